@@ -1,0 +1,508 @@
+//! Every valve model of the paper, as one discrete-time state machine: [`Valve`].
+//!
+//! A model is described by a [`ModelSpec`] (a TOML file under `config/models/`, tagged
+//! `model = "pincart2"` etc.) and run as a [`Valve`]: `reset`, then `step(O_P) -> V_P` once per
+//! sample. Emulation, `sim-device`, simulation and fitting all step this same code. A valve is
+//! always the same chain:
+//!
+//! ```text
+//! O_P ──▶ dead time T_d (delay line) ──▶ core dynamics ──▶ travel range clamp ──▶ V_P
+//! ```
+//!
+//! The cores are modelless (V_P = input), FOPDT, the Choudhury stiction model, pin-cart I and
+//! pin-cart II. `model = "delayed"` is the delayed modelless model. Nothing here does I/O beyond
+//! [`ModelSpec::load`]; stepping never allocates.
+
+mod delay;
+mod effects;
+mod fopdt;
+mod pincart;
+mod stiction;
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+pub use delay::DelayLine;
+pub use effects::Effects;
+pub use fopdt::FopdtParams;
+pub use pincart::{PinCart1Params, PinCart2Params};
+pub use stiction::StictionParams;
+
+use crate::toml_file::{self, TomlError};
+use effects::EffectState;
+use fopdt::Fopdt;
+use pincart::PinCart;
+use stiction::Stiction;
+
+/// Default sample period: 10 ms (100 Hz), as in the paper's recordings.
+pub const DEFAULT_SAMPLE_PERIOD_S: f64 = 0.01;
+
+/// Which model a [`ModelSpec`] describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelKind {
+    /// V_P = O_P.
+    Modelless,
+    /// V_P = O_P delayed by T_d.
+    Delayed,
+    /// First order plus dead time, unity gain.
+    Fopdt,
+    /// Choudhury et al. (2005) stiction model plus dead time.
+    Stiction,
+    /// Pin-cart I plus dead time.
+    Pincart1,
+    /// Pin-cart II plus dead time.
+    Pincart2,
+}
+
+impl ModelKind {
+    /// All kinds, in the order of the paper's Table 1.
+    pub const ALL: [ModelKind; 6] = [
+        ModelKind::Modelless,
+        ModelKind::Delayed,
+        ModelKind::Fopdt,
+        ModelKind::Stiction,
+        ModelKind::Pincart1,
+        ModelKind::Pincart2,
+    ];
+
+    /// The tag used in model files (`model = "..."`).
+    pub fn tag(self) -> &'static str {
+        match self {
+            ModelKind::Modelless => "modelless",
+            ModelKind::Delayed => "delayed",
+            ModelKind::Fopdt => "fopdt",
+            ModelKind::Stiction => "stiction",
+            ModelKind::Pincart1 => "pincart1",
+            ModelKind::Pincart2 => "pincart2",
+        }
+    }
+
+    /// The name used in the paper's tables.
+    pub fn display_name(self) -> &'static str {
+        match self {
+            ModelKind::Modelless => "Modelless",
+            ModelKind::Delayed => "Delayed modelless",
+            ModelKind::Fopdt => "FOPDT",
+            ModelKind::Stiction => "Stiction",
+            ModelKind::Pincart1 => "Pin-cart I",
+            ModelKind::Pincart2 => "Pin-cart II",
+        }
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.tag())
+    }
+}
+
+impl std::str::FromStr for ModelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        ModelKind::ALL
+            .into_iter()
+            .find(|k| k.tag() == s)
+            .ok_or_else(|| {
+                let all: Vec<&str> = ModelKind::ALL.iter().map(|k| k.tag()).collect();
+                format!("unknown model `{s}`: expected one of {}", all.join(", "))
+            })
+    }
+}
+
+/// The valve's travel range in percent; V_P is clamped to it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Travel {
+    /// Lowest position, % (default 0).
+    #[serde(default)]
+    pub min_pct: f64,
+    /// Highest position, % (default 100).
+    #[serde(default = "hundred")]
+    pub max_pct: f64,
+}
+
+fn hundred() -> f64 {
+    100.0
+}
+
+impl Default for Travel {
+    fn default() -> Self {
+        Travel {
+            min_pct: 0.0,
+            max_pct: 100.0,
+        }
+    }
+}
+
+/// A model and its parameters in physical units, as stored in a model TOML file.
+///
+/// ```toml
+/// model = "pincart2"
+/// dead_time_s = 0.3
+/// [pincart2]
+/// p_gain_per_s = 2.5
+/// # ...
+/// ```
+/// Exactly the table named by `model` must be present (none for `modelless` and `delayed`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// Which model this is.
+    pub model: ModelKind,
+    /// Dead time T_d in seconds (>= 0); must be 0 for `modelless`.
+    #[serde(default)]
+    pub dead_time_s: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fopdt: Option<FopdtParams>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stiction: Option<StictionParams>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pincart1: Option<PinCart1Params>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pincart2: Option<PinCart2Params>,
+    /// Travel range (default 0-100 %).
+    #[serde(default)]
+    pub travel: Travel,
+    /// Extra physics around the core (all off by default).
+    #[serde(default, skip_serializing_if = "Effects::is_none")]
+    pub effects: Effects,
+}
+
+/// A model that cannot be built: bad file, missing table or a parameter out of range.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// The model file could not be read or parsed, or a value is out of range.
+    #[error(transparent)]
+    File(#[from] TomlError),
+    /// A parameter is out of its allowed range (model built in memory).
+    #[error("model `{model}`: {key} = {value}: {allowed}")]
+    Param {
+        model: ModelKind,
+        key: String,
+        value: f64,
+        allowed: String,
+    },
+    /// The sample period is not a positive number.
+    #[error("sample period {0} s: must be a positive number of seconds")]
+    SamplePeriod(f64),
+}
+
+/// One violated rule found by [`ModelSpec::check`]: table, key, value and what is allowed.
+struct Violation {
+    table: Option<&'static str>,
+    key: &'static str,
+    value: f64,
+    allowed: String,
+}
+
+impl ModelSpec {
+    /// A spec of `kind` with no parameter tables yet (fill the one for the kind).
+    pub fn bare(kind: ModelKind, dead_time_s: f64) -> Self {
+        ModelSpec {
+            model: kind,
+            dead_time_s,
+            fopdt: None,
+            stiction: None,
+            pincart1: None,
+            pincart2: None,
+            travel: Travel::default(),
+            effects: Effects::default(),
+        }
+    }
+
+    /// Loads and checks a model file; errors name the file, line and key.
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
+        let (spec, text): (ModelSpec, String) = toml_file::load(path)?;
+        spec.check_in(&text, path)?;
+        Ok(spec)
+    }
+
+    /// Parses and checks a model from TOML text (`label` names it in errors).
+    pub fn from_toml(text: &str, label: &Path) -> Result<Self, ModelError> {
+        let spec: ModelSpec = toml_file::parse(text, label)?;
+        spec.check_in(text, label)?;
+        Ok(spec)
+    }
+
+    /// The spec as TOML text, loadable by [`ModelSpec::load`].
+    pub fn to_toml(&self) -> String {
+        // A ModelSpec holds only numbers, enums and tables, which TOML always represents.
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Checks every parameter against its allowed range.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        match self.violations().into_iter().next() {
+            None => Ok(()),
+            Some(v) => Err(ModelError::Param {
+                model: self.model,
+                key: match v.table {
+                    Some(t) => format!("{t}.{}", v.key),
+                    None => v.key.to_string(),
+                },
+                value: v.value,
+                allowed: v.allowed,
+            }),
+        }
+    }
+
+    fn check_in(&self, text: &str, path: &Path) -> Result<(), ModelError> {
+        match self.violations().into_iter().next() {
+            None => Ok(()),
+            Some(v) => Err(toml_file::invalid(
+                text,
+                path,
+                v.table,
+                v.key,
+                if v.value.is_nan() {
+                    v.allowed
+                } else {
+                    format!("{} is not allowed: {}", v.value, v.allowed)
+                },
+            )
+            .into()),
+        }
+    }
+
+    fn violations(&self) -> Vec<Violation> {
+        let mut out = Vec::new();
+        let mut need = |ok: bool, table, key, value: f64, allowed: &str| {
+            if !ok || value.is_nan() {
+                out.push(Violation {
+                    table,
+                    key,
+                    value,
+                    allowed: allowed.to_string(),
+                });
+            }
+        };
+        let kind = self.model;
+        let present = [
+            ("fopdt", self.fopdt.is_some(), ModelKind::Fopdt),
+            ("stiction", self.stiction.is_some(), ModelKind::Stiction),
+            ("pincart1", self.pincart1.is_some(), ModelKind::Pincart1),
+            ("pincart2", self.pincart2.is_some(), ModelKind::Pincart2),
+        ];
+        for (table, is_there, owner) in present {
+            if is_there && owner != kind {
+                need(false, Some(table), "", f64::NAN,
+                    &format!("table [{table}] does not belong to model = \"{kind}\": remove it or set model = \"{table}\""));
+            }
+            if !is_there && owner == kind {
+                need(false, None, "model", f64::NAN,
+                    &format!("model = \"{kind}\" needs a [{table}] table with its parameters (see config/models/{table}.toml)"));
+            }
+        }
+        let td = self.dead_time_s;
+        need(td.is_finite() && td >= 0.0, None, "dead_time_s", td, "a dead time in seconds, >= 0");
+        need(td <= 60.0, None, "dead_time_s", td, "at most 60 s");
+        if kind == ModelKind::Modelless {
+            need(td == 0.0, None, "dead_time_s", td, "modelless has no dead time: use model = \"delayed\"");
+        }
+        let tr = self.travel;
+        need(tr.min_pct.is_finite() && tr.max_pct.is_finite() && tr.min_pct < tr.max_pct,
+            Some("travel"), "max_pct", tr.max_pct, "travel.min_pct < travel.max_pct, both finite");
+        if let Some(p) = &self.fopdt {
+            need(p.time_constant_s.is_finite() && p.time_constant_s > 0.0, Some("fopdt"), "time_constant_s",
+                p.time_constant_s, "a time constant in seconds, > 0");
+        }
+        if let Some(p) = &self.stiction {
+            need(p.stickband_pct.is_finite() && p.stickband_pct >= 0.0, Some("stiction"), "stickband_pct",
+                p.stickband_pct, "S in % of travel, >= 0");
+            need(p.jumpband_pct >= 0.0 && p.jumpband_pct <= p.stickband_pct, Some("stiction"), "jumpband_pct",
+                p.jumpband_pct, "J in % of travel, 0 <= J <= stickband_pct");
+        }
+        if let Some(p) = &self.pincart1 {
+            need(p.backlash_pct.is_finite() && p.backlash_pct >= 0.0, Some("pincart1"), "backlash_pct",
+                p.backlash_pct, "B_L in % of travel, >= 0");
+            need(p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0, Some("pincart1"), "p_gain_per_s",
+                p.p_gain_per_s, "P_k in 1/s, > 0");
+        }
+        if let Some(p) = &self.pincart2 {
+            need(p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0, Some("pincart2"), "p_gain_per_s",
+                p.p_gain_per_s, "P_k in 1/s, > 0");
+            need(p.dy_max_pct_per_s.is_finite() && p.dy_max_pct_per_s > 0.0, Some("pincart2"), "dy_max_pct_per_s",
+                p.dy_max_pct_per_s, "maximum speed in %/s, > 0");
+            need(p.dy_min_pct_per_s >= 0.0 && p.dy_min_pct_per_s <= p.dy_max_pct_per_s, Some("pincart2"),
+                "dy_min_pct_per_s", p.dy_min_pct_per_s, "minimum speed in %/s, 0 <= dy_min <= dy_max");
+            need(p.backlash_pct.is_finite() && p.backlash_pct >= 0.0, Some("pincart2"), "backlash_pct",
+                p.backlash_pct, "B_L in % of travel, >= 0");
+            let worst = [0.0, 25.0, 50.0, 75.0, 100.0, -p.b_p / (2.0 * p.a_p)]
+                .into_iter()
+                .filter(|v| (0.0..=100.0).contains(v))
+                .map(|v| p.crossing_time_s(v))
+                .fold(f64::INFINITY, f64::min);
+            need(worst >= 0.0 && p.a_p.is_finite() && p.b_p.is_finite() && p.c_p.is_finite(), Some("pincart2"), "c_p",
+                p.c_p, "a_p*V^2 + b_p*V + c_p (cart-crossing time, s) must stay >= 0 for V in 0-100 %");
+        }
+        let e = &self.effects;
+        need(e.calibration_gain.is_finite() && e.calibration_gain > 0.0, Some("effects"), "calibration_gain",
+            e.calibration_gain, "a positive gain (1 = none)");
+        need(e.calibration_offset_pct.abs() <= 100.0, Some("effects"), "calibration_offset_pct",
+            e.calibration_offset_pct, "an offset in %, between -100 and 100");
+        need((0.0..=50.0).contains(&e.deadband_pct), Some("effects"), "deadband_pct", e.deadband_pct,
+            "a band in %, 0-50 (0 = none)");
+        need((0.0..=50.0).contains(&e.stickband_pct), Some("effects"), "stickband_pct", e.stickband_pct,
+            "S in %, 0-50 (0 = none)");
+        need(e.jumpband_pct >= 0.0 && e.jumpband_pct <= e.stickband_pct, Some("effects"), "jumpband_pct",
+            e.jumpband_pct, "J in %, 0 <= J <= stickband_pct");
+        need((0.0..=10.0).contains(&e.quantization_pct), Some("effects"), "quantization_pct", e.quantization_pct,
+            "a sensor resolution in %, 0-10 (0 = continuous)");
+        need(e.closing_slew_pct_per_s >= 0.0 && e.closing_slew_pct_per_s.is_finite(), Some("effects"),
+            "closing_slew_pct_per_s", e.closing_slew_pct_per_s, "a speed in %/s, >= 0 (0 = same as opening)");
+        if e.closing_slew_pct_per_s > 0.0 {
+            need(kind == ModelKind::Pincart2, Some("effects"), "closing_slew_pct_per_s", e.closing_slew_pct_per_s,
+                "asymmetric slew rates need model = \"pincart2\" (the only core with a slew rate)");
+        }
+        out
+    }
+}
+
+/// The dynamics between the delay line and the travel clamp.
+#[derive(Debug, Clone)]
+enum Core {
+    PassThrough,
+    Fopdt(Fopdt),
+    Stiction(Stiction),
+    PinCart(PinCart),
+}
+
+/// A runnable valve model: `reset`, then `step(O_P) -> V_P` once per sample.
+#[derive(Debug, Clone)]
+pub struct Valve {
+    spec: ModelSpec,
+    sample_period_s: f64,
+    delay: DelayLine,
+    core: Core,
+    effects: EffectState,
+}
+
+impl Valve {
+    /// Builds the valve of `spec` stepping every `sample_period_s` seconds, at rest at 0 %.
+    pub fn new(spec: &ModelSpec, sample_period_s: f64) -> Result<Self, ModelError> {
+        if !(sample_period_s.is_finite() && sample_period_s > 0.0) {
+            return Err(ModelError::SamplePeriod(sample_period_s));
+        }
+        spec.validate()?;
+        let dt = sample_period_s;
+        let missing = || ModelError::Param {
+            model: spec.model,
+            key: spec.model.tag().into(),
+            value: f64::NAN,
+            allowed: "the model's parameter table is missing".into(),
+        };
+        let core = match spec.model {
+            ModelKind::Modelless | ModelKind::Delayed => Core::PassThrough,
+            ModelKind::Fopdt => Core::Fopdt(Fopdt::new(spec.fopdt.as_ref().ok_or_else(missing)?, dt)),
+            ModelKind::Stiction => Core::Stiction(Stiction::new(spec.stiction.as_ref().ok_or_else(missing)?)),
+            ModelKind::Pincart1 => Core::PinCart(PinCart::one(spec.pincart1.as_ref().ok_or_else(missing)?, dt)),
+            ModelKind::Pincart2 => Core::PinCart(PinCart::two(
+                spec.pincart2.as_ref().ok_or_else(missing)?,
+                spec.effects.closing_slew_pct_per_s,
+                dt,
+            )),
+        };
+        let mut valve = Valve {
+            spec: spec.clone(),
+            sample_period_s,
+            delay: DelayLine::new(spec.dead_time_s, dt),
+            core,
+            effects: EffectState::new(&spec.effects),
+        };
+        valve.reset(0.0, 0.0);
+        Ok(valve)
+    }
+
+    /// The spec this valve was built from.
+    pub fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    /// The sample period in seconds.
+    pub fn sample_period_s(&self) -> f64 {
+        self.sample_period_s
+    }
+
+    /// Puts the valve at rest: position `vp0`, and O_P having been `op0` for ever.
+    pub fn reset(&mut self, op0: f64, vp0: f64) {
+        let vp0 = vp0.clamp(self.spec.travel.min_pct, self.spec.travel.max_pct);
+        self.delay.reset(op0);
+        self.effects.reset(op0, vp0);
+        match &mut self.core {
+            Core::PassThrough => {}
+            Core::Fopdt(c) => c.reset(vp0),
+            Core::Stiction(c) => c.reset(op0, vp0),
+            Core::PinCart(c) => c.reset(vp0),
+        }
+    }
+
+    /// Advances one sample with wanted opening `op` (%) and returns the valve position V_P (%).
+    #[inline]
+    pub fn step(&mut self, op: f64) -> f64 {
+        let u = self.effects.input(self.delay.push(op));
+        let v = match &mut self.core {
+            Core::PassThrough => u,
+            Core::Fopdt(c) => c.step(u),
+            Core::Stiction(c) => c.step(u),
+            Core::PinCart(c) => c.step(u),
+        };
+        let (lo, hi) = (self.spec.travel.min_pct, self.spec.travel.max_pct);
+        if v >= lo && v <= hi {
+            return self.effects.output(v);
+        }
+        let clamped = v.clamp(lo, hi);
+        match &mut self.core {
+            Core::PassThrough => {}
+            Core::Fopdt(c) => c.set_position(clamped),
+            Core::Stiction(c) => c.set_position(clamped),
+            Core::PinCart(c) => c.set_position(clamped),
+        }
+        self.effects.output(clamped)
+    }
+
+    /// Runs the whole O_P sequence from rest at (`op[0]`, `vp0`), writing V_P into `out`.
+    ///
+    /// `out[k]` is the position after the input `op[k]` has been applied for one sample.
+    /// `out` must be as long as `op`; extra entries are left alone.
+    pub fn simulate_into(&mut self, op: &[f64], vp0: f64, out: &mut [f64]) {
+        self.reset(op.first().copied().unwrap_or(vp0), vp0);
+        for (o, &u) in out.iter_mut().zip(op) {
+            *o = self.step(u);
+        }
+    }
+
+    /// Like [`Valve::simulate_into`] but returns a new vector.
+    pub fn simulate(&mut self, op: &[f64], vp0: f64) -> Vec<f64> {
+        let mut out = vec![0.0; op.len()];
+        self.simulate_into(op, vp0, &mut out);
+        out
+    }
+}
+
+/// The model files shipped in `config/models/`, embedded so the binary runs with no files.
+const BUNDLED: [(ModelKind, &str); 6] = [
+    (ModelKind::Modelless, include_str!("../../config/models/modelless.toml")),
+    (ModelKind::Delayed, include_str!("../../config/models/delayed.toml")),
+    (ModelKind::Fopdt, include_str!("../../config/models/fopdt.toml")),
+    (ModelKind::Stiction, include_str!("../../config/models/stiction.toml")),
+    (ModelKind::Pincart1, include_str!("../../config/models/pincart1.toml")),
+    (ModelKind::Pincart2, include_str!("../../config/models/pincart2.toml")),
+];
+
+/// The default parameters of `kind`, as shipped in `config/models/<kind>.toml`.
+pub fn bundled(kind: ModelKind) -> ModelSpec {
+    let text = BUNDLED
+        .iter()
+        .find(|(k, _)| *k == kind)
+        .map(|(_, t)| *t)
+        .unwrap_or_default();
+    let label = format!("config/models/{}.toml", kind.tag());
+    // The bundled files are checked by the unit tests; a broken one is a build defect.
+    ModelSpec::from_toml(text, Path::new(&label))
+        .unwrap_or_else(|e| panic!("bundled model file is invalid: {e}"))
+}
+
+#[cfg(test)]
+mod tests;

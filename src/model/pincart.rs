@@ -1,0 +1,176 @@
+//! The pin-cart models of the paper (Bram et al.), eqs. (1)-(7).
+//!
+//! A pin (the positioner's drive, position `y`) moves inside a cart (the valve stem, position
+//! `V_P`) of width `B_L`. The cart only moves while the pin pushes against one of its sides, so
+//! a reversal of the pin first costs the time it needs to cross the cart: the apparent backlash.
+//!
+//! - Pin-cart I: the pin moves at `P_k * e` with `e = O_P - V_P` (eqs. 1-3).
+//! - Pin-cart II: while the pin pushes the cart it moves at `sgn(e) * max(P_k |e|, dy_min)`,
+//!   saturated at `dy_max` (eqs. 4-6); while it crosses the cart it moves at a speed set by the
+//!   opening (eq. 7), which makes the reversal delay depend on the opening. `B_L` is 1 %.
+//!
+//! Reading of the paper used here (the paper leaves these open):
+//! - Speeds are in physical units: `P_k` in 1/s, `dy_max` and `dy_min` in %/s; one sample moves
+//!   the pin by the speed times the sample period.
+//! - Eq. (7) applies whenever the pin is *not* pushing the cart in the direction of `e` (it is
+//!   inside the cart, or leaving the side it last pushed). Eqs. (4)-(5) apply while it pushes.
+//! - `a_p V^2 + b_p V + c_p` is the time in seconds the pin needs to cross the whole cart at
+//!   opening `V` (in %): the extra delay a reversal costs, Fig. 7's polynomial minus the delay a
+//!   same-direction step has. The pin speed of eq. (7) is then `B_L` divided by that time.
+//! - While pushing, one sample never carries the cart past O_P: `dy_min` closes small errors at
+//!   a constant rate and stops on the target instead of overshooting into a hunting cycle.
+
+use serde::{Deserialize, Serialize};
+
+/// Pin-cart I parameters (Table 2: B_L, P_k; dead time lives in the valve).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PinCart1Params {
+    /// B_L: cart width (apparent backlash), % of travel (>= 0).
+    pub backlash_pct: f64,
+    /// P_k: proportional gain of the pin speed, 1/s (> 0).
+    pub p_gain_per_s: f64,
+}
+
+/// Pin-cart II parameters (Table 2: P_k, dy_max, dy_min, a_p, b_p, c_p; B_L = 1 %).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PinCart2Params {
+    /// P_k: proportional gain of the pin speed while pushing, 1/s (> 0).
+    pub p_gain_per_s: f64,
+    /// dy_max: maximum travel speed (slew rate), %/s (> 0).
+    pub dy_max_pct_per_s: f64,
+    /// dy_min: minimum pin speed while pushing, %/s (>= 0).
+    pub dy_min_pct_per_s: f64,
+    /// a_p: cart-crossing time coefficient, s/%^2.
+    pub a_p: f64,
+    /// b_p: cart-crossing time coefficient, s/%.
+    pub b_p: f64,
+    /// c_p: cart-crossing time at V_P = 0, s (>= 0; 0 = no apparent backlash).
+    pub c_p: f64,
+    /// B_L: cart width, % of travel. Fixed at 1 by the paper (redundant with eq. 7).
+    #[serde(default = "one")]
+    pub backlash_pct: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl PinCart2Params {
+    /// Time in seconds the pin needs to cross the cart at opening `v` (eq. 7's polynomial).
+    #[inline]
+    pub fn crossing_time_s(&self, v: f64) -> f64 {
+        (self.a_p * v + self.b_p) * v + self.c_p
+    }
+}
+
+/// How the pin moves: pin-cart I's proportional law or pin-cart II's eqs. (4)-(7).
+#[derive(Debug, Clone, Copy)]
+enum PinLaw {
+    Proportional {
+        k: f64,
+    },
+    StateDependent {
+        p: PinCart2Params,
+        /// Slew rate while closing, %/s (equal to `dy_max` unless asymmetric).
+        close_max: f64,
+    },
+}
+
+/// Running state of a pin-cart core.
+#[derive(Debug, Clone)]
+pub(crate) struct PinCart {
+    law: PinLaw,
+    half: f64,
+    dt: f64,
+    /// Pin position.
+    y: f64,
+    /// Cart position (valve position).
+    v: f64,
+}
+
+impl PinCart {
+    pub(crate) fn one(p: &PinCart1Params, dt: f64) -> Self {
+        Self::with_law(PinLaw::Proportional { k: p.p_gain_per_s }, p.backlash_pct, dt)
+    }
+
+    /// Pin-cart II; `closing_slew` (%/s) > 0 gives closing its own slew rate (asymmetry).
+    pub(crate) fn two(p: &PinCart2Params, closing_slew: f64, dt: f64) -> Self {
+        let close_max = if closing_slew > 0.0 {
+            closing_slew
+        } else {
+            p.dy_max_pct_per_s
+        };
+        Self::with_law(PinLaw::StateDependent { p: *p, close_max }, p.backlash_pct, dt)
+    }
+
+    fn with_law(law: PinLaw, backlash: f64, dt: f64) -> Self {
+        PinCart {
+            law,
+            half: backlash / 2.0,
+            dt,
+            y: 0.0,
+            v: 0.0,
+        }
+    }
+
+    /// Starts at rest with the pin centred in the cart.
+    pub(crate) fn reset(&mut self, vp0: f64) {
+        self.v = vp0;
+        self.y = vp0;
+    }
+
+    #[inline]
+    pub(crate) fn step(&mut self, u: f64) -> f64 {
+        let e = u - self.v; // eq. (1)
+        let dy = match self.law {
+            PinLaw::Proportional { k } => k * e * self.dt, // eq. (2)
+            PinLaw::StateDependent { p, close_max } => self.pin_step_two(&p, close_max, e),
+        };
+        self.y += dy;
+        // eq. (3): the cart follows only when the pin pushes a side.
+        if self.y - self.v >= self.half {
+            self.v = self.y - self.half;
+        } else if self.y - self.v <= -self.half {
+            self.v = self.y + self.half;
+        }
+        self.v
+    }
+
+    /// Pin movement of pin-cart II for one sample, eqs. (4)-(7).
+    #[inline]
+    fn pin_step_two(&self, p: &PinCart2Params, close_max: f64, e: f64) -> f64 {
+        if e == 0.0 {
+            return 0.0;
+        }
+        let d = e.signum();
+        let rel = self.y - self.v;
+        let pushing = d * rel >= self.half - 1e-12;
+        if pushing {
+            let speed = (p.p_gain_per_s * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
+            let max = if d > 0.0 { p.dy_max_pct_per_s } else { close_max };
+            let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
+            d * step
+        } else {
+            // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
+            // its far side. A crossing time of 0 means no apparent backlash.
+            let t = p.crossing_time_s(self.v).max(self.dt);
+            let step = (2.0 * self.half * self.dt / t).min(self.half - d * rel);
+            d * step
+        }
+    }
+
+    /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart.
+    #[inline]
+    pub(crate) fn set_position(&mut self, v: f64) {
+        self.v = v;
+        self.y = self.y.clamp(v - self.half, v + self.half);
+    }
+
+    /// Pin position relative to the cart centre (for invariant tests).
+    #[cfg(test)]
+    pub(crate) fn pin_offset(&self) -> f64 {
+        self.y - self.v
+    }
+}

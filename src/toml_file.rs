@@ -1,0 +1,168 @@
+//! Loading TOML files (model parameters, daemon configs) with errors that point at the key.
+//!
+//! Every error names the file, the line and the dotted key (`pincart2.c_p`), and says what was
+//! wrong in one line, so a user can fix the file without reading a backtrace. This module only
+//! parses and locates; what a key may hold is checked by the type that owns it.
+
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+
+/// A TOML file that could not be read, parsed or accepted.
+#[derive(Debug, thiserror::Error)]
+pub enum TomlError {
+    /// The file could not be read at all.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or does not fit the expected shape.
+    #[error("{path}:{line}: {key}: {message}")]
+    Invalid {
+        path: PathBuf,
+        line: usize,
+        key: String,
+        message: String,
+    },
+}
+
+/// Reads and parses a TOML file into `T`.
+pub fn load<T: DeserializeOwned>(path: &Path) -> Result<(T, String), TomlError> {
+    let text = std::fs::read_to_string(path).map_err(|source| TomlError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let value = parse(&text, path)?;
+    Ok((value, text))
+}
+
+/// Parses TOML `text` (read from `path`, used in messages) into `T`.
+pub fn parse<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlError> {
+    toml::from_str(text).map_err(|e| {
+        let offset = e.span().map(|s| s.start).unwrap_or(0);
+        let line = text[..offset.min(text.len())].matches('\n').count() + 1;
+        let key = key_at(text, line).unwrap_or_else(|| "(file)".into());
+        TomlError::Invalid {
+            path: path.to_path_buf(),
+            line,
+            key,
+            message: e.message().replace('\n', " "),
+        }
+    })
+}
+
+/// An error about `table.key` in `text`, located at the line that sets it (or line 1).
+pub fn invalid(text: &str, path: &Path, table: Option<&str>, key: &str, message: String) -> TomlError {
+    let dotted = match table {
+        Some(t) if !key.is_empty() => format!("{t}.{key}"),
+        Some(t) => t.to_string(),
+        None => key.to_string(),
+    };
+    TomlError::Invalid {
+        path: path.to_path_buf(),
+        line: line_of(text, table, key).unwrap_or(1),
+        key: dotted,
+        message,
+    }
+}
+
+/// The line (1-based) where `key` is set inside `[table]` (or at the top when `table` is None).
+/// A table itself is found by its header when `key` is empty.
+pub fn line_of(text: &str, table: Option<&str>, key: &str) -> Option<usize> {
+    let mut current: Option<String> = None;
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.trim();
+        if let Some(name) = header(line) {
+            if key.is_empty() && Some(name.as_str()) == table {
+                return Some(i + 1);
+            }
+            current = Some(name);
+            continue;
+        }
+        if current.as_deref() == table {
+            if let Some((k, _)) = line.split_once('=') {
+                if k.trim().trim_matches('"') == key {
+                    return Some(i + 1);
+                }
+            }
+        }
+    }
+    None
+}
+
+/// The dotted key set on `line` (1-based), with its table, if that line sets one.
+fn key_at(text: &str, line: usize) -> Option<String> {
+    let mut table: Option<String> = None;
+    for (i, raw) in text.lines().enumerate() {
+        let l = raw.trim();
+        if let Some(name) = header(l) {
+            table = Some(name);
+        }
+        if i + 1 == line {
+            if let Some((k, _)) = l.split_once('=') {
+                let k = k.trim().trim_matches('"');
+                return Some(match &table {
+                    Some(t) => format!("{t}.{k}"),
+                    None => k.to_string(),
+                });
+            }
+            return table;
+        }
+    }
+    table
+}
+
+/// The table name of a `[table]` or `[[array]]` header line.
+fn header(line: &str) -> Option<String> {
+    let inner = line.strip_prefix('[')?;
+    let end = inner.find(']')?;
+    Some(inner[..end].trim_matches(['[', ']', ' ']).to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        rate_hz: f64,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Outer {
+        name: String,
+        loop_: Option<Inner>,
+        inner: Inner,
+    }
+
+    #[test]
+    fn wrong_type_names_the_key_and_line() {
+        let text = "name = \"x\"\n\n[inner]\nrate_hz = \"fast\"\n";
+        let err = parse::<Outer>(text, Path::new("c.toml")).unwrap_err().to_string();
+        assert!(err.starts_with("c.toml:4: inner.rate_hz:"), "{err}");
+        assert!(!err.contains('\n'));
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let text = "name = \"x\"\n[inner]\nrate_hz = 1.0\nrate = 2\n";
+        let err = parse::<Outer>(text, Path::new("c.toml")).unwrap_err().to_string();
+        assert!(err.contains("c.toml:4: inner.rate:"), "{err}");
+        assert!(err.contains("unknown field `rate`"), "{err}");
+    }
+
+    #[test]
+    fn line_of_finds_keys_in_tables() {
+        let text = "a = 1\n[t]\na = 2\n";
+        assert_eq!(line_of(text, None, "a"), Some(1));
+        assert_eq!(line_of(text, Some("t"), "a"), Some(3));
+        assert_eq!(line_of(text, Some("t"), ""), Some(2));
+        assert_eq!(line_of(text, Some("u"), "a"), None);
+    }
+}
