@@ -1,6 +1,23 @@
 //! valve-bridge: run, emulate, log and identify pneumatic control valves.
 //!
+//! The library holds everything; the `valve-bridge` binary is a thin command-line layer over it.
+//! Data runs one way: a source of wanted openings (O_P) drives a valve (emulated or real), the
+//! loop logs each sample as a recording, and the analysis side reads recordings back to fit and
+//! diagnose the valve models of the pin-cart paper (Bram et al.).
+//!
 //! - [`model`]: every valve model, one `step` each, with TOML parameter files.
+//! - [`recording`]: the CSV recording format (read with helpful errors, write, column mapping).
+//! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
+//! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
+//! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
+//! - [`synth`]: synthetic recordings (random steps or a closed level loop) for demos and tests.
+//! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
+pub mod daemon;
+pub mod diagnose;
+pub mod metrics;
+pub mod modbus;
 pub mod model;
+pub mod recording;
+pub mod synth;
 pub mod toml_file;

@@ -1,1 +1,40 @@
-fn main() {}
+//! The `valve-bridge` command: a thin layer of clap commands over the `valve_bridge` library.
+//!
+//! Each subcommand lives in `src/cli/<name>.rs` with its arguments and a `run` function that
+//! calls the library. Errors are printed as one line (with their causes) and exit code 1; no
+//! backtrace. `RUST_LOG` sets the log level (default `info`).
+
+mod cli;
+
+use clap::{Parser, Subcommand};
+
+/// Run, emulate, log and identify pneumatic control valves.
+#[derive(Parser)]
+#[command(name = "valve-bridge", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a valve model over the O_P of a recording and score it against the measured V_P.
+    Simulate(cli::simulate::Args),
+    /// Run the valve loop (100 Hz by default): source -> valve -> CSV log, until stopped.
+    Run(cli::run::Args),
+    /// Find where a model and a recording differ, name the missing physics, add it, show the gain.
+    Diagnose(cli::diagnose::Args),
+    /// Demonstrations: `demo concealed` hides an effect in a recording and diagnoses it.
+    Demo(cli::demo::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    cli::init_tracing();
+    let result = match Cli::parse().command {
+        Command::Simulate(a) => cli::simulate::run(a),
+        Command::Run(a) => cli::run::run(a),
+        Command::Diagnose(a) => cli::diagnose::run(a),
+        Command::Demo(a) => cli::demo::run(a),
+    };
+    cli::report(result)
+}

@@ -54,7 +54,13 @@ pub fn parse<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlErro
 }
 
 /// An error about `table.key` in `text`, located at the line that sets it (or line 1).
-pub fn invalid(text: &str, path: &Path, table: Option<&str>, key: &str, message: String) -> TomlError {
+pub fn invalid(
+    text: &str,
+    path: &Path,
+    table: Option<&str>,
+    key: &str,
+    message: String,
+) -> TomlError {
     let dotted = match table {
         Some(t) if !key.is_empty() => format!("{t}.{key}"),
         Some(t) => t.to_string(),
@@ -144,7 +150,9 @@ mod tests {
     #[test]
     fn wrong_type_names_the_key_and_line() {
         let text = "name = \"x\"\n\n[inner]\nrate_hz = \"fast\"\n";
-        let err = parse::<Outer>(text, Path::new("c.toml")).unwrap_err().to_string();
+        let err = parse::<Outer>(text, Path::new("c.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(err.starts_with("c.toml:4: inner.rate_hz:"), "{err}");
         assert!(!err.contains('\n'));
     }
@@ -152,7 +160,9 @@ mod tests {
     #[test]
     fn unknown_key_is_named() {
         let text = "name = \"x\"\n[inner]\nrate_hz = 1.0\nrate = 2\n";
-        let err = parse::<Outer>(text, Path::new("c.toml")).unwrap_err().to_string();
+        let err = parse::<Outer>(text, Path::new("c.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("c.toml:4: inner.rate:"), "{err}");
         assert!(err.contains("unknown field `rate`"), "{err}");
     }

@@ -1,5 +1,465 @@
-//! sim-device: a fake valve positioner speaking Modbus (filled in by the Modbus work).
-fn main() {
-    eprintln!("sim-device: the Modbus server is not built yet");
-    std::process::exit(2);
+//! sim-device: a fake Bürkert-style valve positioner that speaks real Modbus TCP and RTU.
+//!
+//! It serves the register map of `valve-bridge`'s `[valve.registers]` table (per-mille `u16`
+//! set-point and `i16` position by default) from a [`RegisterBank`], over Modbus TCP
+//! (`--tcp ADDR`), on a pseudo-terminal it opens itself (`--pty`) or on a serial device
+//! (`--serial PATH`). Its valve is a model from `config/models/` (pin-cart II by default) stepped
+//! at 100 Hz in real time from the last accepted set-point. A set-point outside 0-100 % keeps the
+//! last value and raises the status error bit, as Bürkert positioners do. Faults can be injected
+//! for tests: response delay, dropped responses, corrupted CRC (RTU), exception responses and
+//! TCP disconnects; `--baud-emulation` makes a pty answer as slowly as a real line would.
+//!
+//! On start it prints one line per endpoint on stdout, `tcp: 127.0.0.1:5502` and
+//! `pty: /dev/pts/5`, for a client (or a test) to connect to. It is a test instrument: no
+//! persistence, no device identification, no coils.
+
+mod faults;
+mod rtu;
+
+use std::future::Future;
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::task::{Context, Poll};
+use std::time::Duration;
+
+use anyhow::{bail, Context as _};
+use clap::Parser;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::Deserialize;
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+use tokio::net::{TcpListener, TcpStream};
+use tokio_modbus::{ExceptionCode, Request, Response};
+use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+use valve_bridge::modbus::link::Parity;
+use valve_bridge::modbus::map::RegisterMap;
+use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
+use valve_bridge::model::{self, ModelKind, ModelSpec, Valve};
+use valve_bridge::toml_file;
+
+use faults::{Action, FaultConfig, Faults};
+use rtu::{LineSpeed, RtuDevice};
+
+/// The model's step, 10 ms (100 Hz).
+const MODEL_DT: f64 = model::DEFAULT_SAMPLE_PERIOD_S;
+
+/// A fake valve positioner speaking Modbus TCP and RTU.
+#[derive(Parser, Debug)]
+#[command(name = "sim-device", version, about)]
+struct Args {
+    /// Serve Modbus TCP on this address (port 0: any free port; the line `tcp: ADDR` tells which).
+    #[arg(long, value_name = "ADDR")]
+    tcp: Option<SocketAddr>,
+    /// Serve Modbus RTU on a new pseudo-terminal; prints `pty: PATH` for the client.
+    #[arg(long)]
+    pty: bool,
+    /// With --pty: also make PATH a symbolic link to the client end (a stable name for configs).
+    #[arg(long, value_name = "PATH", requires = "pty")]
+    pty_link: Option<PathBuf>,
+    /// Serve Modbus RTU on this serial device.
+    #[arg(long, value_name = "PATH", conflicts_with = "pty")]
+    serial: Option<PathBuf>,
+    /// Serial baud rate (--serial).
+    #[arg(long, default_value_t = 19200)]
+    baud: u32,
+    /// Serial parity: none, even or odd (--serial; also the character size of --baud-emulation).
+    #[arg(long, default_value = "even", value_parser = parse_parity)]
+    parity: Parity,
+    /// Serial stop bits, 1 or 2.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    stop_bits: u8,
+    /// A valve-bridge config file: its [valve.registers] table is the map served, and
+    /// [valve.modbus-rtu] slave_id / [valve.modbus-tcp] unit_id the RTU address.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// RTU slave address answered (default: from --config, else 1).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=247))]
+    unit: Option<u8>,
+    /// The valve: a bundled model name (pincart2, fopdt, ...) or a model file.
+    #[arg(long, default_value = "pincart2")]
+    model: String,
+    /// Standard deviation of Gaussian noise on the reported position, %.
+    #[arg(long, default_value_t = 0.0)]
+    noise_pct: f64,
+    /// Seed of the noise and of --drop-prob.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Extra delay before every response, ms.
+    #[arg(long, default_value_t = 0)]
+    delay_ms: u64,
+    /// Leave every N-th request unanswered.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    drop_every: Option<u64>,
+    /// Leave requests unanswered with this probability.
+    #[arg(
+        long,
+        value_name = "P",
+        default_value_t = 0.0,
+        conflicts_with = "drop_every"
+    )]
+    drop_prob: f64,
+    /// Corrupt the CRC of every N-th response (RTU).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    corrupt_crc_every: Option<u64>,
+    /// Answer every N-th request with exception 04 (server device failure).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    exception_every: Option<u64>,
+    /// Close a TCP connection on its N-th request, unanswered (the client must reconnect).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    disconnect_after: Option<u64>,
+    /// RTU: answer as late as a line at this baud rate would (characters of request and reply,
+    /// at the --parity/--stop-bits character size, plus --turnaround-ms).
+    #[arg(long, value_name = "BAUD", value_parser = clap::value_parser!(u32).range(300..))]
+    baud_emulation: Option<u32>,
+    /// Device response time added by --baud-emulation, ms.
+    #[arg(long, default_value_t = 1.0)]
+    turnaround_ms: f64,
+}
+
+fn parse_parity(s: &str) -> Result<Parity, String> {
+    match s {
+        "none" => Ok(Parity::None),
+        "even" => Ok(Parity::Even),
+        "odd" => Ok(Parity::Odd),
+        _ => Err(format!("`{s}`: one of none, even, odd")),
+    }
+}
+
+/// The parts of a valve-bridge config file sim-device uses; other tables are ignored.
+#[derive(Debug, Default, Deserialize)]
+struct ConfigFile {
+    #[serde(default)]
+    valve: ValveSection,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct ValveSection {
+    #[serde(default)]
+    registers: RegisterMap,
+    #[serde(default, rename = "modbus-rtu")]
+    rtu: LinkIds,
+    #[serde(default, rename = "modbus-tcp")]
+    tcp: LinkIds,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct LinkIds {
+    slave_id: Option<u8>,
+    unit_id: Option<u8>,
+}
+
+/// The map and the RTU address from `--config`, checked with errors naming file, line and key.
+fn load_config(path: &Path) -> anyhow::Result<(RegisterMap, Option<u8>)> {
+    let (file, text): (ConfigFile, String) = toml_file::load(path)?;
+    file.valve
+        .registers
+        .check_in(&text, path, "valve.registers")?;
+    Ok((
+        file.valve.registers,
+        file.valve.rtu.slave_id.or(file.valve.tcp.unit_id),
+    ))
+}
+
+fn load_model(name: &str) -> anyhow::Result<ModelSpec> {
+    match name.parse::<ModelKind>() {
+        Ok(kind) => Ok(model::bundled(kind)),
+        Err(_) => Ok(ModelSpec::load(Path::new(name))?),
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .compact()
+        .init();
+    let result = tokio::runtime::Runtime::new()
+        .context("cannot start the async runtime")
+        .and_then(|rt| rt.block_on(run(Args::parse())));
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
+            eprintln!("sim-device: error: {}", chain.join(": "));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// Prints an endpoint line and flushes it at once (a test may be waiting for it).
+fn announce(line: &str) {
+    let mut out = std::io::stdout().lock();
+    // A closed stdout only loses the announcement; serving goes on.
+    let _ = writeln!(out, "{line}").and_then(|()| out.flush());
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
+    if args.tcp.is_none() && !args.pty && args.serial.is_none() {
+        bail!("nothing to serve: give --tcp ADDR, --pty or --serial PATH");
+    }
+    let rtu = args.pty || args.serial.is_some();
+    if args.corrupt_crc_every.is_some() && !rtu {
+        bail!("--corrupt-crc-every needs --pty or --serial: Modbus TCP has no CRC");
+    }
+    if args.baud_emulation.is_some() && !rtu {
+        bail!("--baud-emulation needs --pty or --serial");
+    }
+    if args.disconnect_after.is_some() && args.tcp.is_none() {
+        bail!("--disconnect-after needs --tcp: a serial line has no connection to close (use --drop-every)");
+    }
+    if !(0.0..=1.0).contains(&args.drop_prob) {
+        bail!("--drop-prob {}: a probability, 0-1", args.drop_prob);
+    }
+    if !(args.noise_pct.is_finite() && args.noise_pct >= 0.0) {
+        bail!(
+            "--noise-pct {}: a standard deviation in %, >= 0",
+            args.noise_pct
+        );
+    }
+    if !(args.turnaround_ms.is_finite() && (0.0..=1000.0).contains(&args.turnaround_ms)) {
+        bail!(
+            "--turnaround-ms {}: a response time in ms, 0-1000",
+            args.turnaround_ms
+        );
+    }
+    let (map, config_unit) = match &args.config {
+        Some(path) => load_config(path)?,
+        None => (RegisterMap::default(), None),
+    };
+    let unit = args.unit.or(config_unit).unwrap_or(1);
+    let spec = load_model(&args.model)?;
+    let bank = Arc::new(RegisterBank::new(map, 0.0, 100.0, OutOfRange::KeepAndFlag));
+    let faults = Arc::new(Faults::new(FaultConfig {
+        delay: Duration::from_millis(args.delay_ms),
+        drop_every: args.drop_every,
+        drop_prob: args.drop_prob,
+        corrupt_crc_every: args.corrupt_crc_every,
+        exception_every: args.exception_every,
+        disconnect_after: args.disconnect_after,
+        seed: args.seed,
+    }));
+    tracing::info!(
+        "sim-device: {} valve, set-point at {} {}, position at {} {}",
+        spec.model.display_name(),
+        map.setpoint.table,
+        map.setpoint.address,
+        map.position.table,
+        map.position.address
+    );
+
+    let valve = Valve::new(&spec, MODEL_DT)?;
+    let noise = if args.noise_pct > 0.0 {
+        Some(Normal::new(0.0, args.noise_pct)?)
+    } else {
+        None
+    };
+    let stepping = tokio::spawn(step_valve(Arc::clone(&bank), valve, noise, args.seed));
+
+    let mut servers: tokio::task::JoinSet<anyhow::Result<()>> = tokio::task::JoinSet::new();
+    if let Some(addr) = args.tcp {
+        let listener = TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("cannot listen on {addr} (--tcp)"))?;
+        announce(&format!("tcp: {}", listener.local_addr()?));
+        servers.spawn(serve_tcp(listener, Arc::clone(&bank), Arc::clone(&faults)));
+    }
+    if rtu {
+        let bits = 1 + 8 + u32::from(args.parity != Parity::None) + u32::from(args.stop_bits);
+        let device = RtuDevice {
+            bank: Arc::clone(&bank),
+            faults: Arc::clone(&faults),
+            slave: unit,
+            line: args.baud_emulation.map(|baud| LineSpeed {
+                baud,
+                bits_per_char: bits,
+                turnaround: Duration::from_secs_f64(args.turnaround_ms / 1000.0),
+            }),
+        };
+        if args.pty {
+            let (server_end, client_end) =
+                SerialStream::pair().context("cannot open a pseudo-terminal (--pty)")?;
+            let path = client_end
+                .name()
+                .context("the pseudo-terminal has no path")?;
+            if let Some(link) = &args.pty_link {
+                // Replace a link left by an earlier run; a missing one is fine.
+                let _ = std::fs::remove_file(link);
+                std::os::unix::fs::symlink(&path, link).with_context(|| {
+                    format!("cannot create the link {} (--pty-link)", link.display())
+                })?;
+            }
+            announce(&format!("pty: {path}"));
+            servers.spawn(async move {
+                // The client end stays open for the device's life: without it, the server end
+                // reads EIO whenever a client closes its handle.
+                let _client_end = client_end;
+                device.serve(server_end).await.context("pseudo-terminal")
+            });
+        } else if let Some(path) = &args.serial {
+            let name = path.display().to_string();
+            let port = tokio_serial::new(&name, args.baud)
+                .parity(match args.parity {
+                    Parity::None => tokio_serial::Parity::None,
+                    Parity::Even => tokio_serial::Parity::Even,
+                    Parity::Odd => tokio_serial::Parity::Odd,
+                })
+                .stop_bits(if args.stop_bits == 2 {
+                    tokio_serial::StopBits::Two
+                } else {
+                    tokio_serial::StopBits::One
+                })
+                .open_native_async()
+                .with_context(|| format!("cannot open serial port {name} (--serial)"))?;
+            announce(&format!("serial: {name}"));
+            servers.spawn(async move { device.serve(port).await.with_context(|| name) });
+        }
+    }
+    // Serve until the first server ends (an error, or a serial port that closed).
+    let result = match servers.join_next().await {
+        Some(Ok(r)) => r,
+        Some(Err(e)) => Err(anyhow::anyhow!("server task failed: {e}")),
+        None => Ok(()),
+    };
+    stepping.abort();
+    result
+}
+
+/// Steps the valve at 100 Hz in real time from the bank's set-point and reports its position.
+async fn step_valve(
+    bank: Arc<RegisterBank>,
+    mut valve: Valve,
+    noise: Option<Normal<f64>>,
+    seed: u64,
+) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    valve.reset(bank.setpoint_pct(), 0.0);
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(MODEL_DT));
+    // Burst: after a stall the model catches up, so it never falls behind the clock.
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
+    loop {
+        tick.tick().await;
+        let vp = valve.step(bank.setpoint_pct());
+        let n = noise.map(|d| d.sample(&mut rng)).unwrap_or(0.0);
+        bank.set_position_pct(vp + n);
+    }
+}
+
+/// The TCP service: the bank behind fault injection, one per connection.
+#[derive(Debug, Clone)]
+struct TcpService {
+    bank: Arc<RegisterBank>,
+    faults: Arc<Faults>,
+    /// Requests on this connection.
+    served: Arc<AtomicU64>,
+    /// Set to close this connection.
+    closing: Arc<AtomicBool>,
+}
+
+type Reply = Result<Option<Response>, ExceptionCode>;
+
+impl tokio_modbus::server::Service for TcpService {
+    type Request = Request<'static>;
+    type Response = Option<Response>;
+    type Exception = ExceptionCode;
+    type Future = Pin<Box<dyn Future<Output = Reply> + Send>>;
+
+    fn call(&self, req: Self::Request) -> Self::Future {
+        let n = self.served.fetch_add(1, Ordering::Relaxed) + 1;
+        if matches!(self.faults.disconnect_after(), Some(limit) if n >= limit) {
+            tracing::info!("closing the TCP connection on request {n} (--disconnect-after)");
+            self.closing.store(true, Ordering::Relaxed);
+            return Box::pin(std::future::ready(Ok(None)));
+        }
+        let action = self.faults.next();
+        let reply: Reply = match action {
+            Action::Drop => Ok(None),
+            Action::Exception => Err(ExceptionCode::ServerDeviceFailure),
+            Action::Answer | Action::CorruptCrc => self.bank.handle(&req).map(Some),
+        };
+        let delay = self.faults.delay();
+        Box::pin(async move {
+            if !delay.is_zero() {
+                tokio::time::sleep(delay).await;
+            }
+            reply
+        })
+    }
+}
+
+/// A TCP stream that reads as closed once its flag is set, which ends tokio-modbus's
+/// connection task and drops the socket (tokio-modbus has no other way to close from a service).
+#[derive(Debug)]
+struct Closable {
+    inner: TcpStream,
+    closing: Arc<AtomicBool>,
+}
+
+impl AsyncRead for Closable {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<std::io::Result<()>> {
+        if self.closing.load(Ordering::Relaxed) {
+            return Poll::Ready(Ok(()));
+        }
+        Pin::new(&mut self.inner).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for Closable {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<std::io::Result<usize>> {
+        Pin::new(&mut self.inner).poll_write(cx, buf)
+    }
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.inner).poll_flush(cx)
+    }
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
+}
+
+async fn serve_tcp(
+    listener: TcpListener,
+    bank: Arc<RegisterBank>,
+    faults: Arc<Faults>,
+) -> anyhow::Result<()> {
+    let server = tokio_modbus::server::tcp::Server::new(listener);
+    let on_connected = |stream: TcpStream, peer: SocketAddr| {
+        let closing = Arc::new(AtomicBool::new(false));
+        let service = TcpService {
+            bank: Arc::clone(&bank),
+            faults: Arc::clone(&faults),
+            served: Arc::new(AtomicU64::new(0)),
+            closing: Arc::clone(&closing),
+        };
+        tracing::info!("client connected from {peer}");
+        // Latency matters more than throughput for one register per request.
+        if let Err(e) = stream.set_nodelay(true) {
+            tracing::debug!("TCP_NODELAY on {peer}: {e}");
+        }
+        std::future::ready(Ok(Some((
+            service,
+            Closable {
+                inner: stream,
+                closing,
+            },
+        ))))
+    };
+    server
+        .serve(&on_connected, |e| tracing::info!("connection ended: {e}"))
+        .await
+        .context("Modbus TCP server")
 }

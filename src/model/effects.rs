@@ -3,7 +3,8 @@
 //! Each effect is a parameter of the composed valve that is off at its default, so "add a
 //! deadband" means setting `deadband_pct`, not writing a new model. Effects that live inside
 //! the pin-cart II core (backlash, state-dependent delay, slew rate, minimum speed) are
-//! parameters of [`super::PinCart2Params`]; the ones here wrap any core:
+//! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s` and `open_slowdown`
+//! here, which only pin-cart II uses); the others wrap any core:
 //!
 //! ```text
 //! O_P ─▶ T_d ─▶ calibration ─▶ deadband ─▶ stiction ─▶ core ─▶ travel clamp ─▶ quantization ─▶ V_P
@@ -45,6 +46,10 @@ pub struct Effects {
     /// Closing slew rate of pin-cart II, %/s, when it differs from the opening one (0 = same).
     #[serde(skip_serializing_if = "is_zero")]
     pub closing_slew_pct_per_s: f64,
+    /// Opening-dependent slowdown r of pin-cart II (0 = none): its proportional gain P_k scales
+    /// by `1 / (1 + r V / 100)`, so fully open responds `1 + r` times slower than closed.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub open_slowdown: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -65,6 +70,7 @@ impl Default for Effects {
             jumpband_pct: 0.0,
             quantization_pct: 0.0,
             closing_slew_pct_per_s: 0.0,
+            open_slowdown: 0.0,
         }
     }
 }

@@ -296,65 +296,181 @@ impl ModelSpec {
             }
         }
         let td = self.dead_time_s;
-        need(td.is_finite() && td >= 0.0, None, "dead_time_s", td, "a dead time in seconds, >= 0");
+        need(
+            td.is_finite() && td >= 0.0,
+            None,
+            "dead_time_s",
+            td,
+            "a dead time in seconds, >= 0",
+        );
         need(td <= 60.0, None, "dead_time_s", td, "at most 60 s");
         if kind == ModelKind::Modelless {
-            need(td == 0.0, None, "dead_time_s", td, "modelless has no dead time: use model = \"delayed\"");
+            need(
+                td == 0.0,
+                None,
+                "dead_time_s",
+                td,
+                "modelless has no dead time: use model = \"delayed\"",
+            );
         }
         let tr = self.travel;
-        need(tr.min_pct.is_finite() && tr.max_pct.is_finite() && tr.min_pct < tr.max_pct,
-            Some("travel"), "max_pct", tr.max_pct, "travel.min_pct < travel.max_pct, both finite");
+        need(
+            tr.min_pct.is_finite() && tr.max_pct.is_finite() && tr.min_pct < tr.max_pct,
+            Some("travel"),
+            "max_pct",
+            tr.max_pct,
+            "travel.min_pct < travel.max_pct, both finite",
+        );
         if let Some(p) = &self.fopdt {
-            need(p.time_constant_s.is_finite() && p.time_constant_s > 0.0, Some("fopdt"), "time_constant_s",
-                p.time_constant_s, "a time constant in seconds, > 0");
+            need(
+                p.time_constant_s.is_finite() && p.time_constant_s > 0.0,
+                Some("fopdt"),
+                "time_constant_s",
+                p.time_constant_s,
+                "a time constant in seconds, > 0",
+            );
         }
         if let Some(p) = &self.stiction {
-            need(p.stickband_pct.is_finite() && p.stickband_pct >= 0.0, Some("stiction"), "stickband_pct",
-                p.stickband_pct, "S in % of travel, >= 0");
-            need(p.jumpband_pct >= 0.0 && p.jumpband_pct <= p.stickband_pct, Some("stiction"), "jumpband_pct",
-                p.jumpband_pct, "J in % of travel, 0 <= J <= stickband_pct");
+            need(
+                p.stickband_pct.is_finite() && p.stickband_pct >= 0.0,
+                Some("stiction"),
+                "stickband_pct",
+                p.stickband_pct,
+                "S in % of travel, >= 0",
+            );
+            need(
+                p.jumpband_pct >= 0.0 && p.jumpband_pct <= p.stickband_pct,
+                Some("stiction"),
+                "jumpband_pct",
+                p.jumpband_pct,
+                "J in % of travel, 0 <= J <= stickband_pct",
+            );
         }
         if let Some(p) = &self.pincart1 {
-            need(p.backlash_pct.is_finite() && p.backlash_pct >= 0.0, Some("pincart1"), "backlash_pct",
-                p.backlash_pct, "B_L in % of travel, >= 0");
-            need(p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0, Some("pincart1"), "p_gain_per_s",
-                p.p_gain_per_s, "P_k in 1/s, > 0");
+            need(
+                p.backlash_pct.is_finite() && p.backlash_pct >= 0.0,
+                Some("pincart1"),
+                "backlash_pct",
+                p.backlash_pct,
+                "B_L in % of travel, >= 0",
+            );
+            need(
+                p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0,
+                Some("pincart1"),
+                "p_gain_per_s",
+                p.p_gain_per_s,
+                "P_k in 1/s, > 0",
+            );
         }
         if let Some(p) = &self.pincart2 {
-            need(p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0, Some("pincart2"), "p_gain_per_s",
-                p.p_gain_per_s, "P_k in 1/s, > 0");
-            need(p.dy_max_pct_per_s.is_finite() && p.dy_max_pct_per_s > 0.0, Some("pincart2"), "dy_max_pct_per_s",
-                p.dy_max_pct_per_s, "maximum speed in %/s, > 0");
-            need(p.dy_min_pct_per_s >= 0.0 && p.dy_min_pct_per_s <= p.dy_max_pct_per_s, Some("pincart2"),
-                "dy_min_pct_per_s", p.dy_min_pct_per_s, "minimum speed in %/s, 0 <= dy_min <= dy_max");
-            need(p.backlash_pct.is_finite() && p.backlash_pct >= 0.0, Some("pincart2"), "backlash_pct",
-                p.backlash_pct, "B_L in % of travel, >= 0");
+            need(
+                p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0,
+                Some("pincart2"),
+                "p_gain_per_s",
+                p.p_gain_per_s,
+                "P_k in 1/s, > 0",
+            );
+            need(
+                p.dy_max_pct_per_s.is_finite() && p.dy_max_pct_per_s > 0.0,
+                Some("pincart2"),
+                "dy_max_pct_per_s",
+                p.dy_max_pct_per_s,
+                "maximum speed in %/s, > 0",
+            );
+            need(
+                p.dy_min_pct_per_s >= 0.0 && p.dy_min_pct_per_s <= p.dy_max_pct_per_s,
+                Some("pincart2"),
+                "dy_min_pct_per_s",
+                p.dy_min_pct_per_s,
+                "minimum speed in %/s, 0 <= dy_min <= dy_max",
+            );
+            need(
+                p.backlash_pct.is_finite() && p.backlash_pct >= 0.0,
+                Some("pincart2"),
+                "backlash_pct",
+                p.backlash_pct,
+                "B_L in % of travel, >= 0",
+            );
             let worst = [0.0, 25.0, 50.0, 75.0, 100.0, -p.b_p / (2.0 * p.a_p)]
                 .into_iter()
                 .filter(|v| (0.0..=100.0).contains(v))
                 .map(|v| p.crossing_time_s(v))
                 .fold(f64::INFINITY, f64::min);
-            need(worst >= 0.0 && p.a_p.is_finite() && p.b_p.is_finite() && p.c_p.is_finite(), Some("pincart2"), "c_p",
-                p.c_p, "a_p*V^2 + b_p*V + c_p (cart-crossing time, s) must stay >= 0 for V in 0-100 %");
+            need(
+                worst >= 0.0 && p.a_p.is_finite() && p.b_p.is_finite() && p.c_p.is_finite(),
+                Some("pincart2"),
+                "c_p",
+                p.c_p,
+                "a_p*V^2 + b_p*V + c_p (cart-crossing time, s) must stay >= 0 for V in 0-100 %",
+            );
         }
         let e = &self.effects;
-        need(e.calibration_gain.is_finite() && e.calibration_gain > 0.0, Some("effects"), "calibration_gain",
-            e.calibration_gain, "a positive gain (1 = none)");
-        need(e.calibration_offset_pct.abs() <= 100.0, Some("effects"), "calibration_offset_pct",
-            e.calibration_offset_pct, "an offset in %, between -100 and 100");
-        need((0.0..=50.0).contains(&e.deadband_pct), Some("effects"), "deadband_pct", e.deadband_pct,
-            "a band in %, 0-50 (0 = none)");
-        need((0.0..=50.0).contains(&e.stickband_pct), Some("effects"), "stickband_pct", e.stickband_pct,
-            "S in %, 0-50 (0 = none)");
-        need(e.jumpband_pct >= 0.0 && e.jumpband_pct <= e.stickband_pct, Some("effects"), "jumpband_pct",
-            e.jumpband_pct, "J in %, 0 <= J <= stickband_pct");
-        need((0.0..=10.0).contains(&e.quantization_pct), Some("effects"), "quantization_pct", e.quantization_pct,
-            "a sensor resolution in %, 0-10 (0 = continuous)");
-        need(e.closing_slew_pct_per_s >= 0.0 && e.closing_slew_pct_per_s.is_finite(), Some("effects"),
-            "closing_slew_pct_per_s", e.closing_slew_pct_per_s, "a speed in %/s, >= 0 (0 = same as opening)");
-        if e.closing_slew_pct_per_s > 0.0 {
-            need(kind == ModelKind::Pincart2, Some("effects"), "closing_slew_pct_per_s", e.closing_slew_pct_per_s,
-                "asymmetric slew rates need model = \"pincart2\" (the only core with a slew rate)");
+        need(
+            e.calibration_gain.is_finite() && e.calibration_gain > 0.0,
+            Some("effects"),
+            "calibration_gain",
+            e.calibration_gain,
+            "a positive gain (1 = none)",
+        );
+        need(
+            e.calibration_offset_pct.abs() <= 100.0,
+            Some("effects"),
+            "calibration_offset_pct",
+            e.calibration_offset_pct,
+            "an offset in %, between -100 and 100",
+        );
+        need(
+            (0.0..=50.0).contains(&e.deadband_pct),
+            Some("effects"),
+            "deadband_pct",
+            e.deadband_pct,
+            "a band in %, 0-50 (0 = none)",
+        );
+        need(
+            (0.0..=50.0).contains(&e.stickband_pct),
+            Some("effects"),
+            "stickband_pct",
+            e.stickband_pct,
+            "S in %, 0-50 (0 = none)",
+        );
+        need(
+            e.jumpband_pct >= 0.0 && e.jumpband_pct <= e.stickband_pct,
+            Some("effects"),
+            "jumpband_pct",
+            e.jumpband_pct,
+            "J in %, 0 <= J <= stickband_pct",
+        );
+        need(
+            (0.0..=10.0).contains(&e.quantization_pct),
+            Some("effects"),
+            "quantization_pct",
+            e.quantization_pct,
+            "a sensor resolution in %, 0-10 (0 = continuous)",
+        );
+        need(
+            e.closing_slew_pct_per_s >= 0.0 && e.closing_slew_pct_per_s.is_finite(),
+            Some("effects"),
+            "closing_slew_pct_per_s",
+            e.closing_slew_pct_per_s,
+            "a speed in %/s, >= 0 (0 = same as opening)",
+        );
+        need(
+            (0.0..=20.0).contains(&e.open_slowdown),
+            Some("effects"),
+            "open_slowdown",
+            e.open_slowdown,
+            "a slowdown ratio r, 0-20 (fully open is 1 + r times slower; 0 = none)",
+        );
+        if kind != ModelKind::Pincart2 {
+            need(
+                e.closing_slew_pct_per_s == 0.0,
+                Some("effects"),
+                "closing_slew_pct_per_s",
+                e.closing_slew_pct_per_s,
+                "asymmetric slew rates need model = \"pincart2\" (the only core with a slew rate)",
+            );
+            need(e.open_slowdown == 0.0, Some("effects"), "open_slowdown", e.open_slowdown,
+                "an opening-dependent speed needs model = \"pincart2\" (the only core with a pin speed)");
         }
         out
     }
@@ -395,12 +511,20 @@ impl Valve {
         };
         let core = match spec.model {
             ModelKind::Modelless | ModelKind::Delayed => Core::PassThrough,
-            ModelKind::Fopdt => Core::Fopdt(Fopdt::new(spec.fopdt.as_ref().ok_or_else(missing)?, dt)),
-            ModelKind::Stiction => Core::Stiction(Stiction::new(spec.stiction.as_ref().ok_or_else(missing)?)),
-            ModelKind::Pincart1 => Core::PinCart(PinCart::one(spec.pincart1.as_ref().ok_or_else(missing)?, dt)),
+            ModelKind::Fopdt => {
+                Core::Fopdt(Fopdt::new(spec.fopdt.as_ref().ok_or_else(missing)?, dt))
+            }
+            ModelKind::Stiction => {
+                Core::Stiction(Stiction::new(spec.stiction.as_ref().ok_or_else(missing)?))
+            }
+            ModelKind::Pincart1 => Core::PinCart(PinCart::one(
+                spec.pincart1.as_ref().ok_or_else(missing)?,
+                dt,
+            )),
             ModelKind::Pincart2 => Core::PinCart(PinCart::two(
                 spec.pincart2.as_ref().ok_or_else(missing)?,
                 spec.effects.closing_slew_pct_per_s,
+                spec.effects.open_slowdown,
                 dt,
             )),
         };
@@ -483,12 +607,30 @@ impl Valve {
 
 /// The model files shipped in `config/models/`, embedded so the binary runs with no files.
 const BUNDLED: [(ModelKind, &str); 6] = [
-    (ModelKind::Modelless, include_str!("../../config/models/modelless.toml")),
-    (ModelKind::Delayed, include_str!("../../config/models/delayed.toml")),
-    (ModelKind::Fopdt, include_str!("../../config/models/fopdt.toml")),
-    (ModelKind::Stiction, include_str!("../../config/models/stiction.toml")),
-    (ModelKind::Pincart1, include_str!("../../config/models/pincart1.toml")),
-    (ModelKind::Pincart2, include_str!("../../config/models/pincart2.toml")),
+    (
+        ModelKind::Modelless,
+        include_str!("../../config/models/modelless.toml"),
+    ),
+    (
+        ModelKind::Delayed,
+        include_str!("../../config/models/delayed.toml"),
+    ),
+    (
+        ModelKind::Fopdt,
+        include_str!("../../config/models/fopdt.toml"),
+    ),
+    (
+        ModelKind::Stiction,
+        include_str!("../../config/models/stiction.toml"),
+    ),
+    (
+        ModelKind::Pincart1,
+        include_str!("../../config/models/pincart1.toml"),
+    ),
+    (
+        ModelKind::Pincart2,
+        include_str!("../../config/models/pincart2.toml"),
+    ),
 ];
 
 /// The default parameters of `kind`, as shipped in `config/models/<kind>.toml`.

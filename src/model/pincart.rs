@@ -75,6 +75,8 @@ enum PinLaw {
         p: PinCart2Params,
         /// Slew rate while closing, %/s (equal to `dy_max` unless asymmetric).
         close_max: f64,
+        /// Opening-dependent slowdown r: the proportional gain scales by 1 / (1 + r V / 100).
+        slowdown: f64,
     },
 }
 
@@ -92,17 +94,29 @@ pub(crate) struct PinCart {
 
 impl PinCart {
     pub(crate) fn one(p: &PinCart1Params, dt: f64) -> Self {
-        Self::with_law(PinLaw::Proportional { k: p.p_gain_per_s }, p.backlash_pct, dt)
+        Self::with_law(
+            PinLaw::Proportional { k: p.p_gain_per_s },
+            p.backlash_pct,
+            dt,
+        )
     }
 
-    /// Pin-cart II; `closing_slew` (%/s) > 0 gives closing its own slew rate (asymmetry).
-    pub(crate) fn two(p: &PinCart2Params, closing_slew: f64, dt: f64) -> Self {
+    /// Pin-cart II with the core-level effects: `closing_slew` (%/s) > 0 gives closing its own
+    /// slew rate (asymmetry); `slowdown` r > 0 makes the proportional pin speed fall with
+    /// opening as `1 / (1 + r V / 100)` (a pneumatic chamber that grows with opening: slower
+    /// response, same slew limit).
+    pub(crate) fn two(p: &PinCart2Params, closing_slew: f64, slowdown: f64, dt: f64) -> Self {
         let close_max = if closing_slew > 0.0 {
             closing_slew
         } else {
             p.dy_max_pct_per_s
         };
-        Self::with_law(PinLaw::StateDependent { p: *p, close_max }, p.backlash_pct, dt)
+        let law = PinLaw::StateDependent {
+            p: *p,
+            close_max,
+            slowdown,
+        };
+        Self::with_law(law, p.backlash_pct, dt)
     }
 
     fn with_law(law: PinLaw, backlash: f64, dt: f64) -> Self {
@@ -126,7 +140,11 @@ impl PinCart {
         let e = u - self.v; // eq. (1)
         let dy = match self.law {
             PinLaw::Proportional { k } => k * e * self.dt, // eq. (2)
-            PinLaw::StateDependent { p, close_max } => self.pin_step_two(&p, close_max, e),
+            PinLaw::StateDependent {
+                p,
+                close_max,
+                slowdown,
+            } => self.pin_step_two(&p, close_max, slowdown, e),
         };
         self.y += dy;
         // eq. (3): the cart follows only when the pin pushes a side.
@@ -140,7 +158,7 @@ impl PinCart {
 
     /// Pin movement of pin-cart II for one sample, eqs. (4)-(7).
     #[inline]
-    fn pin_step_two(&self, p: &PinCart2Params, close_max: f64, e: f64) -> f64 {
+    fn pin_step_two(&self, p: &PinCart2Params, close_max: f64, slowdown: f64, e: f64) -> f64 {
         if e == 0.0 {
             return 0.0;
         }
@@ -148,8 +166,13 @@ impl PinCart {
         let rel = self.y - self.v;
         let pushing = d * rel >= self.half - 1e-12;
         if pushing {
-            let speed = (p.p_gain_per_s * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
-            let max = if d > 0.0 { p.dy_max_pct_per_s } else { close_max };
+            let gain = p.p_gain_per_s / (1.0 + slowdown * self.v / 100.0);
+            let speed = (gain * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
+            let max = if d > 0.0 {
+                p.dy_max_pct_per_s
+            } else {
+                close_max
+            };
             let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
             d * step
         } else {

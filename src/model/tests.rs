@@ -43,10 +43,10 @@ fn bundled_model_files_load_and_match_their_kind() {
     for kind in ModelKind::ALL {
         let spec = bundled(kind);
         assert_eq!(spec.model, kind);
-        let on_disk = ModelSpec::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(format!(
-            "config/models/{}.toml",
-            kind.tag()
-        )))
+        let on_disk = ModelSpec::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join(format!("config/models/{}.toml", kind.tag())),
+        )
         .unwrap();
         assert_eq!(on_disk, spec);
         Valve::new(&spec, DT).unwrap();
@@ -105,7 +105,9 @@ fn pincart2_polynomial_must_stay_positive() {
 
 #[test]
 fn modelless_is_identity_and_delayed_is_a_shift() {
-    let op: Vec<f64> = (0..50).map(|k| (k as f64 * 0.3).sin() * 10.0 + 50.0).collect();
+    let op: Vec<f64> = (0..50)
+        .map(|k| (k as f64 * 0.3).sin() * 10.0 + 50.0)
+        .collect();
     let mut m = Valve::new(&bundled(ModelKind::Modelless), DT).unwrap();
     assert_eq!(m.simulate(&op, op[0]), op);
     let mut d = Valve::new(&ModelSpec::bare(ModelKind::Delayed, 0.05), DT).unwrap();
@@ -123,7 +125,10 @@ fn fopdt_step_response_is_exponential() {
     assert!(out[..20].iter().all(|&x| x == 0.0));
     for (k, &y) in out.iter().enumerate().skip(20) {
         let t = (k - 19) as f64 * DT;
-        assert!((y - 10.0 * (1.0 - (-t / 0.5f64).exp())).abs() < 1e-9, "k={k}");
+        assert!(
+            (y - 10.0 * (1.0 - (-t / 0.5f64).exp())).abs() < 1e-9,
+            "k={k}"
+        );
     }
 }
 
@@ -173,10 +178,16 @@ fn pincart2_defaults_reproduce_the_paper_delays() {
     let same = step_delay(&spec, 50.0, 1.0, 70.0);
     assert!((0.38..=0.55).contains(&same), "same-direction delay {same}");
     let reversal = step_delay(&spec, 50.0, 1.0, 30.0);
-    assert!((0.85..=1.15).contains(&reversal), "reversal delay {reversal}");
+    assert!(
+        (0.85..=1.15).contains(&reversal),
+        "reversal delay {reversal}"
+    );
     let near_closed = step_delay(&spec, 20.0, 1.0, 5.0);
     let near_open = step_delay(&spec, 90.0, 1.0, 70.0);
-    assert!(near_closed + 0.2 < near_open, "{near_closed} vs {near_open}");
+    assert!(
+        near_closed + 0.2 < near_open,
+        "{near_closed} vs {near_open}"
+    );
     // Closing steps after a close keep the short delay too.
     let same_down = step_delay(&spec, 60.0, -1.0, 40.0);
     assert!((same - same_down).abs() < 0.05, "{same} vs {same_down}");
@@ -211,7 +222,10 @@ fn stiction_sticks_then_jumps() {
     let ramp_up: Vec<f64> = (1..=100).map(|k| 50.0 + 0.1 * k as f64).collect();
     let up = v.simulate(&ramp_up, 50.0);
     let top = *up.last().unwrap_or(&0.0);
-    assert!((top - (60.0 - 0.5)).abs() < 1e-9, "moving offset (S-J)/2: {top}");
+    assert!(
+        (top - (60.0 - 0.5)).abs() < 1e-9,
+        "moving offset (S-J)/2: {top}"
+    );
     let mut y = top;
     let mut moved_at = None;
     for k in 1..=40 {
@@ -249,7 +263,7 @@ proptest! {
             let mut p = bundled(ModelKind::Pincart2).pincart2.unwrap();
             p.p_gain_per_s = gain;
             p.backlash_pct = backlash;
-            PinCart::two(&p, 0.0, DT)
+            PinCart::two(&p, 0.0, 0.0, DT)
         };
         core.reset(50.0);
         for &u in &ops {
@@ -329,7 +343,10 @@ fn golden_runs_match_stored_outputs() {
             .collect();
         assert_eq!(stored.len(), out.len());
         for (k, (a, b)) in stored.iter().zip(&out).enumerate() {
-            assert!((a - b).abs() < 1e-9, "{kind} sample {k}: stored {a}, now {b}");
+            assert!(
+                (a - b).abs() < 1e-9,
+                "{kind} sample {k}: stored {a}, now {b}"
+            );
         }
     }
 }
@@ -387,7 +404,9 @@ fn quantization_reports_a_lattice_but_moves_smoothly() {
     );
     v.reset(40.0, 40.0);
     let out = run(&mut v, 43.3, 300);
-    assert!(out.iter().all(|y| ((y / 0.5).round() * 0.5 - y).abs() < 1e-12));
+    assert!(out
+        .iter()
+        .all(|y| ((y / 0.5).round() * 0.5 - y).abs() < 1e-12));
     assert_eq!(*out.last().unwrap(), 43.5);
 }
 
@@ -401,7 +420,10 @@ fn asymmetry_slows_closing_only() {
         let mut v = with_effects(ModelKind::Pincart2, effects);
         v.reset(from, from);
         let out = run(&mut v, to, 600);
-        out.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max) / DT
+        out.windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0, f64::max)
+            / DT
     };
     assert!((speed(20.0, 80.0) - 20.0).abs() < 1e-6);
     assert!((speed(80.0, 20.0) - 5.0).abs() < 1e-6);
@@ -425,7 +447,11 @@ fn stiction_effect_makes_a_smooth_core_stick() {
         let out = run(&mut v, 50.0 + 0.2 * stair as f64, 300);
         settled.push(*out.last().unwrap());
     }
-    let moves: Vec<f64> = settled.windows(2).map(|w| w[1] - w[0]).filter(|d| d.abs() > 0.05).collect();
+    let moves: Vec<f64> = settled
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| d.abs() > 0.05)
+        .collect();
     assert!(!moves.is_empty() && moves.len() <= 10, "{moves:?}");
     assert!(moves.iter().all(|&d| d > 0.9), "{moves:?}");
 }
@@ -443,6 +469,35 @@ fn effects_round_trip_and_stay_off_by_default() {
     let text = spec.to_toml();
     assert!(text.contains("[effects]") && text.contains("deadband_pct"));
     assert!(!text.contains("calibration_gain"));
-    assert_eq!(ModelSpec::from_toml(&text, Path::new("x.toml")).unwrap(), spec);
+    assert_eq!(
+        ModelSpec::from_toml(&text, Path::new("x.toml")).unwrap(),
+        spec
+    );
     assert!(!bundled(ModelKind::Pincart2).to_toml().contains("effects"));
+}
+
+#[test]
+fn open_slowdown_makes_the_valve_slower_when_open() {
+    let effects = Effects {
+        open_slowdown: 2.0,
+        ..Effects::default()
+    };
+    let spec = ModelSpec {
+        effects,
+        dead_time_s: 0.0,
+        ..bundled(ModelKind::Pincart2)
+    };
+    let t90 = |from: f64, to: f64| {
+        let mut v = Valve::new(&spec, DT).unwrap();
+        v.reset(from, from);
+        let out = run(&mut v, to, 1000);
+        out.iter()
+            .position(|y| (y - from).abs() >= 0.9 * (to - from).abs())
+            .unwrap_or(1000)
+    };
+    let (closed, open) = (t90(10.0, 15.0), t90(85.0, 90.0));
+    assert!(
+        open as f64 > 2.0 * closed as f64,
+        "{closed} vs {open} samples"
+    );
 }

@@ -1,0 +1,102 @@
+//! Loop timing benchmark: runs the real daemon loop (embedded default config: emulated pin-cart
+//! II, random steps, 100 Hz, real clock, logging to a temporary directory) for a fixed time and
+//! reports the timing error |actual - scheduled| (p50, p99, max) and the missed cycles.
+//!
+//! `cargo bench --bench loop_timing`; `VB_BENCH_SECS` sets the run time (default 60 s);
+//! `VB_BENCH_PRIORITY=N` runs the loop thread under SCHED_FIFO priority N (`[loop] realtime_priority`).
+//! `VB_BENCH_TOKIO=1` also measures `tokio::time::interval` (MissedTickBehavior::Skip) over the
+//! same time, the baseline the daemon's schedule replaces.
+
+use std::time::{Duration, Instant};
+
+use hdrhistogram::Histogram;
+use valve_bridge::daemon::{self, Config, RunOptions};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let secs: f64 = match std::env::var("VB_BENCH_SECS") {
+        Ok(v) => v.parse().map_err(|e| format!("VB_BENCH_SECS={v}: {e}"))?,
+        Err(_) => 60.0,
+    };
+    let mut config = Config::embedded_default()?;
+    if let Ok(v) = std::env::var("VB_BENCH_PRIORITY") {
+        config.loop_.realtime_priority = v
+            .parse()
+            .map_err(|e| format!("VB_BENCH_PRIORITY={v}: {e}"))?;
+    }
+    let dir = tempfile::tempdir()?;
+    println!(
+        "loop_timing: {secs} s at 100 Hz, embedded default config, real clock, SCHED_FIFO priority {}",
+        config.loop_.realtime_priority
+    );
+    let summary = daemon::start(
+        config,
+        RunOptions {
+            duration_s: Some(secs),
+            log_dir: Some(dir.path().to_path_buf()),
+            virtual_clock: false,
+            progress: false,
+        },
+    )?
+    .finish()?;
+    let s = &summary.stats;
+    println!(
+        "daemon loop: {} samples, {} missed cycles, timing error p50 {:.2} us, p99 {:.2} us, max {:.2} us",
+        summary.samples(),
+        summary.missed(),
+        s.lateness_us(0.5),
+        s.lateness_us(0.99),
+        s.max_lateness_us()
+    );
+
+    if std::env::var("VB_BENCH_TOKIO").is_ok_and(|v| v == "1") {
+        let (hist, missed) = tokio_interval(secs)?;
+        println!(
+            "tokio::time::interval: {} ticks, {} missed, timing error p50 {:.2} us, p99 {:.2} us, max {:.2} us",
+            hist.len(),
+            missed,
+            hist.value_at_quantile(0.5) as f64 / 1e3,
+            hist.value_at_quantile(0.99) as f64 / 1e3,
+            hist.max() as f64 / 1e3
+        );
+    }
+    Ok(())
+}
+
+/// |tick - scheduled| of a 10 ms `tokio::time::interval` over `secs`, and the ticks it skipped.
+fn tokio_interval(secs: f64) -> Result<(Histogram<u64>, u64), Box<dyn std::error::Error>> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let mut hist = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3)?;
+    let period = Duration::from_millis(10);
+    let n = (secs * 100.0).round() as u64;
+    let missed = rt.block_on(async {
+        let t0 = tokio::time::Instant::now() + period;
+        let mut interval = tokio::time::interval_at(t0, period);
+        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        let mut ticks = 0u64;
+        let mut last_slot = None;
+        let mut missed = 0;
+        while ticks < n {
+            interval.tick().await;
+            let now = Instant::now();
+            let since = now.duration_since(t0.into_std());
+            // The nearest grid slot and the error to it.
+            let slot = (since.as_nanos() as f64 / period.as_nanos() as f64).round() as u64;
+            let sched = t0.into_std() + period * slot as u32;
+            let err = if now >= sched {
+                now - sched
+            } else {
+                sched - now
+            };
+            hist.saturating_record(err.as_nanos().max(1) as u64);
+            if let Some(prev) = last_slot {
+                missed += slot.saturating_sub(prev + 1);
+            }
+            last_slot = Some(slot);
+            ticks += 1;
+        }
+        missed
+    });
+    Ok((hist, missed))
+}

@@ -1,0 +1,135 @@
+//! Fault injection: which requests sim-device answers late, wrongly or not at all.
+//!
+//! Requests are numbered from 1 across the device's life (per connection for
+//! `--disconnect-after`). The rules are deterministic (`every N`) or seeded (`drop-prob`), so a
+//! test knows which requests fail. This module only decides; the servers carry the decision out.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// The fault options of the command line.
+#[derive(Debug, Clone, Default)]
+pub struct FaultConfig {
+    /// Extra delay before every response.
+    pub delay: Duration,
+    /// Answer no request whose number is a multiple of this.
+    pub drop_every: Option<u64>,
+    /// Answer no request with this probability.
+    pub drop_prob: f64,
+    /// Send a wrong CRC for requests whose number is a multiple of this (RTU only).
+    pub corrupt_crc_every: Option<u64>,
+    /// Answer exception 04 (server device failure) to requests whose number is a multiple of this.
+    pub exception_every: Option<u64>,
+    /// Close a TCP connection on its N-th request, unanswered.
+    pub disconnect_after: Option<u64>,
+    /// Seed of `drop_prob`.
+    pub seed: u64,
+}
+
+/// What to do with one request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// Answer normally.
+    Answer,
+    /// Send nothing.
+    Drop,
+    /// Answer exception 04.
+    Exception,
+    /// Answer with a corrupted CRC.
+    CorruptCrc,
+}
+
+/// The shared fault state of one device.
+#[derive(Debug)]
+pub struct Faults {
+    cfg: FaultConfig,
+    count: AtomicU64,
+    rng: Mutex<ChaCha8Rng>,
+}
+
+fn hits(every: Option<u64>, n: u64) -> bool {
+    matches!(every, Some(e) if e > 0 && n.is_multiple_of(e))
+}
+
+impl Faults {
+    /// Fault state for `cfg`, no request seen yet.
+    pub fn new(cfg: FaultConfig) -> Self {
+        let rng = Mutex::new(ChaCha8Rng::seed_from_u64(cfg.seed));
+        Faults {
+            cfg,
+            count: AtomicU64::new(0),
+            rng,
+        }
+    }
+
+    /// The extra response delay.
+    pub fn delay(&self) -> Duration {
+        self.cfg.delay
+    }
+
+    /// The request count after which a TCP connection is closed.
+    pub fn disconnect_after(&self) -> Option<u64> {
+        self.cfg.disconnect_after
+    }
+
+    /// Numbers the next request and decides its fate.
+    pub fn next(&self) -> Action {
+        let n = self.count.fetch_add(1, Ordering::Relaxed) + 1;
+        let random_drop = self.cfg.drop_prob > 0.0
+            && self
+                .rng
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .gen_bool(self.cfg.drop_prob.min(1.0));
+        if hits(self.cfg.drop_every, n) || random_drop {
+            Action::Drop
+        } else if hits(self.cfg.exception_every, n) {
+            Action::Exception
+        } else if hits(self.cfg.corrupt_crc_every, n) {
+            Action::CorruptCrc
+        } else {
+            Action::Answer
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_n_rules_and_precedence() {
+        let f = Faults::new(FaultConfig {
+            drop_every: Some(3),
+            exception_every: Some(2),
+            corrupt_crc_every: Some(5),
+            ..FaultConfig::default()
+        });
+        let got: Vec<Action> = (0..6).map(|_| f.next()).collect();
+        use Action::*;
+        assert_eq!(
+            got,
+            vec![Answer, Exception, Drop, Exception, CorruptCrc, Drop]
+        );
+    }
+
+    #[test]
+    fn drop_probability_is_seeded() {
+        let run = |seed| {
+            let f = Faults::new(FaultConfig {
+                drop_prob: 0.25,
+                seed,
+                ..FaultConfig::default()
+            });
+            (0..4000).map(|_| f.next()).collect::<Vec<_>>()
+        };
+        let a = run(7);
+        assert_eq!(a, run(7));
+        let drops = a.iter().filter(|x| **x == Action::Drop).count();
+        assert!((900..1100).contains(&drops), "{drops}");
+    }
+}

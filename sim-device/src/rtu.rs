@@ -1,0 +1,283 @@
+//! The Modbus RTU server of sim-device: framing, fault injection and line-speed emulation.
+//!
+//! Written by hand, small on purpose: tokio-modbus's RTU server owns its frame encoder
+//! privately, so through it a reply cannot carry a deliberately wrong CRC, and it cannot hold a
+//! reply back for the time its characters would take on a real line. Requests are decoded by
+//! tokio-modbus (`Request::try_from` on the PDU) and answered by the shared
+//! [`RegisterBank`]; only the frame (address, PDU, CRC) and the few response PDUs the bank
+//! produces are encoded here.
+//!
+//! A request frame ends when its function code says it is complete, or, for function codes
+//! whose length is not known here, at an idle gap. Frames with a bad CRC or for another slave
+//! are ignored (a device on a bus stays silent); broadcasts (address 0) are executed unanswered.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio_modbus::bytes::{Bytes, BytesMut};
+use tokio_modbus::{ExceptionCode, Request, Response};
+use tokio_serial::SerialStream;
+use valve_bridge::modbus::server::RegisterBank;
+
+use crate::faults::{Action, Faults};
+
+const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
+
+/// Line-speed emulation: how long characters take on the emulated wire.
+#[derive(Debug, Clone, Copy)]
+pub struct LineSpeed {
+    /// Baud rate.
+    pub baud: u32,
+    /// Bits per character (10 for 8N1, 11 for 8E1 or 8N2).
+    pub bits_per_char: u32,
+    /// Device response time.
+    pub turnaround: Duration,
+}
+
+impl LineSpeed {
+    /// Time for `chars` characters.
+    pub fn chars(&self, chars: usize) -> Duration {
+        Duration::from_secs_f64(chars as f64 * f64::from(self.bits_per_char) / f64::from(self.baud))
+    }
+}
+
+/// Everything the RTU server needs besides the port.
+#[derive(Debug, Clone)]
+pub struct RtuDevice {
+    /// The registers.
+    pub bank: Arc<RegisterBank>,
+    /// Fault injection.
+    pub faults: Arc<Faults>,
+    /// Slave address answered.
+    pub slave: u8,
+    /// Optional line-speed emulation.
+    pub line: Option<LineSpeed>,
+}
+
+/// Gap after which buffered bytes count as a complete (or broken) frame.
+const IDLE_GAP: Duration = Duration::from_millis(5);
+
+/// The length of the RTU request frame at the start of `buf`, if its function code tells it
+/// and enough bytes are there to know; `Err(())` if the function code does not tell it.
+fn request_len(buf: &[u8]) -> Result<Option<usize>, ()> {
+    let Some(&fc) = buf.get(1) else {
+        return Ok(None);
+    };
+    let counted = |at: usize, fixed: usize| buf.get(at).map(|&n| fixed + usize::from(n));
+    match fc {
+        1..=6 => Ok(Some(8)),
+        15 | 16 => Ok(counted(6, 9)),
+        22 => Ok(Some(10)),
+        23 => Ok(counted(10, 13)),
+        _ => Err(()),
+    }
+}
+
+/// The PDU of a response (or exception) to function code `fc`.
+pub fn response_pdu(fc: u8, result: &Result<Response, ExceptionCode>) -> Vec<u8> {
+    let words = |w: &[u16]| {
+        let mut out = Vec::with_capacity(2 + 2 * w.len());
+        out.push(fc);
+        // At most 125 registers are ever read, so the byte count fits in a u8.
+        out.push((2 * w.len()).min(250) as u8);
+        for v in w {
+            out.extend_from_slice(&v.to_be_bytes());
+        }
+        out
+    };
+    let exception = |code: ExceptionCode| vec![fc | 0x80, u8::from(code)];
+    match result {
+        Ok(Response::ReadHoldingRegisters(w))
+        | Ok(Response::ReadInputRegisters(w))
+        | Ok(Response::ReadWriteMultipleRegisters(w)) => words(w),
+        Ok(Response::WriteSingleRegister(a, v)) | Ok(Response::WriteMultipleRegisters(a, v)) => {
+            let mut out = vec![fc];
+            out.extend_from_slice(&a.to_be_bytes());
+            out.extend_from_slice(&v.to_be_bytes());
+            out
+        }
+        // The bank answers only the register functions above; anything else is a device failure.
+        Ok(_) => exception(ExceptionCode::ServerDeviceFailure),
+        Err(code) => exception(*code),
+    }
+}
+
+/// Appends the CRC (low byte first) to `adu`, inverted when `corrupt`.
+pub fn seal(mut adu: Vec<u8>, corrupt: bool) -> Vec<u8> {
+    let crc = MODBUS_CRC.checksum(&adu) ^ if corrupt { 0xFFFF } else { 0 };
+    adu.extend_from_slice(&crc.to_le_bytes());
+    adu
+}
+
+impl RtuDevice {
+    /// The reply to one request frame, or None when the device stays silent.
+    pub fn reply(&self, frame: &[u8]) -> Option<Vec<u8>> {
+        if frame.len() < 4 {
+            return None;
+        }
+        let (body, crc) = frame.split_at(frame.len() - 2);
+        if MODBUS_CRC.checksum(body) != u16::from_le_bytes([crc[0], crc[1]]) {
+            tracing::debug!("ignored a frame with a bad CRC: {frame:02X?}");
+            return None;
+        }
+        let (slave, pdu) = (body[0], &body[1..]);
+        if slave != self.slave && slave != 0 {
+            return None;
+        }
+        let fc = pdu[0];
+        let action = self.faults.next();
+        let result = match Request::try_from(Bytes::copy_from_slice(pdu)) {
+            _ if action == Action::Exception => Err(ExceptionCode::ServerDeviceFailure),
+            Ok(req) => self.bank.handle(&req),
+            Err(_) => Err(ExceptionCode::IllegalFunction),
+        };
+        if slave == 0 || action == Action::Drop {
+            return None;
+        }
+        let mut adu = vec![slave];
+        adu.extend_from_slice(&response_pdu(fc, &result));
+        Some(seal(adu, action == Action::CorruptCrc))
+    }
+
+    /// Serves requests on `port` until it closes.
+    pub async fn serve(&self, mut port: SerialStream) -> std::io::Result<()> {
+        let mut buf = BytesMut::with_capacity(512);
+        loop {
+            let n = if buf.is_empty() {
+                port.read_buf(&mut buf).await?
+            } else {
+                match tokio::time::timeout(IDLE_GAP, port.read_buf(&mut buf)).await {
+                    Ok(r) => r?,
+                    Err(_) => {
+                        // Silence: what is buffered is a whole frame (unknown function) or garbage.
+                        let frame = buf.split();
+                        self.answer(&mut port, &frame).await?;
+                        continue;
+                    }
+                }
+            };
+            if n == 0 {
+                return Ok(());
+            }
+            while let Ok(Some(len)) = request_len(&buf) {
+                if buf.len() < len {
+                    break;
+                }
+                let frame = buf.split_to(len);
+                self.answer(&mut port, &frame).await?;
+            }
+        }
+    }
+
+    async fn answer(&self, port: &mut SerialStream, frame: &[u8]) -> std::io::Result<()> {
+        let Some(reply) = self.reply(frame) else {
+            return Ok(());
+        };
+        let mut wait = self.faults.delay();
+        if let Some(line) = self.line {
+            wait += line.chars(frame.len() + reply.len()) + line.turnaround;
+        }
+        if !wait.is_zero() {
+            tokio::time::sleep(wait).await;
+        }
+        port.write_all(&reply).await?;
+        port.flush().await
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::faults::FaultConfig;
+    use valve_bridge::modbus::map::RegisterMap;
+    use valve_bridge::modbus::server::OutOfRange;
+
+    fn device(faults: FaultConfig) -> RtuDevice {
+        let bank = RegisterBank::new(RegisterMap::default(), 0.0, 100.0, OutOfRange::KeepAndFlag);
+        bank.set_position_pct(50.0);
+        RtuDevice {
+            bank: Arc::new(bank),
+            faults: Arc::new(Faults::new(faults)),
+            slave: 7,
+            line: None,
+        }
+    }
+
+    #[test]
+    fn frame_lengths() {
+        assert_eq!(request_len(&[1]), Ok(None));
+        assert_eq!(request_len(&[1, 3]), Ok(Some(8)));
+        assert_eq!(request_len(&[1, 16, 0, 0, 0, 1]), Ok(None));
+        assert_eq!(request_len(&[1, 16, 0, 0, 0, 1, 2]), Ok(Some(11)));
+        assert_eq!(
+            request_len(&[1, 23, 0, 1, 0, 1, 0, 0, 0, 1, 2]),
+            Ok(Some(15))
+        );
+        assert_eq!(request_len(&[1, 17]), Err(()));
+    }
+
+    #[test]
+    fn reads_position_with_valid_crc() {
+        let d = device(FaultConfig::default());
+        // Read holding register 1 of slave 7: the reference frame from the Modbus spec's CRC.
+        let req = seal(vec![7, 3, 0, 1, 0, 1], false);
+        let reply = d.reply(&req).unwrap();
+        assert_eq!(&reply[..5], &[7, 3, 2, 0x01, 0xF4]); // 500 per mille
+        assert_eq!(reply, seal(vec![7, 3, 2, 0x01, 0xF4], false));
+        // Known CRC: 01 03 00 00 00 01 -> 84 0A.
+        assert_eq!(seal(vec![1, 3, 0, 0, 0, 1], false)[6..], [0x84, 0x0A]);
+    }
+
+    #[test]
+    fn silence_for_bad_crc_other_slaves_and_broadcasts() {
+        let d = device(FaultConfig::default());
+        let mut bad = seal(vec![7, 3, 0, 1, 0, 1], false);
+        bad[7] ^= 1;
+        assert_eq!(d.reply(&bad), None);
+        assert_eq!(d.reply(&seal(vec![8, 3, 0, 1, 0, 1], false)), None);
+        // Broadcast write is executed, unanswered.
+        assert_eq!(d.reply(&seal(vec![0, 6, 0, 0, 0x01, 0x2C], false)), None);
+        assert_eq!(d.bank.setpoint_pct(), 30.0);
+    }
+
+    #[test]
+    fn writes_exceptions_and_injected_faults() {
+        let d = device(FaultConfig {
+            corrupt_crc_every: Some(2),
+            exception_every: Some(3),
+            ..FaultConfig::default()
+        });
+        // 1: FC16 write 700 per mille.
+        let reply = d
+            .reply(&seal(vec![7, 16, 0, 0, 0, 1, 2, 0x02, 0xBC], false))
+            .unwrap();
+        assert_eq!(reply, seal(vec![7, 16, 0, 0, 0, 1], false));
+        assert_eq!(d.bank.setpoint_pct(), 70.0);
+        // 2: corrupted CRC.
+        let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap();
+        assert_eq!(reply, seal(vec![7, 3, 2, 0x01, 0xF4], true));
+        // 3: injected exception 04.
+        let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap();
+        assert_eq!(reply, seal(vec![7, 0x83, 4], false));
+        // 5: unmapped address gives exception 02 (4 is a corrupted CRC).
+        d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false));
+        let reply = d.reply(&seal(vec![7, 3, 0, 9, 0, 1], false)).unwrap();
+        assert_eq!(reply, seal(vec![7, 0x83, 2], false));
+        // 6: injected exception again, whatever the function; 7: unknown function, exception 01.
+        let reply = d.reply(&seal(vec![7, 0x41, 1, 2], false)).unwrap();
+        assert_eq!(reply, seal(vec![7, 0xC1, 4], false));
+        let reply = d.reply(&seal(vec![7, 0x41, 1, 2], false)).unwrap();
+        assert_eq!(reply, seal(vec![7, 0xC1, 1], false));
+    }
+
+    #[test]
+    fn line_speed_figures() {
+        let l = LineSpeed {
+            baud: 19200,
+            bits_per_char: 11,
+            turnaround: Duration::ZERO,
+        };
+        assert!((l.chars(22).as_secs_f64() - 22.0 * 11.0 / 19200.0).abs() < 1e-9);
+    }
+}

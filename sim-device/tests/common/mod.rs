@@ -1,0 +1,96 @@
+//! Starting and stopping the real sim-device binary for the integration tests.
+#![allow(dead_code)] // each test file uses a different part of this helper
+
+use std::io::{BufRead, BufReader, Read};
+use std::process::{Child, ChildStdout, Command, Stdio};
+
+/// A running sim-device, killed when dropped.
+pub struct Sim {
+    child: Child,
+    _stdout: BufReader<ChildStdout>,
+    /// `host:port` announced for --tcp.
+    pub tcp: Option<String>,
+    /// Client-end path announced for --pty.
+    pub pty: Option<String>,
+}
+
+impl Sim {
+    /// Starts sim-device with `args` and waits for its endpoint lines.
+    pub fn start(args: &[&str]) -> Sim {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_sim-device"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("sim-device starts");
+        let mut stdout = BufReader::new(child.stdout.take().expect("piped stdout"));
+        let want = usize::from(args.contains(&"--tcp")) + usize::from(args.contains(&"--pty"));
+        let (mut tcp, mut pty) = (None, None);
+        for _ in 0..want {
+            let mut line = String::new();
+            if stdout.read_line(&mut line).unwrap_or(0) == 0 {
+                let mut err = String::new();
+                let _ = child.stderr.take().map(|mut e| e.read_to_string(&mut err));
+                panic!("sim-device {args:?} ended before announcing its endpoints: {err}");
+            }
+            if let Some(a) = line.trim().strip_prefix("tcp: ") {
+                tcp = Some(a.to_string());
+            } else if let Some(p) = line.trim().strip_prefix("pty: ") {
+                pty = Some(p.to_string());
+            }
+        }
+        Sim {
+            child,
+            _stdout: stdout,
+            tcp,
+            pty,
+        }
+    }
+
+    /// Kills the device now.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// Runs sim-device to completion and returns (exit success, stderr without info logs).
+pub fn run_to_end(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_sim-device"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("sim-device runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A TCP port that was free a moment ago.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+/// True if `program` can be run; otherwise prints why the test is skipped.
+pub fn have(program: &str, probe: &[&str], install: &str) -> bool {
+    let ok = Command::new(program)
+        .args(probe)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        println!("SKIPPED: `{program}` is not available ({install})");
+    }
+    ok
+}

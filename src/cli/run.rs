@@ -1,0 +1,40 @@
+//! `valve-bridge run`: the valve loop (see `valve_bridge::daemon`), with a summary at the end.
+
+use std::path::PathBuf;
+
+use valve_bridge::daemon::{self, Config, RunOptions};
+
+/// Arguments of `valve-bridge run`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Daemon config (TOML). Default: the embedded config/emulated.toml (emulated pin-cart II,
+    /// random steps, logs in ./logs/).
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Stop after this much loop time, s (default: run until SIGINT/SIGTERM).
+    #[arg(long, value_name = "SECS")]
+    duration: Option<f64>,
+    /// Write the CSV logs here instead of `[log] dir`.
+    #[arg(long, value_name = "DIR")]
+    log_dir: Option<PathBuf>,
+    /// Run on the virtual clock, as fast as possible (same as `[loop] clock = "virtual"`):
+    /// for tests and offline runs with the emulated valve; --duration is then loop time.
+    #[arg(long)]
+    as_fast_as_possible: bool,
+}
+
+/// Loads the config, runs the loop and prints the summary on stdout.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = Config::load(args.config.as_deref())?;
+    let summary = daemon::run(
+        config,
+        RunOptions {
+            duration_s: args.duration,
+            log_dir: args.log_dir,
+            virtual_clock: args.as_fast_as_possible,
+            progress: true,
+        },
+    )?;
+    println!("{summary}");
+    Ok(())
+}

@@ -1,0 +1,62 @@
+//! `valve-bridge simulate`: run a model over the O_P of a recording and score it.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use valve_bridge::metrics;
+use valve_bridge::model::{ModelSpec, Valve};
+use valve_bridge::recording;
+
+use super::input::RecordingArgs;
+
+/// Arguments of `valve-bridge simulate`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Model parameter file (TOML, e.g. config/models/pincart2.toml).
+    #[arg(long)]
+    model: PathBuf,
+    /// Recording whose O_P drives the model.
+    #[arg(long)]
+    input: PathBuf,
+    /// Where to write the simulated run (t_s,op_pct,vp_pct[,vp_meas_pct]).
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    read: RecordingArgs,
+}
+
+/// Simulates, writes the CSV and prints the Table 1 row against the measurement.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let spec = ModelSpec::load(&args.model)?;
+    let rec = recording::read(&args.input, &args.read.options()?)?;
+    let mut valve = Valve::new(&spec, rec.sample_period)
+        .with_context(|| format!("building {}", args.model.display()))?;
+    let vp0 = rec.vp.first().copied().unwrap_or(rec.op[0]);
+    let sim = valve.simulate(&rec.op, vp0);
+    let has_vp = !rec.vp.is_empty();
+    let mut names = vec!["t_s", "op_pct", "vp_pct"];
+    let mut cols: Vec<&[f64]> = vec![&rec.t, &rec.op, &sim];
+    if has_vp {
+        names.push("vp_meas_pct");
+        cols.push(&rec.vp);
+    }
+    recording::write_columns(&args.out, &names, &cols)?;
+    tracing::info!(
+        samples = rec.op.len(),
+        out = %args.out.display(),
+        "simulated {} at {} s",
+        spec.model.display_name(),
+        rec.sample_period
+    );
+    if has_vp {
+        let s = metrics::scores(&rec.vp, &sim, &rec.op, rec.sample_period);
+        println!("{}", metrics::table1_header());
+        println!("{}", metrics::table1_row(spec.model.display_name(), &s));
+    } else {
+        println!(
+            "no measured V_P in {}: nothing to score",
+            args.input.display()
+        );
+    }
+    Ok(())
+}

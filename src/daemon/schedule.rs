@@ -1,0 +1,189 @@
+//! The loop's schedule: an absolute grid of deadlines `t0 + k * period`, on a real or virtual clock.
+//!
+//! On the real clock each slot waits until its deadline by sleeping to `deadline - spin` and then
+//! busy-waiting the rest (a plain sleep overshoots by the timer slack and the wake-up latency,
+//! tens to hundreds of µs; `tokio::time::interval` rounds to 1 ms). Deadlines are computed from
+//! the slot number, never from the previous wake-up, so errors never accumulate. A slot that
+//! cannot start within half a period of its deadline (the previous cycle overran) is returned as
+//! [`Slot::Skipped`]: the schedule stays on its grid, runs no catch-up burst, and the caller logs
+//! each skipped slot. On the virtual clock slots follow each other immediately, on time.
+//!
+//! This module only decides when; it knows nothing of valves, sources or logs.
+
+use std::time::{Duration, Instant};
+
+/// One slot of the grid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Slot {
+    /// Run the cycle of slot `k` now; it started `lateness` after its deadline.
+    Run { k: u64, lateness: Duration },
+    /// Slot `k` was missed (its cycle would start more than half a period late).
+    Skipped { k: u64 },
+}
+
+impl Slot {
+    /// The slot number.
+    pub fn k(&self) -> u64 {
+        match *self {
+            Slot::Run { k, .. } | Slot::Skipped { k } => k,
+        }
+    }
+}
+
+/// Which clock the schedule follows.
+#[derive(Debug, Clone, Copy)]
+enum Clock {
+    /// The monotonic wall clock, grid origin `t0`.
+    Real { t0: Instant, spin: Duration },
+    /// No waiting: every slot is on time.
+    Virtual,
+}
+
+/// The grid of deadlines and the number of the next slot.
+#[derive(Debug)]
+pub struct Schedule {
+    period_ns: u64,
+    next_k: u64,
+    clock: Clock,
+}
+
+impl Schedule {
+    /// A real-clock grid whose slot 0 is one period from now; `spin` is the busy-wait margin.
+    pub fn real(period: Duration, spin: Duration) -> Self {
+        Schedule {
+            period_ns: period.as_nanos() as u64,
+            next_k: 0,
+            clock: Clock::Real {
+                t0: Instant::now() + period,
+                spin,
+            },
+        }
+    }
+
+    /// A virtual-clock grid: slots follow each other without waiting.
+    pub fn virtual_clock(period: Duration) -> Self {
+        Schedule {
+            period_ns: period.as_nanos() as u64,
+            next_k: 0,
+            clock: Clock::Virtual,
+        }
+    }
+
+    /// The scheduled time of slot `k`, seconds from slot 0.
+    pub fn t_s(&self, k: u64) -> f64 {
+        // Integer nanoseconds, then one division: k/100 at 100 Hz is the correctly rounded value.
+        (k as f64 * self.period_ns as f64) / 1e9
+    }
+
+    /// Waits for the next slot (real clock) and returns it, or reports it as skipped.
+    pub fn next_slot(&mut self) -> Slot {
+        let k = self.next_k;
+        self.next_k += 1;
+        let Clock::Real { t0, spin } = self.clock else {
+            return Slot::Run {
+                k,
+                lateness: Duration::ZERO,
+            };
+        };
+        let deadline = t0 + Duration::from_nanos(k * self.period_ns);
+        let now = Instant::now();
+        if now > deadline + Duration::from_nanos(self.period_ns / 2) {
+            return Slot::Skipped { k };
+        }
+        if let Some(rest) = deadline.checked_duration_since(now + spin) {
+            std::thread::sleep(rest);
+        }
+        let mut now = Instant::now();
+        while now < deadline {
+            std::hint::spin_loop();
+            now = Instant::now();
+        }
+        Slot::Run {
+            k,
+            lateness: now - deadline,
+        }
+    }
+}
+
+/// Makes the calling thread's sleeps end as close to their deadline as the kernel allows.
+///
+/// Linux lets a sleeping thread wake up to 50 µs late by default (timer slack) to batch
+/// wake-ups; 1 ns asks for precise wake-ups. Harmless if refused.
+pub fn tighten_timer_slack() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and only affects the calling thread.
+    unsafe {
+        libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0);
+    }
+}
+
+/// Puts the calling thread under SCHED_FIFO at `priority` (1-99), so ordinary work on a busy
+/// machine cannot delay its wake-ups. Needs root or CAP_SYS_NICE; the error says so.
+pub fn realtime_priority(priority: u8) -> std::io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        let param = libc::sched_param {
+            sched_priority: libc::c_int::from(priority),
+        };
+        // SAFETY: pid 0 is the calling thread; `param` is a valid sched_param for SCHED_FIFO.
+        let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+        if rc != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(())
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = priority;
+        Err(std::io::Error::new(
+            std::io::ErrorKind::Unsupported,
+            "SCHED_FIFO is Linux-only here",
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn virtual_clock_runs_every_slot_on_time() {
+        let mut s = Schedule::virtual_clock(Duration::from_millis(10));
+        for k in 0..5 {
+            assert_eq!(
+                s.next_slot(),
+                Slot::Run {
+                    k,
+                    lateness: Duration::ZERO
+                }
+            );
+        }
+        assert_eq!(s.t_s(7), 0.07);
+        assert_eq!(s.t_s(300), 3.0);
+    }
+
+    #[test]
+    fn real_clock_keeps_the_grid_and_skips_overrun_slots() {
+        let period = Duration::from_millis(10);
+        let mut s = Schedule::real(period, Duration::from_micros(200));
+        let Slot::Run { k: 0, lateness } = s.next_slot() else {
+            panic!("slot 0 must run")
+        };
+        let after_slot0 = Instant::now();
+        assert!(lateness < Duration::from_millis(5), "{lateness:?}");
+        // Overrun: 25 ms of work puts slots 1 and 2 more than half a period late.
+        std::thread::sleep(Duration::from_millis(25));
+        assert_eq!(s.next_slot(), Slot::Skipped { k: 1 });
+        assert_eq!(s.next_slot(), Slot::Skipped { k: 2 });
+        let Slot::Run { k: 3, .. } = s.next_slot() else {
+            panic!("slot 3 must run on the grid")
+        };
+        // Slot 3 starts 30 ms after slot 0's deadline: on the grid, not one period after the
+        // overrun (which would be 35 + 10 = 45 ms).
+        let at = after_slot0.elapsed() + lateness;
+        assert!(
+            at >= Duration::from_millis(29) && at < Duration::from_millis(40),
+            "{at:?}"
+        );
+    }
+}

@@ -1,0 +1,322 @@
+//! Sources of the wanted opening O_P: random steps, steps, ramp, sine, PRBS, replay, constant.
+//!
+//! A [`Source`] is asked `op_at(t_s)` once per cycle with non-decreasing loop times and answers
+//! the clamped O_P, or `None` when it has nothing more to give (only a replay ends). Random
+//! sources are seeded (ChaCha8) and depend on the time only, not on how often they are asked, so a
+//! skipped cycle does not change what later cycles get. Asking never allocates.
+//!
+//! Sources do not know about valves or timing; the clamp range comes from `[source]`.
+
+use std::f64::consts::TAU;
+use std::sync::Arc;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::config::{SourceConfig, SourceKind};
+
+/// Slack when turning a time into a step or bit index, so `0.3 / 0.1` counts as 3, not 2.999...
+const INDEX_EPS: f64 = 1e-9;
+
+/// An O_P source with its clamp range.
+#[derive(Debug)]
+pub struct Source {
+    kind: Kind,
+    min_pct: f64,
+    max_pct: f64,
+}
+
+#[derive(Debug)]
+enum Kind {
+    RandomSteps {
+        rng: ChaCha8Rng,
+        level_range: (f64, f64),
+        hold_range: (f64, f64),
+        level: f64,
+        next_change_s: f64,
+    },
+    Steps {
+        levels: Vec<f64>,
+        hold_s: f64,
+        repeat: bool,
+    },
+    Ramp {
+        from: f64,
+        to: f64,
+        duration_s: f64,
+        repeat: bool,
+    },
+    Sine {
+        mean: f64,
+        amplitude: f64,
+        period_s: f64,
+    },
+    Prbs {
+        rng: ChaCha8Rng,
+        mean: f64,
+        amplitude: f64,
+        bit_s: f64,
+        bits_drawn: u64,
+        high: bool,
+    },
+    Replay {
+        op: Arc<Vec<f64>>,
+        period_s: f64,
+    },
+    Constant(f64),
+}
+
+impl Source {
+    /// The source `[source]` describes, for a loop of period `period_s`.
+    ///
+    /// The config must have been checked by [`super::config::Config::load`] (ranges, tables).
+    pub fn new(cfg: &SourceConfig, period_s: f64) -> Source {
+        let kind = match cfg.kind {
+            SourceKind::RandomSteps => {
+                let r = &cfg.random_steps;
+                Kind::RandomSteps {
+                    rng: ChaCha8Rng::seed_from_u64(r.seed),
+                    level_range: (r.min_pct, r.max_pct),
+                    hold_range: (r.hold_min_s, r.hold_max_s),
+                    level: r.min_pct,
+                    next_change_s: 0.0,
+                }
+            }
+            SourceKind::Steps => {
+                let s = cfg
+                    .steps
+                    .clone()
+                    .unwrap_or_else(|| super::config::StepsConfig {
+                        levels_pct: vec![cfg.op_min_pct],
+                        hold_s: 1.0,
+                        repeat: false,
+                    });
+                Kind::Steps {
+                    levels: s.levels_pct,
+                    hold_s: s.hold_s,
+                    repeat: s.repeat,
+                }
+            }
+            SourceKind::Ramp => Kind::Ramp {
+                from: cfg.ramp.from_pct,
+                to: cfg.ramp.to_pct,
+                duration_s: cfg.ramp.duration_s,
+                repeat: cfg.ramp.repeat,
+            },
+            SourceKind::Sine => Kind::Sine {
+                mean: cfg.sine.mean_pct,
+                amplitude: cfg.sine.amplitude_pct,
+                period_s: cfg.sine.period_s,
+            },
+            SourceKind::Prbs => Kind::Prbs {
+                rng: ChaCha8Rng::seed_from_u64(cfg.prbs.seed),
+                mean: cfg.prbs.mean_pct,
+                amplitude: cfg.prbs.amplitude_pct,
+                bit_s: 1.0 / (2.0 * cfg.prbs.band_hz),
+                bits_drawn: 0,
+                high: false,
+            },
+            SourceKind::Replay => Kind::Replay {
+                op: cfg
+                    .replay
+                    .as_ref()
+                    .map(|r| r.op_pct.clone())
+                    .unwrap_or_default(),
+                period_s,
+            },
+            SourceKind::Constant => {
+                Kind::Constant(cfg.constant.as_ref().map_or(cfg.op_min_pct, |c| c.op_pct))
+            }
+        };
+        Source {
+            kind,
+            min_pct: cfg.op_min_pct,
+            max_pct: cfg.op_max_pct,
+        }
+    }
+
+    /// The O_P at loop time `t_s` (s from the first cycle), clamped; `None` once a replay is over.
+    pub fn op_at(&mut self, t_s: f64) -> Option<f64> {
+        let raw = match &mut self.kind {
+            Kind::RandomSteps {
+                rng,
+                level_range,
+                hold_range,
+                level,
+                next_change_s,
+            } => {
+                while t_s >= *next_change_s {
+                    *level = rng.gen_range(level_range.0..=level_range.1);
+                    *next_change_s += rng.gen_range(hold_range.0..=hold_range.1);
+                }
+                *level
+            }
+            Kind::Steps {
+                levels,
+                hold_s,
+                repeat,
+            } => {
+                let i = (t_s / *hold_s + INDEX_EPS).floor() as usize;
+                let i = if *repeat {
+                    i % levels.len()
+                } else {
+                    i.min(levels.len() - 1)
+                };
+                levels[i]
+            }
+            Kind::Ramp {
+                from,
+                to,
+                duration_s,
+                repeat,
+            } => {
+                let phase = t_s / *duration_s;
+                let frac = if *repeat {
+                    let p = phase % 2.0;
+                    if p <= 1.0 {
+                        p
+                    } else {
+                        2.0 - p
+                    }
+                } else {
+                    phase.min(1.0)
+                };
+                *from + (*to - *from) * frac
+            }
+            Kind::Sine {
+                mean,
+                amplitude,
+                period_s,
+            } => *mean + *amplitude * (TAU * t_s / *period_s).sin(),
+            Kind::Prbs {
+                rng,
+                mean,
+                amplitude,
+                bit_s,
+                bits_drawn,
+                high,
+            } => {
+                // Draw every bit up to this time, so the sequence does not depend on skipped cycles.
+                let bits_due = (t_s / *bit_s + INDEX_EPS).floor() as u64 + 1;
+                while *bits_drawn < bits_due {
+                    *high = rng.gen::<bool>();
+                    *bits_drawn += 1;
+                }
+                if *high {
+                    *mean + *amplitude
+                } else {
+                    *mean - *amplitude
+                }
+            }
+            // Held onto the loop grid at load time (`recording::resample_zoh`): slot k is entry k.
+            Kind::Replay { op, period_s } => *op.get((t_s / *period_s).round() as usize)?,
+            Kind::Constant(v) => *v,
+        };
+        Some(raw.clamp(self.min_pct, self.max_pct))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::config::Config;
+    use std::path::Path;
+
+    fn source(toml: &str) -> Source {
+        let cfg = Config::from_toml(toml, Path::new("t.toml")).unwrap();
+        Source::new(&cfg.source, cfg.loop_.period_s())
+    }
+
+    fn series(s: &mut Source, n: usize) -> Vec<f64> {
+        (0..n).map(|k| s.op_at(k as f64 / 100.0).unwrap()).collect()
+    }
+
+    #[test]
+    fn random_steps_are_seeded_in_range_and_hold() {
+        let toml = "[source.random-steps]\nseed = 7\n";
+        let a = series(&mut source(toml), 60_000);
+        let b = series(&mut source(toml), 60_000);
+        assert_eq!(a, b);
+        assert!(a.iter().all(|v| (20.0..=97.0).contains(v)));
+        let changes = a.windows(2).filter(|w| w[0] != w[1]).count();
+        // 600 s with holds averaging 10 s: about 60 steps.
+        assert!((30..=100).contains(&changes), "{changes}");
+        let c = series(&mut source("[source.random-steps]\nseed = 8\n"), 60_000);
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn steps_ramp_sine_constant_follow_their_definitions() {
+        let mut s = source(
+            "[source]\nkind = \"steps\"\n[source.steps]\nlevels_pct = [10.0, 20.0]\nhold_s = 0.1\n",
+        );
+        let v = series(&mut s, 40);
+        assert_eq!(&v[..10], &[10.0; 10]);
+        assert_eq!(&v[10..20], &[20.0; 10]);
+        assert_eq!(&v[20..30], &[10.0; 10]);
+
+        let mut s = source("[source]\nkind = \"ramp\"\n[source.ramp]\nfrom_pct = 0.0\nto_pct = 50.0\nduration_s = 1.0\nrepeat = true\n");
+        assert!((s.op_at(0.5).unwrap() - 25.0).abs() < 1e-9);
+        assert!((s.op_at(1.5).unwrap() - 25.0).abs() < 1e-9);
+        assert!((s.op_at(2.0).unwrap() - 0.0).abs() < 1e-9);
+
+        let mut s = source("[source]\nkind = \"sine\"\n[source.sine]\nmean_pct = 50.0\namplitude_pct = 10.0\nperiod_s = 4.0\n");
+        assert!((s.op_at(1.0).unwrap() - 60.0).abs() < 1e-9);
+        assert!((s.op_at(3.0).unwrap() - 40.0).abs() < 1e-9);
+
+        let mut s = source(
+            "[source]\nkind = \"constant\"\nop_max_pct = 40.0\n[source.constant]\nop_pct = 55.0\n",
+        );
+        assert_eq!(s.op_at(0.0), Some(40.0), "clamped to op_max_pct");
+    }
+
+    #[test]
+    fn prbs_has_two_levels_on_its_bit_clock() {
+        let mut s = source("[source]\nkind = \"prbs\"\n[source.prbs]\nmean_pct = 50.0\namplitude_pct = 5.0\nband_hz = 5.0\n");
+        let v = series(&mut s, 2000);
+        assert!(v.iter().all(|&x| x == 45.0 || x == 55.0));
+        // Bits last 1/(2*5) s = 10 cycles: levels change only on multiples of 10.
+        for (k, w) in v.windows(2).enumerate() {
+            if w[0] != w[1] {
+                assert_eq!((k + 1) % 10, 0, "change at cycle {}", k + 1);
+            }
+        }
+        assert!(v.windows(2).filter(|w| w[0] != w[1]).count() > 50);
+        // Skipping cycles does not change the sequence.
+        let mut t = source("[source]\nkind = \"prbs\"\n[source.prbs]\nmean_pct = 50.0\namplitude_pct = 5.0\nband_hz = 5.0\n");
+        assert_eq!(t.op_at(13.37), Some(v[1337]));
+    }
+
+    #[test]
+    fn replay_holds_each_sample_and_ends_with_the_recording() {
+        let dir = tempfile::tempdir().unwrap();
+        let rec = dir.path().join("rec.csv");
+        // A 1 Hz recording with absolute times and no V_P cells where the loop failed.
+        std::fs::write(&rec, "t_s,op_pct,vp_pct\n100,10,\n101,20,19\n102,30,\n").unwrap();
+        let toml = format!(
+            "[loop]\nrate_hz = 4.0\n[source]\nkind = \"replay\"\nop_max_pct = 25.0\n[source.replay]\nfile = {:?}\n",
+            rec.display().to_string()
+        );
+        let mut s = source(&toml);
+        let got: Vec<Option<f64>> = (0..11).map(|k| s.op_at(k as f64 * 0.25)).collect();
+        let mut want = vec![Some(10.0); 4];
+        want.extend([Some(20.0); 4]);
+        want.push(Some(25.0)); // clamped to op_max_pct
+        want.extend([None, None]);
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn replay_of_a_missing_file_names_the_key() {
+        let e = Config::from_toml(
+            "[source]\nkind = \"replay\"\n[source.replay]\nfile = \"nope.csv\"\n",
+            Path::new("t.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("t.toml:4: source.replay.file: cannot replay `nope.csv`"),
+            "{e}"
+        );
+    }
+}

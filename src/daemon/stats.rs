@@ -1,0 +1,239 @@
+//! Run statistics: counts by status, the timing-error histogram, the live figures and the summary.
+//!
+//! The loop records every slot into [`Stats`] (an HDR histogram of |actual - scheduled| with 3
+//! significant digits; recording never allocates) and publishes a few [`Live`] figures through
+//! atomics for the progress display. At the end, [`Summary`] is what `valve-bridge run` prints.
+//! Nothing here does I/O.
+
+use std::fmt;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use hdrhistogram::Histogram;
+
+use super::logger::{LogReport, Sample, Status};
+
+/// Counts and timing of the loop's slots.
+#[derive(Debug, Clone)]
+pub struct Stats {
+    lateness_ns: Histogram<u64>,
+    counts: [u64; Status::ALL.len()],
+}
+
+impl Default for Stats {
+    fn default() -> Self {
+        Stats::new()
+    }
+}
+
+impl Stats {
+    /// Empty statistics (timing errors up to 60 s, 3 significant digits).
+    pub fn new() -> Self {
+        Stats {
+            // Bounds are constants within the crate's limits; `new_with_bounds` only fails on bad bounds.
+            lateness_ns: Histogram::new_with_bounds(1, 60_000_000_000, 3)
+                .unwrap_or_else(|e| panic!("histogram bounds: {e}")),
+            counts: [0; Status::ALL.len()],
+        }
+    }
+
+    /// Counts a row and, when it ran, its timing error.
+    pub fn record(&mut self, sample: &Sample, lateness: Option<Duration>) {
+        if let Some(i) = Status::ALL.iter().position(|s| *s == sample.status) {
+            self.counts[i] += 1;
+        }
+        if let Some(l) = lateness {
+            self.lateness_ns
+                .saturating_record(l.as_nanos().max(1) as u64);
+        }
+    }
+
+    /// Rows with this status.
+    pub fn count(&self, status: Status) -> u64 {
+        Status::ALL
+            .iter()
+            .position(|s| *s == status)
+            .map_or(0, |i| self.counts[i])
+    }
+
+    /// The timing error at quantile `q` (0-1), µs.
+    pub fn lateness_us(&self, q: f64) -> f64 {
+        if self.lateness_ns.is_empty() {
+            return 0.0;
+        }
+        self.lateness_ns.value_at_quantile(q) as f64 / 1e3
+    }
+
+    /// The largest timing error, µs.
+    pub fn max_lateness_us(&self) -> f64 {
+        self.lateness_ns.max() as f64 / 1e3
+    }
+}
+
+/// Figures the loop publishes for the progress display (lock-free).
+#[derive(Debug, Default)]
+pub struct Live {
+    samples: AtomicU64,
+    op_bits: AtomicU64,
+    vp_bits: AtomicU64,
+    p99_ns: AtomicU64,
+}
+
+/// A snapshot of [`Live`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiveView {
+    /// Rows so far.
+    pub samples: u64,
+    /// Last O_P sent, % (NaN before the first).
+    pub op_pct: f64,
+    /// Last V_P read, % (NaN if the last read failed).
+    pub vp_pct: f64,
+    /// Timing error p99 so far, µs.
+    pub p99_us: f64,
+}
+
+impl Live {
+    /// Publishes the latest row.
+    pub fn publish(&self, sample: &Sample) {
+        self.samples.fetch_add(1, Ordering::Relaxed);
+        if let Some(op) = sample.op_pct {
+            self.op_bits.store(op.to_bits(), Ordering::Relaxed);
+        }
+        self.vp_bits.store(
+            sample.vp_pct.unwrap_or(f64::NAN).to_bits(),
+            Ordering::Relaxed,
+        );
+    }
+
+    /// Publishes the timing p99.
+    pub fn publish_p99(&self, stats: &Stats) {
+        self.p99_ns
+            .store((stats.lateness_us(0.99) * 1e3) as u64, Ordering::Relaxed);
+    }
+
+    /// Reads the latest figures.
+    pub fn view(&self) -> LiveView {
+        let samples = self.samples.load(Ordering::Relaxed);
+        LiveView {
+            samples,
+            op_pct: if samples == 0 {
+                f64::NAN
+            } else {
+                f64::from_bits(self.op_bits.load(Ordering::Relaxed))
+            },
+            vp_pct: if samples == 0 {
+                f64::NAN
+            } else {
+                f64::from_bits(self.vp_bits.load(Ordering::Relaxed))
+            },
+            p99_us: self.p99_ns.load(Ordering::Relaxed) as f64 / 1e3,
+        }
+    }
+}
+
+/// Why the loop stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// `--duration` reached.
+    Duration,
+    /// SIGINT or SIGTERM (or the logger failed).
+    Signal,
+    /// The source (a replay) ran out.
+    SourceEnded,
+}
+
+impl fmt::Display for StopReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            StopReason::Duration => "duration reached",
+            StopReason::Signal => "stop requested",
+            StopReason::SourceEnded => "source ended",
+        })
+    }
+}
+
+/// What `valve-bridge run` reports at the end.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    /// Loop statistics (cycle rows and the stop-action row).
+    pub stats: Stats,
+    /// Why the loop stopped.
+    pub reason: StopReason,
+    /// Slots covered, including skipped ones (not the stop action).
+    pub slots: u64,
+    /// Loop rate, Hz.
+    pub rate_hz: f64,
+    /// The stop-action row, if one was sent.
+    pub safe: Option<Sample>,
+    /// What the logger wrote.
+    pub log: LogReport,
+}
+
+impl Summary {
+    /// Slots that ran a transaction (ok or failed), not counting skipped slots or the stop action.
+    pub fn samples(&self) -> u64 {
+        [
+            Status::Ok,
+            Status::Timeout,
+            Status::Error,
+            Status::Disconnected,
+        ]
+        .iter()
+        .map(|s| self.stats.count(*s))
+        .sum()
+    }
+
+    /// Slots missed because a cycle overran.
+    pub fn missed(&self) -> u64 {
+        self.stats.count(Status::Skipped)
+    }
+}
+
+impl fmt::Display for Summary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = &self.stats;
+        writeln!(
+            f,
+            "run: {} slots at {} Hz ({:.2} s), stopped: {}",
+            self.slots,
+            self.rate_hz,
+            self.slots as f64 / self.rate_hz,
+            self.reason
+        )?;
+        writeln!(
+            f,
+            "samples: {} ({} ok, {} timeout, {} error, {} disconnected)",
+            self.samples(),
+            s.count(Status::Ok),
+            s.count(Status::Timeout),
+            s.count(Status::Error),
+            s.count(Status::Disconnected)
+        )?;
+        writeln!(f, "missed cycles: {}", self.missed())?;
+        writeln!(
+            f,
+            "timing error |actual - scheduled|: p50 {:.2} us, p99 {:.2} us, max {:.2} us",
+            s.lateness_us(0.5),
+            s.lateness_us(0.99),
+            s.max_lateness_us()
+        )?;
+        match &self.safe {
+            Some(row) => writeln!(
+                f,
+                "stop action: {} O_P {} %, V_P {}",
+                row.status.as_str(),
+                row.op_pct.map_or("-".into(), |v| format!("{v:.2}")),
+                row.vp_pct
+                    .map_or("not read".into(), |v| format!("{v:.2} %"))
+            )?,
+            None => writeln!(f, "stop action: none (no O_P was ever sent)")?,
+        }
+        let files: Vec<String> = self
+            .log
+            .files
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        write!(f, "log: {} rows in {}", self.log.rows, files.join(", "))
+    }
+}

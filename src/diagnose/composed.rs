@@ -1,0 +1,344 @@
+//! The composed valve that diagnosis grows: pin-cart II plus effects, and the effect vocabulary.
+//!
+//! Every model diagnosis starts from is first written as an equivalent pin-cart II spec with all
+//! effects off (an FOPDT is pin-cart II without a cart, without speed limits and with
+//! `P_k = (1 - e^(-dt/tau)) / dt`, which steps exactly the same recursion). Adding an effect
+//! then means freeing a few numbers of that spec ("knobs"), never writing a new model.
+
+use serde::Serialize;
+
+use crate::model::{Effects, ModelKind, ModelSpec, PinCart2Params};
+
+/// The physics diagnosis can name; the JSON names are the vocabulary of the issue tracker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Effect {
+    DeadTime,
+    Backlash,
+    StateDependentDelay,
+    SlewRate,
+    Asymmetry,
+    MinSpeed,
+    Stiction,
+    Deadband,
+    Saturation,
+    Quantization,
+    Calibration,
+}
+
+impl Effect {
+    /// Every effect, in the order candidates are tried.
+    pub const ALL: [Effect; 11] = [
+        Effect::DeadTime,
+        Effect::Backlash,
+        Effect::StateDependentDelay,
+        Effect::SlewRate,
+        Effect::Asymmetry,
+        Effect::MinSpeed,
+        Effect::Stiction,
+        Effect::Deadband,
+        Effect::Saturation,
+        Effect::Quantization,
+        Effect::Calibration,
+    ];
+
+    /// The vocabulary name (`dead_time`, `backlash`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Effect::DeadTime => "dead_time",
+            Effect::Backlash => "backlash",
+            Effect::StateDependentDelay => "state_dependent_delay",
+            Effect::SlewRate => "slew_rate",
+            Effect::Asymmetry => "asymmetry",
+            Effect::MinSpeed => "min_speed",
+            Effect::Stiction => "stiction",
+            Effect::Deadband => "deadband",
+            Effect::Saturation => "saturation",
+            Effect::Quantization => "quantization",
+            Effect::Calibration => "calibration",
+        }
+    }
+
+    /// Effects that leave similar traces, so a win of one over the other needs a margin.
+    pub fn look_alikes(self) -> &'static [Effect] {
+        match self {
+            Effect::Backlash => &[Effect::Deadband, Effect::StateDependentDelay],
+            Effect::Deadband => &[Effect::Backlash, Effect::Calibration],
+            Effect::Quantization => &[Effect::Stiction],
+            Effect::Stiction => &[Effect::Quantization, Effect::Deadband],
+            Effect::SlewRate => &[Effect::Asymmetry],
+            Effect::Asymmetry => &[Effect::SlewRate],
+            Effect::Calibration => &[Effect::Deadband, Effect::Saturation],
+            Effect::Saturation => &[Effect::Calibration],
+            Effect::StateDependentDelay => &[Effect::Backlash],
+            Effect::DeadTime | Effect::MinSpeed => &[],
+        }
+    }
+
+    /// What experiment separates this effect from its look-alikes.
+    pub fn experiment(self) -> &'static str {
+        match self {
+            Effect::Backlash | Effect::Deadband | Effect::StateDependentDelay => {
+                "random steps with many reversals over the whole travel (`[source] kind = \"random-steps\"`)"
+            }
+            Effect::Quantization | Effect::Stiction => {
+                "a slow ramp (`[source] kind = \"ramp\"`): stiction moves in jumps larger than the sensor step"
+            }
+            Effect::SlewRate | Effect::Asymmetry => {
+                "large steps in both directions (`[source] kind = \"steps\"` from 20 to 90 % and back)"
+            }
+            Effect::Calibration | Effect::Saturation => {
+                "steps held to steady state across the whole travel, up to 0 and 100 % (`[source] kind = \"steps\"`)"
+            }
+            Effect::DeadTime | Effect::MinSpeed => "small steps (<= 1 %) held for several seconds",
+        }
+    }
+}
+
+/// One number of the composed spec that a fit may move.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Knob {
+    /// P_k, 1/s.
+    Gain,
+    /// T_d, s.
+    DeadTime,
+    /// Cart-crossing time at V = 0 (c_p), s.
+    Crossing,
+    /// Change of the crossing time per % of opening (b_p), s/%.
+    CrossingSlope,
+    /// Opening-dependent slowdown r.
+    Slowdown,
+    /// dy_max, %/s.
+    Slew,
+    /// Closing slew rate, %/s.
+    ClosingSlew,
+    /// dy_min, %/s.
+    MinSpeed,
+    /// Stickband S, %.
+    Stickband,
+    /// Slip jump as a fraction of S.
+    JumpFraction,
+    /// Deadband width, %.
+    Deadband,
+    /// Lowest travel, %.
+    TravelMin,
+    /// Highest travel, %.
+    TravelMax,
+    /// Sensor resolution, %.
+    Quantum,
+    /// Calibration gain.
+    CalGain,
+    /// Calibration offset, %.
+    CalOffset,
+}
+
+impl Knob {
+    /// Parameter name and unit for reports.
+    pub fn label(self) -> &'static str {
+        match self {
+            Knob::Gain => "p_gain_per_s",
+            Knob::DeadTime => "dead_time_s",
+            Knob::Crossing => "crossing_time_s",
+            Knob::CrossingSlope => "crossing_slope_s_per_pct",
+            Knob::Slowdown => "open_slowdown",
+            Knob::Slew => "slew_pct_per_s",
+            Knob::ClosingSlew => "closing_slew_pct_per_s",
+            Knob::MinSpeed => "min_speed_pct_per_s",
+            Knob::Stickband => "stickband_pct",
+            Knob::JumpFraction => "jump_fraction",
+            Knob::Deadband => "deadband_pct",
+            Knob::TravelMin => "travel_min_pct",
+            Knob::TravelMax => "travel_max_pct",
+            Knob::Quantum => "quantization_pct",
+            Knob::CalGain => "calibration_gain",
+            Knob::CalOffset => "calibration_offset_pct",
+        }
+    }
+}
+
+/// "Off" value of a speed limit: 1000 % a sample at 100 Hz, so it never binds, not even for
+/// a pass-through (modelless) core.
+pub const NO_LIMIT_PCT_PER_S: f64 = 1e5;
+/// The fastest speed limit a fit considers, %/s: a full stroke in 0.1 s.
+pub const FASTEST_PCT_PER_S: f64 = 1000.0;
+
+fn pc2(spec: &ModelSpec) -> PinCart2Params {
+    spec.pincart2.unwrap_or(PinCart2Params {
+        p_gain_per_s: 10.0,
+        dy_max_pct_per_s: NO_LIMIT_PCT_PER_S,
+        dy_min_pct_per_s: 0.0,
+        a_p: 0.0,
+        b_p: 0.0,
+        c_p: 0.0,
+        backlash_pct: 0.0,
+    })
+}
+
+/// Reads a knob's value from a composed spec.
+pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
+    let p = pc2(spec);
+    let e = &spec.effects;
+    match knob {
+        Knob::Gain => p.p_gain_per_s,
+        Knob::DeadTime => spec.dead_time_s,
+        Knob::Crossing => p.c_p,
+        Knob::CrossingSlope => p.b_p,
+        Knob::Slowdown => e.open_slowdown,
+        Knob::Slew => p.dy_max_pct_per_s,
+        Knob::ClosingSlew => {
+            if e.closing_slew_pct_per_s > 0.0 {
+                e.closing_slew_pct_per_s
+            } else {
+                p.dy_max_pct_per_s
+            }
+        }
+        Knob::MinSpeed => p.dy_min_pct_per_s,
+        Knob::Stickband => e.stickband_pct,
+        Knob::JumpFraction => {
+            if e.stickband_pct > 0.0 {
+                e.jumpband_pct / e.stickband_pct
+            } else {
+                0.0
+            }
+        }
+        Knob::Deadband => e.deadband_pct,
+        Knob::TravelMin => spec.travel.min_pct,
+        Knob::TravelMax => spec.travel.max_pct,
+        Knob::Quantum => e.quantization_pct,
+        Knob::CalGain => e.calibration_gain,
+        Knob::CalOffset => e.calibration_offset_pct,
+    }
+}
+
+/// Sets a knob on a composed spec (the caller keeps values inside their bounds).
+pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
+    let mut p = pc2(spec);
+    let e = &mut spec.effects;
+    match knob {
+        Knob::Gain => p.p_gain_per_s = v,
+        Knob::DeadTime => spec.dead_time_s = v,
+        Knob::Crossing => {
+            p.c_p = v;
+            p.backlash_pct = 1.0;
+        }
+        Knob::CrossingSlope => p.b_p = v,
+        Knob::Slowdown => e.open_slowdown = v,
+        Knob::Slew => {
+            p.dy_max_pct_per_s = v;
+            p.dy_min_pct_per_s = p.dy_min_pct_per_s.min(v);
+        }
+        Knob::ClosingSlew => e.closing_slew_pct_per_s = v,
+        Knob::MinSpeed => p.dy_min_pct_per_s = v.min(p.dy_max_pct_per_s),
+        Knob::Stickband => {
+            let frac = if e.stickband_pct > 0.0 {
+                e.jumpband_pct / e.stickband_pct
+            } else {
+                0.5
+            };
+            e.stickband_pct = v;
+            e.jumpband_pct = frac * v;
+        }
+        Knob::JumpFraction => e.jumpband_pct = v.clamp(0.0, 1.0) * e.stickband_pct,
+        Knob::Deadband => e.deadband_pct = v,
+        Knob::TravelMin => spec.travel.min_pct = v,
+        Knob::TravelMax => spec.travel.max_pct = v,
+        Knob::Quantum => e.quantization_pct = v,
+        Knob::CalGain => e.calibration_gain = v,
+        Knob::CalOffset => e.calibration_offset_pct = v,
+    }
+    spec.pincart2 = Some(p);
+}
+
+/// The composed pin-cart II spec that steps like `base` (or as close as the family allows).
+///
+/// FOPDT, delayed modelless, modelless, stiction and pin-cart II convert exactly. Pin-cart I's
+/// crossing time depends on the error size, which pin-cart II cannot express: it converts to a
+/// constant crossing time of `B_L / (P_k * 1 %)`, the time for a 1 % reversal.
+pub fn compose(base: &ModelSpec, dt: f64) -> ModelSpec {
+    let mut spec = ModelSpec {
+        model: ModelKind::Pincart2,
+        pincart2: None,
+        fopdt: None,
+        stiction: None,
+        pincart1: None,
+        ..base.clone()
+    };
+    let pass_through = 1.0 / dt;
+    let mut p = pc2(&spec);
+    match base.model {
+        ModelKind::Modelless | ModelKind::Delayed => p.p_gain_per_s = pass_through,
+        ModelKind::Fopdt => {
+            let tau = base.fopdt.map(|f| f.time_constant_s).unwrap_or(dt);
+            p.p_gain_per_s = (1.0 - (-dt / tau).exp()) / dt;
+        }
+        ModelKind::Stiction => {
+            p.p_gain_per_s = pass_through;
+            if let Some(s) = base.stiction {
+                spec.effects = Effects {
+                    stickband_pct: s.stickband_pct,
+                    jumpband_pct: s.jumpband_pct,
+                    ..spec.effects
+                };
+            }
+        }
+        ModelKind::Pincart1 => {
+            if let Some(q) = base.pincart1 {
+                p.p_gain_per_s = q.p_gain_per_s;
+                p.backlash_pct = 1.0;
+                p.c_p = q.backlash_pct / q.p_gain_per_s;
+            }
+        }
+        ModelKind::Pincart2 => p = base.pincart2.unwrap_or(p),
+    }
+    spec.pincart2 = Some(p);
+    spec
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, Valve};
+
+    #[test]
+    fn composed_fopdt_steps_exactly_like_fopdt() {
+        let op: Vec<f64> = (0..3000)
+            .map(|k| if (k / 400) % 2 == 0 { 30.0 } else { 70.0 })
+            .collect();
+        for kind in [
+            ModelKind::Fopdt,
+            ModelKind::Delayed,
+            ModelKind::Modelless,
+            ModelKind::Stiction,
+            ModelKind::Pincart2,
+        ] {
+            let base = bundled(kind);
+            let a = Valve::new(&base, 0.01).unwrap().simulate(&op, 30.0);
+            let b = Valve::new(&compose(&base, 0.01), 0.01)
+                .unwrap()
+                .simulate(&op, 30.0);
+            let worst = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            assert!(worst < 1e-9, "{kind}: {worst}");
+        }
+    }
+
+    #[test]
+    fn knobs_round_trip() {
+        let mut spec = compose(&bundled(ModelKind::Fopdt), 0.01);
+        for (knob, v) in [
+            (Knob::Crossing, 0.4),
+            (Knob::Slew, 12.0),
+            (Knob::ClosingSlew, 6.0),
+            (Knob::Stickband, 1.5),
+            (Knob::Deadband, 0.3),
+            (Knob::CalOffset, -1.0),
+        ] {
+            set(&mut spec, knob, v);
+            assert_eq!(get(&spec, knob), v, "{knob:?}");
+        }
+        spec.validate().unwrap();
+    }
+}

@@ -1,0 +1,245 @@
+//! Locate: where in time a simulation departs from the recording by more than the noise.
+//!
+//! The noise floor is the measurement noise of V_P, estimated robustly from its second
+//! differences (a smooth movement has almost none, white noise of sigma has sigma * sqrt(6)),
+//! so steps and jumps do not inflate it. A mismatch window is a stretch where the residual's
+//! mean square over one second stays above four times the noise variance; each window is tied
+//! to what O_P and V_P were doing there. This module measures; it does not decide what is
+//! missing (that is [`super::explain`]).
+
+use serde::Serialize;
+
+/// One stretch of recording where the model misses by more than the noise.
+#[derive(Debug, Clone, Serialize)]
+pub struct Window {
+    pub start_s: f64,
+    pub end_s: f64,
+    /// Sum over the window of (residual² - noise variance), %².
+    pub excess_sse: f64,
+    /// What O_P and V_P were doing: e.g. "after a reversal of O_P at 63 % opening".
+    pub context: String,
+    /// The kind of context, for tallies.
+    #[serde(skip)]
+    pub kind: Context,
+}
+
+/// What the valve was doing in a window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Context {
+    /// O_P reversed its direction shortly before or inside the window.
+    Reversal,
+    /// O_P stepped by more than 5 % in the same direction as before.
+    LargeStep,
+    /// O_P moved by a small step or a ramp in the same direction.
+    Move,
+    /// O_P held still: the valve should have been at rest.
+    Rest,
+    /// O_P or V_P near a travel limit.
+    NearLimit,
+}
+
+impl Context {
+    pub fn describe(self) -> &'static str {
+        match self {
+            Context::Reversal => "after a direction reversal of O_P",
+            Context::LargeStep => "during a large step",
+            Context::Move => "while O_P moves on in the same direction",
+            Context::Rest => "at rest (O_P steady)",
+            Context::NearLimit => "near a travel limit",
+        }
+    }
+}
+
+/// Measurement noise (standard deviation, %) of V_P from its second differences.
+pub fn noise_floor(vp: &[f64]) -> f64 {
+    if vp.len() < 5 {
+        return 0.0;
+    }
+    let mut d2: Vec<f64> = vp
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
+    let mid = d2.len() / 2;
+    let (_, median, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
+    // MAD of a zero-mean Gaussian is 0.6745 sigma; the second difference has variance 6 sigma².
+    *median / 0.6745 / 6f64.sqrt()
+}
+
+/// Finds the mismatch windows of `residual` (measured - simulated) given the noise `sigma`.
+pub fn windows(
+    t: &[f64],
+    op: &[f64],
+    vp: &[f64],
+    residual: &[f64],
+    sigma: f64,
+    dt: f64,
+) -> Vec<Window> {
+    let n = residual.len();
+    let w = ((1.0 / dt).round() as usize).clamp(1, n.max(1));
+    let var = sigma * sigma;
+    // Floor the threshold at 0.05 %² so noiseless recordings do not flag rounding noise.
+    let threshold = (4.0 * var).max(2.5e-3);
+    let mut out = Vec::new();
+    let mut acc: f64 = residual[..w.min(n)].iter().map(|r| r * r).sum();
+    let mut start: Option<usize> = None;
+    let mut last_hot = 0;
+    let gap = w / 2;
+    for i in 0..n.saturating_sub(w) {
+        let hot = acc / w as f64 > threshold;
+        if hot {
+            if start.is_none() {
+                start = Some(i);
+            }
+            last_hot = i + w;
+        } else if let Some(s) = start {
+            if i > last_hot + gap {
+                out.push(make(t, op, vp, residual, var, s, last_hot.min(n), dt));
+                start = None;
+            }
+        }
+        acc += residual[i + w] * residual[i + w] - residual[i] * residual[i];
+    }
+    if let Some(s) = start {
+        out.push(make(t, op, vp, residual, var, s, last_hot.min(n), dt));
+    }
+    out
+}
+
+#[allow(clippy::too_many_arguments)]
+fn make(
+    t: &[f64],
+    op: &[f64],
+    vp: &[f64],
+    r: &[f64],
+    var: f64,
+    a: usize,
+    b: usize,
+    dt: f64,
+) -> Window {
+    // Trim to the samples that are themselves above the threshold of their window.
+    let hot = |k: &usize| r[*k] * r[*k] > 4.0 * var;
+    let a = (a..b).find(hot).unwrap_or(a);
+    let b = (a..b).rev().find(hot).map_or(b, |k| k + 1);
+    let excess_sse = r[a..b].iter().map(|x| x * x - var).sum::<f64>().max(0.0);
+    let kind = classify(op, vp, a, b, dt);
+    let level = vp[a..b].iter().sum::<f64>() / (b - a).max(1) as f64;
+    Window {
+        start_s: t[a],
+        end_s: t[b.saturating_sub(1)],
+        excess_sse,
+        context: format!("{} at {:.0} % opening", kind.describe(), level),
+        kind,
+    }
+}
+
+/// What O_P was doing from two seconds before the window to its end.
+pub fn classify(op: &[f64], vp: &[f64], a: usize, b: usize, dt: f64) -> Context {
+    let back = (2.0 / dt) as usize;
+    let lo = a.saturating_sub(back);
+    let near = |x: f64| !(2.0..=98.0).contains(&x);
+    if op[lo..b].iter().chain(&vp[a..b]).any(|&x| near(x)) {
+        return Context::NearLimit;
+    }
+    let span = op[lo..b].iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x))
+        - op[lo..b].iter().fold(f64::INFINITY, |m, &x| m.min(x));
+    if span < 0.05 {
+        return Context::Rest;
+    }
+    // Direction of the last clear movement before `lo`, and of the movement inside.
+    let inside = direction_changes(op, lo, b);
+    let before = last_direction(op, lo, dt);
+    match (before, inside.first()) {
+        (Some(d0), Some(&d1)) if d0 != d1 => Context::Reversal,
+        _ if inside.windows(2).any(|w| w[0] != w[1]) => Context::Reversal,
+        _ if span > 5.0 => Context::LargeStep,
+        _ => Context::Move,
+    }
+}
+
+/// Signs of the successive clear movements of `op` in `a..b` (moves over 0.02 % a sample).
+fn direction_changes(op: &[f64], a: usize, b: usize) -> Vec<i8> {
+    let mut dirs = Vec::new();
+    for k in a.max(1)..b {
+        let d = op[k] - op[k - 1];
+        if d.abs() > 0.02 {
+            let s = if d > 0.0 { 1 } else { -1 };
+            if dirs.last() != Some(&s) {
+                dirs.push(s);
+            }
+        }
+    }
+    dirs
+}
+
+/// The sign of the last clear movement of `op` before `a`, looking back at most 60 s.
+fn last_direction(op: &[f64], a: usize, dt: f64) -> Option<i8> {
+    let stop = a.saturating_sub((60.0 / dt) as usize).max(1);
+    (stop..a).rev().find_map(|k| {
+        let d = op[k] - op[k - 1];
+        (d.abs() > 0.02).then_some(if d > 0.0 { 1 } else { -1 })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noise_floor_recovers_white_noise_and_ignores_steps() {
+        // Deterministic pseudo-noise with sigma 0.1 on top of a step.
+        let mut state: u64 = 12345;
+        let mut gauss = || {
+            let mut s = 0.0;
+            for _ in 0..12 {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                s += (state >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            s - 6.0
+        };
+        let vp: Vec<f64> = (0..20000)
+            .map(|k| if k < 10000 { 30.0 } else { 60.0 } + 0.1 * gauss())
+            .collect();
+        let s = noise_floor(&vp);
+        assert!((s - 0.1).abs() < 0.01, "{s}");
+    }
+
+    #[test]
+    fn windows_find_the_bad_stretch_and_its_context() {
+        let dt = 0.01;
+        let n = 6000;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        // O_P goes up at 10 s and reverses at 30 s; the residual is bad for 1 s after 30 s.
+        let op: Vec<f64> = (0..n)
+            .map(|k| {
+                if k < 1000 {
+                    40.0
+                } else if k < 3000 {
+                    50.0
+                } else {
+                    45.0
+                }
+            })
+            .collect();
+        let vp = op.clone();
+        let r: Vec<f64> = (0..n)
+            .map(|k| if (3000..3100).contains(&k) { 1.0 } else { 0.0 })
+            .collect();
+        let w = windows(&t, &op, &vp, &r, 0.05, dt);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].start_s > 28.5 && w[0].end_s < 31.5, "{w:?}");
+        assert_eq!(w[0].kind, Context::Reversal);
+        assert!((w[0].excess_sse - 100.0 * (1.0 - 0.0025)).abs() < 1.0);
+    }
+
+    #[test]
+    fn clean_residual_gives_no_window() {
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
+        let x = vec![50.0; 1000];
+        let r: Vec<f64> = (0..1000)
+            .map(|k| 0.05 * ((k * 7919 % 13) as f64 / 6.0 - 1.0))
+            .collect();
+        assert!(windows(&t, &x, &x, &r, 0.05, 0.01).is_empty());
+    }
+}

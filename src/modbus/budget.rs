@@ -1,0 +1,252 @@
+//! The serial bus budget: how long one loop cycle takes on an RTU line, and whether the loop
+//! rate fits.
+//!
+//! A transaction costs its request and response characters (start, data, parity and stop bits
+//! each), the silence that ends each frame (3.5 characters, fixed at 1.75 ms above 19200 baud as
+//! the Modbus serial-line guide prescribes), and the device's turnaround (its response time). A
+//! cycle is the sum over the plan's transactions. The verdict refuses a rate the link cannot
+//! carry and flags a thin margin; it is computed once at start-up, not measured.
+
+use super::link::RtuLink;
+use super::plan::Plan;
+
+/// Above this share of the period the margin counts as thin.
+pub const THIN_USAGE: f64 = 0.7;
+
+/// One transaction's share of the cycle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransactionTime {
+    /// Modbus function code.
+    pub function_code: u8,
+    /// Request characters.
+    pub request_chars: usize,
+    /// Response characters.
+    pub response_chars: usize,
+    /// Wire time including both silences and the turnaround, s.
+    pub time_s: f64,
+}
+
+/// How a cycle's wire time compares with the loop period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// Comfortably inside the period.
+    Fits,
+    /// Fits, but uses more than [`THIN_USAGE`] of the period.
+    Thin,
+    /// Does not fit.
+    TooSlow,
+}
+
+/// The wire time of one cycle on an RTU line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Budget {
+    /// Baud rate.
+    pub baud: u32,
+    /// Bits per character.
+    pub bits_per_char: u32,
+    /// Time of one character, s.
+    pub char_s: f64,
+    /// Inter-frame silence, s.
+    pub silence_s: f64,
+    /// Device turnaround, s.
+    pub turnaround_s: f64,
+    /// Per transaction.
+    pub transactions: Vec<TransactionTime>,
+    /// Whole cycle, s.
+    pub cycle_s: f64,
+    /// Loop period, s.
+    pub period_s: f64,
+}
+
+/// A loop rate the serial line cannot carry.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("bus budget: {0}")]
+pub struct BudgetError(pub String);
+
+impl Budget {
+    /// The budget of `plan` on `link` for a loop of period `period_s`.
+    pub fn rtu(link: &RtuLink, plan: &Plan, period_s: f64) -> Budget {
+        let bits = link.bits_per_char();
+        let char_s = f64::from(bits) / f64::from(link.baud);
+        let silence_s = if link.baud > 19200 {
+            1.75e-3
+        } else {
+            3.5 * char_s
+        };
+        let turnaround_s = link.turnaround_ms / 1000.0;
+        let transactions: Vec<TransactionTime> = plan
+            .transactions
+            .iter()
+            .map(|t| {
+                let (req, resp) = (t.rtu_request_bytes(), t.rtu_response_bytes());
+                TransactionTime {
+                    function_code: t.function_code(),
+                    request_chars: req,
+                    response_chars: resp,
+                    time_s: (req + resp) as f64 * char_s + 2.0 * silence_s + turnaround_s,
+                }
+            })
+            .collect();
+        let cycle_s = transactions.iter().map(|t| t.time_s).sum();
+        Budget {
+            baud: link.baud,
+            bits_per_char: bits,
+            char_s,
+            silence_s,
+            turnaround_s,
+            transactions,
+            cycle_s,
+            period_s,
+        }
+    }
+
+    /// Cycle time over period.
+    pub fn usage(&self) -> f64 {
+        self.cycle_s / self.period_s
+    }
+
+    /// The highest loop rate the link carries, Hz.
+    pub fn max_rate_hz(&self) -> f64 {
+        1.0 / self.cycle_s
+    }
+
+    /// Fits, thin or too slow.
+    pub fn verdict(&self) -> Verdict {
+        let u = self.usage();
+        if u > 1.0 {
+            Verdict::TooSlow
+        } else if u > THIN_USAGE {
+            Verdict::Thin
+        } else {
+            Verdict::Fits
+        }
+    }
+
+    /// The figures in one line.
+    pub fn describe(&self) -> String {
+        let parts: Vec<String> = self
+            .transactions
+            .iter()
+            .map(|t| {
+                format!(
+                    "FC {} {}+{} chars",
+                    t.function_code, t.request_chars, t.response_chars
+                )
+            })
+            .collect();
+        let n = self.transactions.len();
+        format!(
+            "one cycle takes {:.1} ms on the wire at {} baud, {} bits/char ({}; {} silences of {:.2} ms; {} turnaround{} of {:.1} ms) \
+             = {:.0} % of the {:.1} ms loop period; the link carries at most {:.1} Hz",
+            self.cycle_s * 1e3,
+            self.baud,
+            self.bits_per_char,
+            parts.join(", "),
+            2 * n,
+            self.silence_s * 1e3,
+            n,
+            if n == 1 { "" } else { "s" },
+            self.turnaround_s * 1e3,
+            self.usage() * 100.0,
+            self.period_s * 1e3,
+            self.max_rate_hz(),
+        )
+    }
+
+    /// `Ok` (with the budget) unless the cycle does not fit the period; logs a warning when the
+    /// margin is thin.
+    pub fn check(self) -> Result<Budget, BudgetError> {
+        match self.verdict() {
+            Verdict::TooSlow => Err(BudgetError(format!(
+                "{}: refusing {:.1} Hz (raise the baud rate, set fc23 = true, or lower the loop rate)",
+                self.describe(),
+                1.0 / self.period_s
+            ))),
+            Verdict::Thin => {
+                tracing::warn!("thin bus margin: {}", self.describe());
+                Ok(self)
+            }
+            Verdict::Fits => {
+                tracing::info!("bus budget: {}", self.describe());
+                Ok(self)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::modbus::map::RegisterMap;
+
+    fn link(baud: u32) -> RtuLink {
+        RtuLink {
+            baud,
+            ..RtuLink::new("/dev/null")
+        }
+    }
+
+    fn fc23() -> Plan {
+        Plan::new(&RegisterMap {
+            fc23: true,
+            ..RegisterMap::default()
+        })
+    }
+
+    #[test]
+    fn nineteen_k_two_transactions() {
+        // 8E1: 11 bits/char, 11/19200 s = 0.5729 ms; silence 3.5 chars = 2.0052 ms.
+        // FC16 11+8 chars, FC3 8+7 chars: 34 chars = 19.479 ms, 4 silences = 8.021 ms,
+        // 2 turnarounds of 1 ms: 29.500 ms.
+        let b = Budget::rtu(&link(19200), &Plan::new(&RegisterMap::default()), 0.01);
+        assert!((b.char_s - 11.0 / 19200.0).abs() < 1e-15);
+        assert!((b.silence_s - 3.5 * 11.0 / 19200.0).abs() < 1e-15);
+        assert!((b.cycle_s - 0.029_500).abs() < 1e-6, "{}", b.cycle_s);
+        assert_eq!(b.verdict(), Verdict::TooSlow);
+        let err = b.check().unwrap_err().to_string();
+        assert!(
+            err.contains("29.5 ms") && err.contains("refusing 100.0 Hz") && err.contains("33.9 Hz"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn nineteen_k_cannot_carry_100_hz_even_with_fc23() {
+        // FC23 15+7 = 22 chars = 12.604 ms + 2 silences 4.010 ms + 1 ms = 17.615 ms.
+        let b = Budget::rtu(&link(19200), &fc23(), 0.01);
+        assert!((b.cycle_s - 0.017_615).abs() < 1e-6, "{}", b.cycle_s);
+        assert_eq!(b.verdict(), Verdict::TooSlow);
+        // ... but carries 50 Hz with a thin margin (88 %).
+        let b = Budget::rtu(&link(19200), &fc23(), 0.02);
+        assert_eq!(b.verdict(), Verdict::Thin);
+    }
+
+    #[test]
+    fn fast_line_uses_fixed_silence() {
+        // 115200 8E1: 0.09549 ms/char; silence fixed 1.75 ms. FC23: 22 chars = 2.1007 ms
+        // + 3.5 ms + 1 ms = 6.6007 ms: fits 100 Hz at 66 %.
+        let b = Budget::rtu(&link(115200), &fc23(), 0.01);
+        assert_eq!(b.silence_s, 1.75e-3);
+        assert!((b.cycle_s - 0.006_600_7).abs() < 1e-6, "{}", b.cycle_s);
+        assert_eq!(b.verdict(), Verdict::Fits);
+        // Two transactions: 34 chars = 3.2465 ms + 7 ms + 2 ms = 12.25 ms: too slow.
+        let b = Budget::rtu(&link(115200), &Plan::new(&RegisterMap::default()), 0.01);
+        assert!((b.cycle_s - 0.012_246_5).abs() < 1e-6, "{}", b.cycle_s);
+        assert_eq!(b.verdict(), Verdict::TooSlow);
+    }
+
+    #[test]
+    fn thin_margin_is_flagged() {
+        let b = Budget::rtu(
+            &RtuLink {
+                turnaround_ms: 2.0,
+                ..link(115200)
+            },
+            &fc23(),
+            0.01,
+        );
+        assert!((b.usage() - 0.76).abs() < 0.01);
+        assert_eq!(b.verdict(), Verdict::Thin);
+        assert!(b.check().is_ok());
+    }
+}

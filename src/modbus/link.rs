@@ -1,0 +1,182 @@
+//! Link settings of a Modbus valve: the `[valve.modbus-tcp]` and `[valve.modbus-rtu]` tables.
+//!
+//! Plain serde structs with defaults, plus the serial character size that the bus budget needs.
+//! Opening the link is [`crate::modbus::client`]'s job.
+
+use serde::{Deserialize, Serialize};
+
+/// `[valve.modbus-tcp]`: a positioner (or gateway) reached over Modbus TCP.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TcpLink {
+    /// `host:port`, e.g. `192.168.0.20:502` or `127.0.0.1:5502`.
+    pub address: String,
+    /// Unit identifier (default 1).
+    #[serde(default = "one")]
+    pub unit_id: u8,
+    /// Per-transaction timeout in ms (default: 80 % of the loop period).
+    #[serde(default)]
+    pub timeout_ms: Option<f64>,
+}
+
+/// Serial parity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Parity {
+    /// No parity bit.
+    None,
+    /// Even parity (the Modbus RTU default).
+    #[default]
+    Even,
+    /// Odd parity.
+    Odd,
+}
+
+/// `[valve.modbus-rtu]`: a positioner on a serial line (RS-485 adapter or a pseudo-terminal).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RtuLink {
+    /// Serial device, e.g. `/dev/ttyUSB0`.
+    pub port: String,
+    /// Baud rate (default 19200, the Modbus default).
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+    /// Parity (default even, the Modbus default).
+    #[serde(default)]
+    pub parity: Parity,
+    /// Data bits, 7 or 8 (default 8; Modbus RTU needs 8).
+    #[serde(default = "eight")]
+    pub data_bits: u8,
+    /// Stop bits, 1 or 2 (default 1).
+    #[serde(default = "one")]
+    pub stop_bits: u8,
+    /// Slave address of the positioner, 1-247 (default 1).
+    #[serde(default = "one")]
+    pub slave_id: u8,
+    /// Per-transaction timeout in ms (default: 80 % of the loop period).
+    #[serde(default)]
+    pub timeout_ms: Option<f64>,
+    /// Device response time from the end of a request to the start of its reply, ms, used in the
+    /// bus budget (default 1 ms; measure your device and set it).
+    #[serde(default = "default_turnaround")]
+    pub turnaround_ms: f64,
+}
+
+fn one() -> u8 {
+    1
+}
+
+fn eight() -> u8 {
+    8
+}
+
+fn default_baud() -> u32 {
+    19200
+}
+
+fn default_turnaround() -> f64 {
+    1.0
+}
+
+impl RtuLink {
+    /// Settings for `port` with every other key at its default.
+    pub fn new(port: impl Into<String>) -> Self {
+        RtuLink {
+            port: port.into(),
+            baud: default_baud(),
+            parity: Parity::Even,
+            data_bits: 8,
+            stop_bits: 1,
+            slave_id: 1,
+            timeout_ms: None,
+            turnaround_ms: default_turnaround(),
+        }
+    }
+
+    /// Bits on the wire per character: start + data + parity + stop (11 for 8E1 or 8N2).
+    pub fn bits_per_char(&self) -> u32 {
+        let parity = if self.parity == Parity::None { 0 } else { 1 };
+        1 + u32::from(self.data_bits) + parity + u32::from(self.stop_bits)
+    }
+
+    /// The first setting that is not allowed, as (key, message).
+    pub fn violation(&self) -> Option<(&'static str, String)> {
+        if !(300..=4_000_000).contains(&self.baud) {
+            return Some((
+                "baud",
+                format!("{} is not allowed: a baud rate, 300-4000000", self.baud),
+            ));
+        }
+        if !(7..=8).contains(&self.data_bits) {
+            return Some((
+                "data_bits",
+                format!("{} is not allowed: 7 or 8", self.data_bits),
+            ));
+        }
+        if !(1..=2).contains(&self.stop_bits) {
+            return Some((
+                "stop_bits",
+                format!("{} is not allowed: 1 or 2", self.stop_bits),
+            ));
+        }
+        if !(1..=247).contains(&self.slave_id) {
+            return Some((
+                "slave_id",
+                format!("{} is not allowed: a slave address, 1-247", self.slave_id),
+            ));
+        }
+        if !(self.turnaround_ms.is_finite() && (0.0..=1000.0).contains(&self.turnaround_ms)) {
+            return Some((
+                "turnaround_ms",
+                format!(
+                    "{} is not allowed: a response time in ms, 0-1000",
+                    self.turnaround_ms
+                ),
+            ));
+        }
+        timeout_violation(self.timeout_ms)
+    }
+}
+
+impl TcpLink {
+    /// The first setting that is not allowed, as (key, message).
+    pub fn violation(&self) -> Option<(&'static str, String)> {
+        timeout_violation(self.timeout_ms)
+    }
+}
+
+fn timeout_violation(t: Option<f64>) -> Option<(&'static str, String)> {
+    match t {
+        Some(t) if !(t.is_finite() && t > 0.0 && t <= 60_000.0) => Some((
+            "timeout_ms",
+            format!("{t} is not allowed: a timeout in ms, > 0 and at most 60000"),
+        )),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn character_sizes() {
+        let mut l = RtuLink::new("/dev/null");
+        assert_eq!(l.bits_per_char(), 11); // 8E1
+        l.parity = Parity::None;
+        assert_eq!(l.bits_per_char(), 10); // 8N1
+        l.stop_bits = 2;
+        assert_eq!(l.bits_per_char(), 11); // 8N2
+    }
+
+    #[test]
+    fn violations_name_the_key() {
+        let mut l = RtuLink::new("/dev/null");
+        assert_eq!(l.violation(), None);
+        l.slave_id = 0;
+        assert_eq!(l.violation().map(|v| v.0), Some("slave_id"));
+        l.slave_id = 1;
+        l.timeout_ms = Some(0.0);
+        assert_eq!(l.violation().map(|v| v.0), Some("timeout_ms"));
+    }
+}

@@ -1,0 +1,21 @@
+//! Modbus for valve positioners: the register map, the bus budget, the valve client and the
+//! register bank a Modbus server answers from.
+//!
+//! - [`map`]: where the set-point, the position and the status live and how words convert to %
+//!   (Bürkert-style per-mille by default; addresses are configuration).
+//! - [`link`]: the `[valve.modbus-tcp]` / `[valve.modbus-rtu]` settings.
+//! - [`plan`]: the transactions of one cycle (FC 23, or FC 16 plus a read) and their RTU sizes.
+//! - [`budget`]: a cycle's wire time on a serial line, and the verdict on the loop rate.
+//! - [`client`]: [`client::ModbusValve`], one cycle `transact(O_P) -> V_P` with a deadline,
+//!   fault kinds and reconnection.
+//! - [`server`]: [`server::RegisterBank`], the device side (used by `sim-device`, and by a
+//!   Modbus server that the loop can offer to a process controller).
+//!
+//! Not here: the loop, its clock and its log (`daemon`), and any valve model (`model`).
+
+pub mod budget;
+pub mod client;
+pub mod link;
+pub mod map;
+pub mod plan;
+pub mod server;

@@ -1,0 +1,309 @@
+//! The Modbus transactions of one loop cycle, derived from a register map.
+//!
+//! A cycle writes the set-point and reads the position (and the status register when the map has
+//! one): either one Read/Write Multiple Registers transaction (FC 23) or a Write Multiple
+//! Registers (FC 16) followed by a read (FC 3 or FC 4). The position and a status register in the
+//! same table within [`MAX_JOINED_SPAN`] registers are read together. The plan also knows the RTU
+//! frame sizes of each transaction, which the bus budget uses. Nothing here does I/O.
+
+use super::map::{RegisterMap, Table};
+
+/// Position and status closer than this many registers are read in one request.
+pub const MAX_JOINED_SPAN: u16 = 16;
+
+/// One request/response exchange.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transaction {
+    /// FC 16: write `count` holding registers from `address`.
+    Write { address: u16, count: u16 },
+    /// FC 3 (holding) or FC 4 (input): read `count` registers from `address`.
+    Read {
+        table: Table,
+        address: u16,
+        count: u16,
+    },
+    /// FC 23: write `write_count` registers at `write_address`, then read `read_count` at
+    /// `read_address` (both holding).
+    ReadWrite {
+        read_address: u16,
+        read_count: u16,
+        write_address: u16,
+        write_count: u16,
+    },
+}
+
+impl Transaction {
+    /// The Modbus function code.
+    pub fn function_code(&self) -> u8 {
+        match self {
+            Transaction::Write { .. } => 16,
+            Transaction::Read {
+                table: Table::Holding,
+                ..
+            } => 3,
+            Transaction::Read {
+                table: Table::Input,
+                ..
+            } => 4,
+            Transaction::ReadWrite { .. } => 23,
+        }
+    }
+
+    /// RTU request frame size in bytes (address, PDU, CRC).
+    pub fn rtu_request_bytes(&self) -> usize {
+        match *self {
+            // addr, fc, start(2), qty(2), crc(2)
+            Transaction::Read { .. } => 8,
+            // addr, fc, start(2), qty(2), byte count, data, crc(2)
+            Transaction::Write { count, .. } => 9 + 2 * usize::from(count),
+            // addr, fc, read start(2), read qty(2), write start(2), write qty(2), byte count, data, crc(2)
+            Transaction::ReadWrite { write_count, .. } => 13 + 2 * usize::from(write_count),
+        }
+    }
+
+    /// RTU response frame size in bytes for a normal (non-exception) reply.
+    pub fn rtu_response_bytes(&self) -> usize {
+        match *self {
+            // addr, fc, byte count, data, crc(2)
+            Transaction::Read { count, .. } => 5 + 2 * usize::from(count),
+            // addr, fc, start(2), qty(2), crc(2)
+            Transaction::Write { .. } => 8,
+            Transaction::ReadWrite { read_count, .. } => 5 + 2 * usize::from(read_count),
+        }
+    }
+}
+
+/// Where a value sits in the words returned by the plan's transactions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Slot {
+    /// Index of the transaction whose reply holds the value.
+    pub transaction: usize,
+    /// Offset of the value's first word in that reply.
+    pub offset: usize,
+}
+
+/// The transactions of one cycle and where position and status are found in their replies.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Plan {
+    /// In the order they are sent.
+    pub transactions: Vec<Transaction>,
+    /// Where the position words are.
+    pub position: Slot,
+    /// Where the status word is, if the map has one.
+    pub status: Option<Slot>,
+}
+
+impl Plan {
+    /// The plan for a (validated) map.
+    pub fn new(map: &RegisterMap) -> Plan {
+        let pos = map.position;
+        let pos_w = pos.format.width();
+        // The read block: position alone, or position and status together.
+        let joined = map.status.and_then(|s| {
+            let start = pos.address.min(s.address);
+            let end = (u32::from(pos.address) + u32::from(pos_w)).max(u32::from(s.address) + 1);
+            let span = end - u32::from(start);
+            (s.table == pos.table && span <= u32::from(MAX_JOINED_SPAN)).then_some((
+                start,
+                span as u16,
+                s.address - start,
+            ))
+        });
+        let (read_start, read_count) = match joined {
+            Some((start, span, _)) => (start, span),
+            None => (pos.address, pos_w),
+        };
+        let first_read = if map.fc23 {
+            Transaction::ReadWrite {
+                read_address: read_start,
+                read_count,
+                write_address: map.setpoint.address,
+                write_count: map.setpoint.format.width(),
+            }
+        } else {
+            Transaction::Read {
+                table: pos.table,
+                address: read_start,
+                count: read_count,
+            }
+        };
+        let mut transactions = Vec::with_capacity(3);
+        if !map.fc23 {
+            transactions.push(Transaction::Write {
+                address: map.setpoint.address,
+                count: map.setpoint.format.width(),
+            });
+        }
+        let read_index = transactions.len();
+        transactions.push(first_read);
+        let position = Slot {
+            transaction: read_index,
+            offset: usize::from(pos.address - read_start),
+        };
+        let status = match (map.status, joined) {
+            (None, _) => None,
+            (Some(_), Some((_, _, off))) => Some(Slot {
+                transaction: read_index,
+                offset: usize::from(off),
+            }),
+            (Some(s), None) => {
+                transactions.push(Transaction::Read {
+                    table: s.table,
+                    address: s.address,
+                    count: 1,
+                });
+                Some(Slot {
+                    transaction: transactions.len() - 1,
+                    offset: 0,
+                })
+            }
+        };
+        Plan {
+            transactions,
+            position,
+            status,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::modbus::map::{Format, Register, StatusRegister};
+
+    #[test]
+    fn default_map_writes_then_reads() {
+        let p = Plan::new(&RegisterMap::default());
+        assert_eq!(
+            p.transactions,
+            vec![
+                Transaction::Write {
+                    address: 0,
+                    count: 1
+                },
+                Transaction::Read {
+                    table: Table::Holding,
+                    address: 1,
+                    count: 1
+                }
+            ]
+        );
+        assert_eq!(
+            p.position,
+            Slot {
+                transaction: 1,
+                offset: 0
+            }
+        );
+        assert_eq!(p.transactions[0].rtu_request_bytes(), 11);
+        assert_eq!(p.transactions[0].rtu_response_bytes(), 8);
+        assert_eq!(p.transactions[1].rtu_request_bytes(), 8);
+        assert_eq!(p.transactions[1].rtu_response_bytes(), 7);
+    }
+
+    #[test]
+    fn fc23_with_joined_status() {
+        let map = RegisterMap {
+            fc23: true,
+            status: Some(StatusRegister {
+                table: Table::Holding,
+                address: 3,
+                setpoint_error_bit: 0,
+            }),
+            ..RegisterMap::default()
+        };
+        let p = Plan::new(&map);
+        assert_eq!(
+            p.transactions,
+            vec![Transaction::ReadWrite {
+                read_address: 1,
+                read_count: 3,
+                write_address: 0,
+                write_count: 1
+            }]
+        );
+        assert_eq!(
+            p.status,
+            Some(Slot {
+                transaction: 0,
+                offset: 2
+            })
+        );
+        assert_eq!(p.transactions[0].function_code(), 23);
+        assert_eq!(p.transactions[0].rtu_request_bytes(), 15);
+        assert_eq!(p.transactions[0].rtu_response_bytes(), 11);
+    }
+
+    #[test]
+    fn far_or_other_table_status_is_read_alone() {
+        let map = RegisterMap {
+            position: Register {
+                table: Table::Input,
+                address: 100,
+                format: Format::F32,
+                scale: 1.0,
+                offset: 0.0,
+            },
+            status: Some(StatusRegister {
+                table: Table::Holding,
+                address: 101,
+                setpoint_error_bit: 0,
+            }),
+            ..RegisterMap::default()
+        };
+        let p = Plan::new(&map);
+        assert_eq!(p.transactions.len(), 3);
+        assert_eq!(
+            p.transactions[1],
+            Transaction::Read {
+                table: Table::Input,
+                address: 100,
+                count: 2
+            }
+        );
+        assert_eq!(p.transactions[1].function_code(), 4);
+        assert_eq!(
+            p.status,
+            Some(Slot {
+                transaction: 2,
+                offset: 0
+            })
+        );
+        // Status below the position in the same table: the block starts at the status.
+        let map = RegisterMap {
+            status: Some(StatusRegister {
+                table: Table::Holding,
+                address: 1,
+                setpoint_error_bit: 0,
+            }),
+            position: Register {
+                address: 5,
+                ..RegisterMap::default().position
+            },
+            ..RegisterMap::default()
+        };
+        let p = Plan::new(&map);
+        assert_eq!(
+            p.transactions[1],
+            Transaction::Read {
+                table: Table::Holding,
+                address: 1,
+                count: 5
+            }
+        );
+        assert_eq!(
+            p.position,
+            Slot {
+                transaction: 1,
+                offset: 4
+            }
+        );
+        assert_eq!(
+            p.status,
+            Some(Slot {
+                transaction: 1,
+                offset: 0
+            })
+        );
+    }
+}

@@ -1,0 +1,386 @@
+//! The device side of a register map: a bank of registers that a Modbus server serves.
+//!
+//! [`RegisterBank`] holds the set-point, the position and the status word of one register map
+//! and answers Modbus requests on them the way a Bürkert-style positioner does: reads of mapped
+//! registers (FC 3, FC 4), writes of the whole set-point (FC 6, FC 16) and both at once (FC 23,
+//! write first). A set-point outside the accepted range is either kept-last-value-and-flagged
+//! (the positioner's behaviour: the status register's error bit is raised until a valid
+//! set-point arrives) or refused with exception 03 (what a process-controller-facing server
+//! wants). Unmapped or read-only addresses give exception 02, bad quantities exception 03, other
+//! function codes exception 01. [`BankService`] plugs the bank into tokio-modbus's servers.
+//!
+//! The bank does no I/O, owns no clock and runs no valve model: `sim-device` advances its valve
+//! and calls [`RegisterBank::set_position_pct`]; framing and fault injection live with the server.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Instant;
+
+use tokio_modbus::{ExceptionCode, Request, Response};
+
+use super::map::{RegisterMap, Table};
+
+/// Largest register count of a read (FC 3/4/23), from the Modbus application protocol.
+pub const MAX_READ: u16 = 125;
+/// Largest register count of FC 16.
+pub const MAX_WRITE: u16 = 123;
+/// Largest write count of FC 23.
+pub const MAX_RW_WRITE: u16 = 121;
+
+/// What the bank does with a set-point outside the accepted range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutOfRange {
+    /// Keep the last set-point, raise the status error bit, answer normally (Bürkert).
+    KeepAndFlag,
+    /// Refuse the write with exception 03 (illegal data value).
+    Exception,
+}
+
+#[derive(Debug)]
+struct State {
+    setpoint_pct: f64,
+    position_pct: f64,
+    status: u16,
+    last_write: Option<Instant>,
+    rejected: u64,
+}
+
+/// The registers of one positioner (see the module documentation).
+#[derive(Debug)]
+pub struct RegisterBank {
+    map: RegisterMap,
+    min_pct: f64,
+    max_pct: f64,
+    policy: OutOfRange,
+    state: Mutex<State>,
+}
+
+impl RegisterBank {
+    /// A bank for a (validated) `map` accepting set-points in `min_pct..=max_pct`.
+    pub fn new(map: RegisterMap, min_pct: f64, max_pct: f64, policy: OutOfRange) -> Self {
+        RegisterBank {
+            map,
+            min_pct,
+            max_pct,
+            policy,
+            state: Mutex::new(State {
+                setpoint_pct: min_pct.max(0.0).min(max_pct),
+                position_pct: 0.0,
+                status: 0,
+                last_write: None,
+                rejected: 0,
+            }),
+        }
+    }
+
+    fn state(&self) -> MutexGuard<'_, State> {
+        // A panic while holding the lock cannot leave State half-written (plain stores), so a
+        // poisoned lock is still usable.
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The map served.
+    pub fn map(&self) -> &RegisterMap {
+        &self.map
+    }
+
+    /// The last accepted set-point, %.
+    pub fn setpoint_pct(&self) -> f64 {
+        self.state().setpoint_pct
+    }
+
+    /// Sets the position the bank reports, %.
+    pub fn set_position_pct(&self, pct: f64) {
+        self.state().position_pct = pct;
+    }
+
+    /// The status word.
+    pub fn status(&self) -> u16 {
+        self.state().status
+    }
+
+    /// When the last set-point write arrived (accepted or not); None before the first.
+    pub fn last_write(&self) -> Option<Instant> {
+        self.state().last_write
+    }
+
+    /// Number of set-points refused as out of range.
+    pub fn rejected(&self) -> u64 {
+        self.state().rejected
+    }
+
+    /// Answers one request.
+    pub fn handle(&self, req: &Request<'_>) -> Result<Response, ExceptionCode> {
+        match req {
+            Request::ReadHoldingRegisters(a, n) => self
+                .read(Table::Holding, *a, *n, MAX_READ)
+                .map(Response::ReadHoldingRegisters),
+            Request::ReadInputRegisters(a, n) => self
+                .read(Table::Input, *a, *n, MAX_READ)
+                .map(Response::ReadInputRegisters),
+            Request::WriteSingleRegister(a, w) => {
+                self.write(*a, &[*w])?;
+                Ok(Response::WriteSingleRegister(*a, *w))
+            }
+            Request::WriteMultipleRegisters(a, words) => {
+                if words.is_empty() || words.len() > usize::from(MAX_WRITE) {
+                    return Err(ExceptionCode::IllegalDataValue);
+                }
+                self.write(*a, words)?;
+                Ok(Response::WriteMultipleRegisters(*a, words.len() as u16))
+            }
+            Request::ReadWriteMultipleRegisters(ra, rn, wa, words) => {
+                if words.is_empty()
+                    || words.len() > usize::from(MAX_RW_WRITE)
+                    || *rn == 0
+                    || *rn > MAX_READ
+                {
+                    return Err(ExceptionCode::IllegalDataValue);
+                }
+                self.write(*wa, words)?;
+                self.read(Table::Holding, *ra, *rn, MAX_READ)
+                    .map(Response::ReadWriteMultipleRegisters)
+            }
+            _ => Err(ExceptionCode::IllegalFunction),
+        }
+    }
+
+    /// The words of `count` registers from `start` in `table`.
+    fn read(
+        &self,
+        table: Table,
+        start: u16,
+        count: u16,
+        max: u16,
+    ) -> Result<Vec<u16>, ExceptionCode> {
+        if count == 0 || count > max {
+            return Err(ExceptionCode::IllegalDataValue);
+        }
+        let st = self.state();
+        let m = &self.map;
+        let mut values: Vec<(std::ops::Range<u32>, Vec<u16>)> = Vec::with_capacity(3);
+        if m.setpoint.table == table {
+            values.push((
+                m.setpoint.span(),
+                m.setpoint.encode_saturating(st.setpoint_pct, m.word_order),
+            ));
+        }
+        if m.position.table == table {
+            values.push((
+                m.position.span(),
+                m.position.encode_saturating(st.position_pct, m.word_order),
+            ));
+        }
+        if let Some(s) = m.status.filter(|s| s.table == table) {
+            let a = u32::from(s.address);
+            values.push((a..a + 1, vec![st.status]));
+        }
+        let start = u32::from(start);
+        (start..start + u32::from(count))
+            .map(|a| {
+                values
+                    .iter()
+                    .find(|(span, _)| span.contains(&a))
+                    .and_then(|(span, words)| words.get((a - span.start) as usize).copied())
+                    .ok_or(ExceptionCode::IllegalDataAddress)
+            })
+            .collect()
+    }
+
+    /// Writes the set-point; only a write of exactly its registers is accepted.
+    fn write(&self, start: u16, words: &[u16]) -> Result<(), ExceptionCode> {
+        let sp = &self.map.setpoint;
+        if start != sp.address || words.len() != usize::from(sp.format.width()) {
+            return Err(ExceptionCode::IllegalDataAddress);
+        }
+        let pct = sp.decode("set-point", words, self.map.word_order).ok();
+        let mut st = self.state();
+        st.last_write = Some(Instant::now());
+        let mask = self.map.status.map(|s| s.error_mask()).unwrap_or(0);
+        match pct {
+            Some(p) if p >= self.min_pct && p <= self.max_pct => {
+                st.setpoint_pct = p;
+                st.status &= !mask;
+                Ok(())
+            }
+            _ => {
+                st.rejected += 1;
+                match self.policy {
+                    OutOfRange::KeepAndFlag => {
+                        st.status |= mask;
+                        Ok(())
+                    }
+                    OutOfRange::Exception => Err(ExceptionCode::IllegalDataValue),
+                }
+            }
+        }
+    }
+}
+
+/// A tokio-modbus server [`Service`](tokio_modbus::server::Service) answering from a bank.
+#[derive(Debug, Clone)]
+pub struct BankService(pub Arc<RegisterBank>);
+
+impl tokio_modbus::server::Service for BankService {
+    type Request = Request<'static>;
+    type Response = Response;
+    type Exception = ExceptionCode;
+    type Future = std::future::Ready<Result<Response, ExceptionCode>>;
+
+    fn call(&self, req: Self::Request) -> Self::Future {
+        std::future::ready(self.0.handle(&req))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::modbus::map::{Format, Register, StatusRegister, WordOrder};
+    use std::borrow::Cow;
+
+    fn map() -> RegisterMap {
+        RegisterMap {
+            status: Some(StatusRegister {
+                table: Table::Holding,
+                address: 2,
+                setpoint_error_bit: 3,
+            }),
+            ..RegisterMap::default()
+        }
+    }
+
+    fn write(b: &RegisterBank, raw: u16) -> Result<Response, ExceptionCode> {
+        b.handle(&Request::WriteMultipleRegisters(0, Cow::Owned(vec![raw])))
+    }
+
+    #[test]
+    fn out_of_range_keeps_last_value_and_flags() {
+        let b = RegisterBank::new(map(), 0.0, 100.0, OutOfRange::KeepAndFlag);
+        assert_eq!(write(&b, 420), Ok(Response::WriteMultipleRegisters(0, 1)));
+        assert_eq!(b.setpoint_pct(), 42.0);
+        assert_eq!(b.status(), 0);
+        assert_eq!(write(&b, 1001), Ok(Response::WriteMultipleRegisters(0, 1)));
+        assert_eq!(b.setpoint_pct(), 42.0, "kept");
+        assert_eq!(b.status(), 0b1000, "flagged");
+        assert_eq!(b.rejected(), 1);
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(0, 3)),
+            Ok(Response::ReadHoldingRegisters(vec![420, 0, 8]))
+        );
+        assert_eq!(write(&b, 1000), Ok(Response::WriteMultipleRegisters(0, 1)));
+        assert_eq!(b.status(), 0, "cleared by a valid set-point");
+        assert!(b.last_write().is_some());
+    }
+
+    #[test]
+    fn exception_policy_refuses_with_03() {
+        let b = RegisterBank::new(map(), 10.0, 90.0, OutOfRange::Exception);
+        assert_eq!(write(&b, 950), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(write(&b, 50), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(write(&b, 500), Ok(Response::WriteMultipleRegisters(0, 1)));
+        assert_eq!(b.setpoint_pct(), 50.0);
+    }
+
+    #[test]
+    fn addresses_and_quantities() {
+        let b = RegisterBank::new(map(), 0.0, 100.0, OutOfRange::KeepAndFlag);
+        b.set_position_pct(-0.3);
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(1, 1)),
+            Ok(Response::ReadHoldingRegisters(vec![(-3i16) as u16]))
+        );
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(1, 3)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(0, 0)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(0, 126)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            b.handle(&Request::ReadInputRegisters(0, 1)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        // The position and the status are read-only.
+        assert_eq!(
+            b.handle(&Request::WriteSingleRegister(1, 5)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            b.handle(&Request::ReadCoils(0, 1)),
+            Err(ExceptionCode::IllegalFunction)
+        );
+        assert_eq!(
+            b.handle(&Request::WriteSingleRegister(0, 250)),
+            Ok(Response::WriteSingleRegister(0, 250))
+        );
+        assert_eq!(b.setpoint_pct(), 25.0);
+    }
+
+    #[test]
+    fn fc23_writes_before_reading() {
+        let b = RegisterBank::new(map(), 0.0, 100.0, OutOfRange::KeepAndFlag);
+        let r = b.handle(&Request::ReadWriteMultipleRegisters(
+            0,
+            3,
+            0,
+            Cow::Owned(vec![777]),
+        ));
+        assert_eq!(r, Ok(Response::ReadWriteMultipleRegisters(vec![777, 0, 0])));
+        let r = b.handle(&Request::ReadWriteMultipleRegisters(
+            0,
+            1,
+            1,
+            Cow::Owned(vec![1]),
+        ));
+        assert_eq!(r, Err(ExceptionCode::IllegalDataAddress));
+    }
+
+    #[test]
+    fn partial_writes_of_a_32_bit_set_point_are_refused() {
+        let m = RegisterMap {
+            setpoint: Register {
+                table: Table::Holding,
+                address: 10,
+                format: Format::F32,
+                scale: 1.0,
+                offset: 0.0,
+            },
+            position: Register {
+                table: Table::Input,
+                address: 0,
+                format: Format::F32,
+                scale: 1.0,
+                offset: 0.0,
+            },
+            word_order: WordOrder::Little,
+            ..RegisterMap::default()
+        };
+        let b = RegisterBank::new(m, 0.0, 100.0, OutOfRange::KeepAndFlag);
+        assert_eq!(
+            b.handle(&Request::WriteSingleRegister(10, 1)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        let w = m.setpoint.encode("x", 33.5, WordOrder::Little).unwrap();
+        b.handle(&Request::WriteMultipleRegisters(10, Cow::Owned(w)))
+            .unwrap();
+        assert_eq!(b.setpoint_pct(), 33.5);
+        // NaN is out of range: kept.
+        let nan = f32::NAN.to_bits();
+        b.handle(&Request::WriteMultipleRegisters(
+            10,
+            Cow::Owned(vec![nan as u16, (nan >> 16) as u16]),
+        ))
+        .unwrap();
+        assert_eq!(b.setpoint_pct(), 33.5);
+        b.set_position_pct(12.25);
+        let Ok(Response::ReadInputRegisters(words)) = b.handle(&Request::ReadInputRegisters(0, 2))
+        else {
+            panic!("input registers not readable")
+        };
+        assert_eq!(m.decode_position(&words), Ok(12.25));
+    }
+}

@@ -1,0 +1,138 @@
+//! [`RecordingError`]: every way a recording can fail to load or save, as one line that says
+//! where (file, line, column), what was expected and which option fixes it.
+
+/// A recording that cannot be read, checked or written.
+///
+/// `file` is the path (or the label given to [`read_from`](super::read_from)); `line` is the
+/// 1-based line in that file, the header being line 1. Options are named by their command-line
+/// flags; each maps to one [`ReadOptions`](super::ReadOptions) field.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// The file cannot be opened, read or written.
+    #[error("{file}: {action}: {source}")]
+    Io {
+        /// Path or label.
+        file: String,
+        /// `cannot read` or `cannot write`.
+        action: &'static str,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The CSV itself is malformed (e.g. not UTF-8).
+    #[error("{file}:{line}: malformed CSV: {message}")]
+    Csv {
+        /// Path or label.
+        file: String,
+        /// Line of the bad record.
+        line: u64,
+        /// What the CSV parser said.
+        message: String,
+    },
+    /// The header lacks a mapped column.
+    #[error(
+        "{file}:1: no column {}; the header has {}; name the columns with --columns t=TIME,op=OP,vp=VP (vp= for a file without V_P)",
+        quoted(missing),
+        if found.is_empty() { "no columns (empty file?)".to_string() } else { quoted(found) }
+    )]
+    MissingColumns {
+        /// Path or label.
+        file: String,
+        /// The mapped names not found.
+        missing: Vec<String>,
+        /// The header as found.
+        found: Vec<String>,
+    },
+    /// A row with fewer cells than the header, before the last line.
+    #[error("{file}:{line}: {cells} cells but the header has {expected}; only a cut-off last line is tolerated")]
+    ShortRow {
+        /// Path or label.
+        file: String,
+        /// Line of the row.
+        line: u64,
+        /// Cells in the row.
+        cells: usize,
+        /// Cells in the header.
+        expected: usize,
+    },
+    /// An empty, `NaN`, `NULL` or `NA` cell.
+    #[error("{file}:{line}: column `{column}` has no value (`{cell}`); expected a number; --skip-missing drops such rows")]
+    MissingValue {
+        /// Path or label.
+        file: String,
+        /// Line of the row.
+        line: u64,
+        /// Column name.
+        column: String,
+        /// The cell as written (empty for an empty cell).
+        cell: String,
+    },
+    /// A cell that is not a finite number (or not a timestamp, with `--timestamps`).
+    #[error("{file}:{line}: column `{column}`: `{cell}` is not {expected}{hint}")]
+    BadCell {
+        /// Path or label.
+        file: String,
+        /// Line of the row.
+        line: u64,
+        /// Column name (`DATE+TIME` for joined columns).
+        column: String,
+        /// The cell as written.
+        cell: String,
+        /// What the cell should be.
+        expected: &'static str,
+        /// `; ...` with the option that fixes it, or empty.
+        hint: &'static str,
+    },
+    /// Time does not increase from one row to the next.
+    #[error("{file}:{line}: time {t} s is not after {prev_t} s (line {prev_line}); times must increase strictly")]
+    NotIncreasing {
+        /// Path or label.
+        file: String,
+        /// Line of the offending row.
+        line: u64,
+        /// Its time, s.
+        t: f64,
+        /// Line of the row before it (in time order).
+        prev_line: u64,
+        /// That row's time, s.
+        prev_t: f64,
+    },
+    /// Every row is older than the one above it.
+    #[error("{file}: times decrease on every row (newest row first); --reverse reads the file oldest first")]
+    NewestFirst {
+        /// Path or label.
+        file: String,
+    },
+    /// `--reverse` on a file that already runs forward in time.
+    #[error("{file}: --reverse was given but the times already increase; drop --reverse")]
+    AlreadyForward {
+        /// Path or label.
+        file: String,
+    },
+    /// Fewer than two usable rows.
+    #[error("{file}: {rows} usable data row(s){}; a recording needs at least 2", if *dropped > 0 { format!(" ({dropped} dropped)") } else { String::new() })]
+    TooFewRows {
+        /// Path or label.
+        file: String,
+        /// Rows kept.
+        rows: usize,
+        /// Rows dropped (missing values, cut-off last line).
+        dropped: usize,
+    },
+    /// In-memory data that cannot form a recording, or columns of different lengths to write.
+    #[error("{file}: {detail}")]
+    Invalid {
+        /// Path or label.
+        file: String,
+        /// What is wrong.
+        detail: String,
+    },
+}
+
+/// `` `a`, `b` `` for a list of names.
+fn quoted(names: &[String]) -> String {
+    names
+        .iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}

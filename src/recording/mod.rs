@@ -1,0 +1,266 @@
+//! The recording format: CSV files of a valve's wanted opening O_P and actual position V_P over
+//! time, as logged by the daemon and read by the analysis side.
+//!
+//! A recording file has the header `t_s,op_pct,vp_pct` (time in s, O_P and V_P in %) and one
+//! row per sample at a constant sample period (100 Hz is typical, any rate works). Extra columns
+//! are ignored on reading; other names are mapped with a [`ColumnMap`] (`--columns`).
+//!
+//! - [`read`] / [`read_from`]: load and check a file into a [`Recording`]. Every problem is a
+//!   one-line [`RecordingError`] naming file, line, column, what was expected and the option
+//!   that fixes it. Tolerated: a UTF-8 BOM, CRLF line ends, non-UTF-8 text in unmapped
+//!   columns; with a warning: a last line cut off by a crash, irregular sampling, values that
+//!   look like fractions instead of percent. With options: rows
+//!   with missing values (`--skip-missing`), newest-row-first files (`--reverse`), wall-clock
+//!   timestamps in one or two columns (`--timestamps`, `t=DATE+TIME`), files without V_P
+//!   (`vp=`), scaling (`--scale`). See [`ReadOptions`].
+//! - [`write()`] / [`write_columns`]: save columns with shortest round-trip number formatting, so
+//!   reading back gives the identical `f64` values.
+//! - [`resample_zoh`]: hold a piecewise-constant signal (O_P) onto another sample period.
+//!
+//! Not here: interpolation of missing V_P (a missing value is dropped or refused, never
+//! invented), unit conversion beyond a scale factor, time zones (timestamps are taken as given,
+//! without daylight-saving handling), and any analysis of the signals.
+
+mod columns;
+mod error;
+mod read;
+mod resample;
+mod write;
+
+pub use columns::{ColumnMap, ColumnMapError};
+pub use error::RecordingError;
+pub use read::{read, read_from, ReadOptions};
+pub use resample::resample_zoh;
+pub use write::{write, write_columns};
+
+/// A checked recording: at least two samples, strictly increasing finite times, finite values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// Sample times, s. As in the file for numeric times; from the first row for timestamps.
+    pub t: Vec<f64>,
+    /// Wanted opening O_P, % (times [`ReadOptions::scale`]).
+    pub op: Vec<f64>,
+    /// Valve position V_P, % (times the scale); empty when the file has no V_P (`vp=`).
+    pub vp: Vec<f64>,
+    /// Interval between samples, s: the median interval, or the mean interval (span / (n − 1))
+    /// when the two agree to 1e-6, which averages out the rounding of times written as
+    /// decimals (0.01 rather than 0.009999999999990905).
+    pub sample_period: f64,
+    /// Where it came from: the path, a label, or `in-memory`.
+    pub source: String,
+    /// What was tolerated or looks odd (also logged with `tracing::warn!`).
+    pub warnings: Vec<String>,
+}
+
+impl Recording {
+    /// A recording from in-memory columns (`vp` may be empty), with the same checks and
+    /// warnings as a file; `source` is `in-memory`.
+    pub fn from_vectors(t: Vec<f64>, op: Vec<f64>, vp: Vec<f64>) -> Result<Self, RecordingError> {
+        let invalid = |detail: String| RecordingError::Invalid {
+            file: "in-memory".into(),
+            detail,
+        };
+        if op.len() != t.len() || !(vp.is_empty() || vp.len() == t.len()) {
+            return Err(invalid(format!(
+                "column lengths differ: t {}, op {}, vp {} (vp may be empty)",
+                t.len(),
+                op.len(),
+                vp.len()
+            )));
+        }
+        if t.len() < 2 {
+            return Err(RecordingError::TooFewRows {
+                file: "in-memory".into(),
+                rows: t.len(),
+                dropped: 0,
+            });
+        }
+        for (name, col) in [("t", &t), ("op", &op), ("vp", &vp)] {
+            if let Some(i) = col.iter().position(|v| !v.is_finite()) {
+                return Err(invalid(format!(
+                    "{name}[{i}] is {}; expected a finite number",
+                    col[i]
+                )));
+            }
+        }
+        if let Some(i) = (1..t.len()).find(|&i| t[i] <= t[i - 1]) {
+            return Err(invalid(format!(
+                "t[{i}] = {} s is not after t[{}] = {} s; times must increase strictly",
+                t[i],
+                i - 1,
+                t[i - 1]
+            )));
+        }
+        Ok(Self::assemble(t, op, vp, "in-memory".into(), Vec::new()))
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there are no samples (never true for a checked recording).
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Time from the first to the last sample, s.
+    pub fn duration(&self) -> f64 {
+        match (self.t.first(), self.t.last()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        }
+    }
+
+    /// Builds a recording from checked columns (at least two samples, strictly increasing
+    /// times): sets the sample period and adds the sampling and fraction warnings.
+    fn assemble(
+        t: Vec<f64>,
+        op: Vec<f64>,
+        vp: Vec<f64>,
+        source: String,
+        mut warnings: Vec<String>,
+    ) -> Self {
+        let (sample_period, irregular) = sampling(&t);
+        warnings.extend(irregular);
+        if op.iter().chain(&vp).all(|v| (0.0..=1.05).contains(v)) {
+            let what = if vp.is_empty() {
+                "O_P lies"
+            } else {
+                "O_P and V_P lie"
+            };
+            warnings.push(format!(
+                "{what} within [0, 1.05]: looks like fractions of full travel, not percent; \
+                 --scale 100 converts"
+            ));
+        }
+        for w in &warnings {
+            tracing::warn!(file = %source, "{w}");
+        }
+        Recording {
+            t,
+            op,
+            vp,
+            sample_period,
+            source,
+            warnings,
+        }
+    }
+}
+
+/// The sample period (see [`Recording::sample_period`]) and, when more than 1 % of the
+/// intervals differ from the median by more than 10 %, a warning with their count and the worst
+/// one. `t` has at least two samples.
+fn sampling(t: &[f64]) -> (f64, Option<String>) {
+    let mut dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let m = dt.len();
+    dt.sort_unstable_by(f64::total_cmp);
+    let median = if m % 2 == 1 {
+        dt[m / 2]
+    } else {
+        (dt[m / 2 - 1] + dt[m / 2]) / 2.0
+    };
+    let mut count = 0;
+    let mut worst = (0.0, 0.0, 0.0); // (|deviation|, interval, start time)
+    for w in t.windows(2) {
+        let d = w[1] - w[0];
+        let dev = (d - median).abs();
+        if dev > 0.1 * median {
+            count += 1;
+            if dev > worst.0 {
+                worst = (dev, d, w[0]);
+            }
+        }
+    }
+    let warning = (count * 100 > m).then(|| {
+        format!(
+            "irregular sampling: {count} of {m} intervals differ by more than 10 % from the \
+             median {median} s (worst: {} s after t = {} s)",
+            worst.1, worst.2
+        )
+    });
+    let mean = (t[m] - t[0]) / m as f64;
+    let period = if (mean - median).abs() <= 1e-6 * median {
+        mean
+    } else {
+        median
+    };
+    (period, warning)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn from_vectors_checks_and_measures() {
+        let r =
+            Recording::from_vectors(vec![0.0, 0.5, 1.0], vec![10.0, 20.0, 30.0], vec![]).unwrap();
+        assert_eq!((r.len(), r.duration(), r.sample_period), (3, 1.0, 0.5));
+        assert!(r.warnings.is_empty() && r.vp.is_empty() && !r.is_empty());
+        assert_eq!(r.source, "in-memory");
+
+        let e = Recording::from_vectors(vec![0.0, 1.0], vec![1.0], vec![]).unwrap_err();
+        assert!(e.to_string().contains("lengths differ: t 2, op 1"), "{e}");
+        let e = Recording::from_vectors(vec![0.0], vec![1.0], vec![1.0]).unwrap_err();
+        assert!(
+            matches!(e, RecordingError::TooFewRows { rows: 1, .. }),
+            "{e}"
+        );
+        let e = Recording::from_vectors(vec![0.0, 1.0], vec![1.0, 2.0], vec![3.0, f64::NAN])
+            .unwrap_err();
+        assert!(e.to_string().contains("vp[1] is NaN"), "{e}");
+        let e = Recording::from_vectors(vec![0.0, 1.0, 1.0], vec![5.0; 3], vec![]).unwrap_err();
+        assert!(
+            e.to_string().contains("t[2] = 1 s is not after t[1] = 1 s"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn irregular_sampling_is_counted_with_the_worst_interval() {
+        // 200 intervals of 0.01 s, three of them 0.02 s or 0.015 s: 1.5 % deviate.
+        let mut t = vec![0.0];
+        for i in 0..200 {
+            let dt = match i {
+                50 | 120 => 0.02,
+                130 => 0.015,
+                _ => 0.01,
+            };
+            t.push(t[t.len() - 1] + dt);
+        }
+        let n = t.len();
+        let r = Recording::from_vectors(t, vec![50.0; n], vec![50.0; n]).unwrap();
+        assert!((r.sample_period - 0.01).abs() < 1e-12, "the median");
+        assert_eq!(r.warnings.len(), 1, "{:?}", r.warnings);
+        let w = &r.warnings[0];
+        assert!(
+            w.starts_with("irregular sampling: 3 of 200 intervals"),
+            "{w}"
+        );
+        assert!(w.contains("worst: 0.02"), "{w}");
+        // Two deviating intervals in 200 (1 %) is still regular.
+        let mut t: Vec<f64> = (0..=200).map(|k| k as f64 * 0.01).collect();
+        t[100] = 0.995;
+        let r = Recording::from_vectors(t, vec![50.0; 201], vec![]).unwrap();
+        assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+    }
+
+    #[test]
+    fn a_regular_grid_written_as_decimals_gets_its_exact_period() {
+        let t: Vec<f64> = (0..60000)
+            .map(|k| format!("{:.2}", k as f64 * 0.01).parse().unwrap())
+            .collect();
+        let r = Recording::from_vectors(t, vec![50.0; 60000], vec![]).unwrap();
+        assert_eq!(r.sample_period, 0.01);
+    }
+
+    #[test]
+    fn fractions_are_flagged() {
+        let r = Recording::from_vectors(vec![0.0, 1.0], vec![0.2, 1.0], vec![0.1, 1.04]).unwrap();
+        assert_eq!(r.warnings.len(), 1);
+        assert!(r.warnings[0].contains("--scale 100"), "{:?}", r.warnings);
+        let r = Recording::from_vectors(vec![0.0, 1.0], vec![0.2, 1.0], vec![0.1, 2.0]).unwrap();
+        assert!(r.warnings.is_empty());
+    }
+}
