@@ -10,6 +10,7 @@
 //! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
 //! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
+//! - [`report`]: self-contained HTML reports with SVG charts.
 //! - [`synth`]: synthetic recordings (random steps or a closed level loop) for demos and tests.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
@@ -19,5 +20,6 @@ pub mod metrics;
 pub mod modbus;
 pub mod model;
 pub mod recording;
+pub mod report;
 pub mod synth;
 pub mod toml_file;

@@ -8,6 +8,7 @@ use valve_bridge::diagnose::{self, Diagnosis};
 use valve_bridge::metrics;
 use valve_bridge::model::ModelSpec;
 use valve_bridge::recording;
+use valve_bridge::report;
 
 use super::input::RecordingArgs;
 
@@ -54,7 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     tracing::info!(seconds = started.elapsed().as_secs_f64(), "diagnosis done");
     if let Some(dir) = &args.out {
-        write_out(dir, &d)?;
+        write_out(dir, &rec, &d)?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&d)?);
@@ -77,7 +78,11 @@ fn progress_bar() -> Option<indicatif::ProgressBar> {
     })
 }
 
-fn write_out(dir: &std::path::Path, d: &Diagnosis) -> anyhow::Result<()> {
+fn write_out(
+    dir: &std::path::Path,
+    rec: &recording::Recording,
+    d: &Diagnosis,
+) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let model = dir.join("model.toml");
     std::fs::write(&model, d.final_model.spec.to_toml())
@@ -85,7 +90,15 @@ fn write_out(dir: &std::path::Path, d: &Diagnosis) -> anyhow::Result<()> {
     let json = dir.join("diagnosis.json");
     std::fs::write(&json, serde_json::to_string_pretty(d)?)
         .with_context(|| format!("cannot write {}", json.display()))?;
-    eprintln!("wrote {} and {}", model.display(), json.display());
+    let html = dir.join("report.html");
+    let page = report::diagnosis_html(&rec.source, &rec.t, &rec.op, &rec.vp, d);
+    std::fs::write(&html, page).with_context(|| format!("cannot write {}", html.display()))?;
+    eprintln!(
+        "wrote {}, {} and {}",
+        html.display(),
+        model.display(),
+        json.display()
+    );
     Ok(())
 }
 

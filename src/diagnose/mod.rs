@@ -101,6 +101,9 @@ pub struct Diagnosis {
     pub sim_after: Vec<f64>,
     /// Notes on what the data could not tell apart, and what experiment would.
     pub notes: Vec<String>,
+    /// The step responses measured in the recording (evidence for delays).
+    #[serde(skip)]
+    pub steps: Vec<evidence::StepResponse>,
 }
 
 /// Errors that stop a diagnosis.
@@ -724,6 +727,7 @@ pub fn diagnose(
         sim_before,
         sim_after,
         notes,
+        steps: facts.steps,
     })
 }
 

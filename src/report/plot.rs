@@ -1,0 +1,209 @@
+//! SVG charts with plotters: time series (several lines over one time axis) and scatter plots.
+//!
+//! Charts come back as SVG text to embed in an HTML page. Long series are thinned to at most
+//! [`MAX_POINTS`] points per line by keeping each bucket's min and max, so spikes survive.
+
+use plotters::prelude::*;
+
+/// Most points drawn per line.
+pub const MAX_POINTS: usize = 4000;
+
+/// One named line of a chart.
+pub struct Series<'a> {
+    pub name: &'a str,
+    pub y: &'a [f64],
+    pub color: RGBColor,
+}
+
+/// Palette for the lines of a chart: measured, before, after, then extras.
+pub const MEASURED: RGBColor = RGBColor(40, 40, 40);
+pub const BEFORE: RGBColor = RGBColor(214, 39, 40);
+pub const AFTER: RGBColor = RGBColor(31, 119, 180);
+pub const EXTRA: RGBColor = RGBColor(44, 160, 44);
+
+/// Indices to draw for `range` of a series: all, or each bucket's min and max.
+fn thin(y: &[f64], range: std::ops::Range<usize>) -> Vec<usize> {
+    let n = range.len();
+    if n <= MAX_POINTS {
+        return range.collect();
+    }
+    let bucket = n.div_ceil(MAX_POINTS / 2);
+    let mut out = Vec::with_capacity(MAX_POINTS + 2);
+    let mut a = range.start;
+    while a < range.end {
+        let b = (a + bucket).min(range.end);
+        let (mut lo, mut hi) = (a, a);
+        for k in a..b {
+            if y[k] < y[lo] {
+                lo = k;
+            }
+            if y[k] > y[hi] {
+                hi = k;
+            }
+        }
+        out.push(lo.min(hi));
+        out.push(lo.max(hi));
+        a = b;
+    }
+    out
+}
+
+/// A time-series chart of `series` against `t` over the samples `range`.
+pub fn lines(
+    title: &str,
+    y_label: &str,
+    t: &[f64],
+    series: &[Series],
+    range: std::ops::Range<usize>,
+) -> String {
+    let mut svg = String::new();
+    if range.is_empty() {
+        return svg;
+    }
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 320)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for s in series {
+            for &v in &s.y[range.clone()] {
+                if v.is_finite() {
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+            }
+        }
+        if !lo.is_finite() {
+            (lo, hi) = (0.0, 1.0);
+        }
+        let pad = ((hi - lo) * 0.05).max(1e-3);
+        let (t0, t1) = (t[range.start], t[range.end - 1].max(t[range.start] + 1e-9));
+        let chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(55)
+            .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad));
+        let Ok(mut chart) = chart else {
+            return String::new();
+        };
+        let _ = chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc(y_label)
+            .light_line_style(WHITE.mix(0.0))
+            .draw();
+        for s in series {
+            let idx = thin(s.y, range.clone());
+            let color = s.color;
+            if let Ok(ann) = chart.draw_series(LineSeries::new(
+                idx.iter().map(|&k| (t[k], s.y[k])),
+                color.stroke_width(1),
+            )) {
+                ann.label(s.name)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            }
+        }
+        let _ = chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw();
+        let _ = root.present();
+    }
+    svg
+}
+
+/// A scatter chart of labelled point groups, with optional lines (x, y) drawn over them.
+pub fn scatter(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    groups: &[(&str, RGBColor, Vec<(f64, f64)>)],
+) -> String {
+    let mut svg = String::new();
+    let pts = || groups.iter().flat_map(|g| g.2.iter());
+    if pts().next().is_none() {
+        return svg;
+    }
+    {
+        let root = SVGBackend::with_string(&mut svg, (600, 360)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let fold = |f: fn(&(f64, f64)) -> f64| {
+            pts()
+                .map(f)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                    (a.min(v), b.max(v))
+                })
+        };
+        let (x0, x1) = fold(|p| p.0);
+        let (y0, y1) = fold(|p| p.1);
+        let chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(
+                (x0 - 1.0)..(x1 + 1.0),
+                (y0 - 0.05).min(0.0)..(y1 * 1.1 + 0.05),
+            );
+        let Ok(mut chart) = chart else {
+            return String::new();
+        };
+        let _ = chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .draw();
+        for (name, color, points) in groups {
+            let color = *color;
+            if let Ok(ann) =
+                chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+            {
+                ann.label(*name)
+                    .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
+            }
+        }
+        let _ = chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw();
+        let _ = root.present();
+    }
+    svg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_the_extremes() {
+        let y: Vec<f64> = (0..100_000)
+            .map(|k| if k == 54_321 { 9.0 } else { 0.0 })
+            .collect();
+        let idx = thin(&y, 0..y.len());
+        assert!(idx.len() <= MAX_POINTS + 2);
+        assert!(idx.contains(&54_321));
+    }
+
+    #[test]
+    fn charts_are_svg() {
+        let t: Vec<f64> = (0..500).map(|k| k as f64 * 0.01).collect();
+        let y: Vec<f64> = t.iter().map(|x| x.sin()).collect();
+        let svg = lines(
+            "x",
+            "%",
+            &t,
+            &[Series {
+                name: "sin",
+                y: &y,
+                color: MEASURED,
+            }],
+            0..500,
+        );
+        assert!(svg.starts_with("<svg") && svg.contains("sin"));
+        let s = scatter("s", "a", "b", &[("g", AFTER, vec![(1.0, 2.0), (3.0, 1.0)])]);
+        assert!(s.contains("<circle"));
+    }
+}
