@@ -113,13 +113,11 @@ pub fn lines(
     svg
 }
 
-/// A scatter chart of labelled point groups, with optional lines (x, y) drawn over them.
-pub fn scatter(
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    groups: &[(&str, RGBColor, Vec<(f64, f64)>)],
-) -> String {
+/// A named group of (x, y) points of one colour.
+pub type PointGroup<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
+
+/// A scatter chart of labelled point groups.
+pub fn scatter(title: &str, x_label: &str, y_label: &str, groups: &[PointGroup]) -> String {
     let mut svg = String::new();
     let pts = || groups.iter().flat_map(|g| g.2.iter());
     if pts().next().is_none() {
