@@ -158,8 +158,9 @@ pub fn percentile(x: &mut [f64], q: f64) -> f64 {
 
 /// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
 ///
-/// The smallest common nonzero change of V_P is the candidate spacing; V_P is on a lattice when
-/// at least 95 % of its values sit within 2 % of a spacing of a multiple of it.
+/// The smallest nonzero change of V_P that occurs at least three times is the candidate
+/// spacing; V_P is on a lattice when at least 95 % of its values sit within 2 % of a spacing of a
+/// multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
 fn lattice(vp: &[f64]) -> f64 {
     let mut diffs: Vec<f64> = vp
         .windows(2)
@@ -169,8 +170,12 @@ fn lattice(vp: &[f64]) -> f64 {
     if diffs.len() < 20 {
         return 0.0;
     }
-    let q = percentile(&mut diffs, 0.05);
-    if q < 1e-6 {
+    diffs.sort_by(f64::total_cmp);
+    let q = diffs
+        .windows(3)
+        .find(|w| w[2] - w[0] <= 1e-6 * w[0].max(1e-9) + 1e-9)
+        .map_or(0.0, |w| w[1]);
+    if q < 0.01 {
         return 0.0;
     }
     let near = vp

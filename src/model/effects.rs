@@ -85,6 +85,8 @@ impl Effects {
 /// Running state of the effects around a core.
 #[derive(Debug, Clone)]
 pub(crate) struct EffectState {
+    /// False when calibration, deadband and stiction are all off: the input passes untouched.
+    shapes_input: bool,
     gain: f64,
     offset: f64,
     half_band: f64,
@@ -96,6 +98,10 @@ pub(crate) struct EffectState {
 impl EffectState {
     pub(crate) fn new(e: &Effects) -> Self {
         EffectState {
+            shapes_input: e.calibration_gain != 1.0
+                || e.calibration_offset_pct != 0.0
+                || e.deadband_pct > 0.0
+                || e.stickband_pct > 0.0,
             gain: e.calibration_gain,
             offset: e.calibration_offset_pct,
             half_band: e.deadband_pct / 2.0,
@@ -121,6 +127,9 @@ impl EffectState {
     /// Calibration, deadband and stiction: the input the core is driven with.
     #[inline]
     pub(crate) fn input(&mut self, u: f64) -> f64 {
+        if !self.shapes_input {
+            return u;
+        }
         let u = self.gain * u + self.offset;
         if u - self.target > self.half_band {
             self.target = u - self.half_band;

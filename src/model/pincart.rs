@@ -166,7 +166,11 @@ impl PinCart {
         let rel = self.y - self.v;
         let pushing = d * rel >= self.half - 1e-12;
         if pushing {
-            let gain = p.p_gain_per_s / (1.0 + slowdown * self.v / 100.0);
+            let gain = if slowdown == 0.0 {
+                p.p_gain_per_s
+            } else {
+                p.p_gain_per_s / (1.0 + slowdown * self.v / 100.0)
+            };
             let speed = (gain * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
             let max = if d > 0.0 {
                 p.dy_max_pct_per_s
