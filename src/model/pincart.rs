@@ -4,7 +4,8 @@
 //! `V_P`) of width `B_L`. The cart only moves while the pin pushes against one of its sides, so
 //! a reversal of the pin first costs the time it needs to cross the cart: the apparent backlash.
 //!
-//! - Pin-cart I: the pin moves at `P_k * e` with `e = O_P - V_P` (eqs. 1-3).
+//! - Pin-cart I: the pin moves at `P_k * e` with `e = O_P - V_P` (eqs. 1-3), at most by `e`
+//!   in one sample.
 //! - Pin-cart II: while the pin pushes the cart it moves at `sgn(e) * max(P_k |e|, dy_min)`,
 //!   saturated at `dy_max` (eqs. 4-6); while it crosses the cart it moves at a speed set by the
 //!   opening (eq. 7), which makes the reversal delay depend on the opening. `B_L` is 1 %.
@@ -139,7 +140,9 @@ impl PinCart {
     pub(crate) fn step(&mut self, u: f64) -> f64 {
         let e = u - self.v; // eq. (1)
         let dy = match self.law {
-            PinLaw::Proportional { k } => k * e * self.dt, // eq. (2)
+            // eq. (2); one sample never carries the pin past the target, which keeps slow
+            // sampling (P_k dt > 1, e.g. 1 Hz data) stable and changes nothing at 100 Hz.
+            PinLaw::Proportional { k } => (k * self.dt).min(1.0) * e,
             PinLaw::StateDependent {
                 p,
                 close_max,

@@ -501,3 +501,14 @@ fn open_slowdown_makes_the_valve_slower_when_open() {
         "{closed} vs {open} samples"
     );
 }
+
+#[test]
+fn slow_sampling_keeps_every_model_stable() {
+    // At 1 Hz, P_k dt exceeds 1 for the bundled pin-cart gains: no model may overshoot a step.
+    for kind in ModelKind::ALL {
+        let mut v = Valve::new(&bundled(kind), 1.0).unwrap();
+        v.reset(40.0, 40.0);
+        let out: Vec<f64> = (0..60).map(|_| v.step(60.0)).collect();
+        assert!(out.iter().all(|&y| (40.0..=60.0 + 1e-9).contains(&y)), "{kind}: {out:?}");
+    }
+}
