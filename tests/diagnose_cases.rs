@@ -92,3 +92,8 @@ fn slow_venting_is_asymmetry() {
 fn air_supply_limit_is_slew_rate() {
     check("pub_slew_mixed");
 }
+
+#[test]
+fn transport_delay_is_dead_time() {
+    check("pub_deadtime_mixed");
+}

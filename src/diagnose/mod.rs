@@ -481,7 +481,8 @@ struct Trial {
     spec: ModelSpec,
     errors: Errors,
     free: Vec<Free>,
-    /// Held-out blocks improved minus three times blocks made worse, each beyond noise (z > 2).
+    /// Held-out blocks helped beyond noise (z > 2); 0 when the blocks hurt lose over a quarter
+    /// of what those gain.
     t_stat: f64,
     excess_share: f64,
     delta_bic: f64,
@@ -750,14 +751,26 @@ fn judge(
     // Per held-out block, the drop in squared error is tested against measurement noise: with
     // noise sigma, the drop has a standard deviation of 2 sigma sqrt(sum (y_before - y_after)^2)
     // when nothing real changed. An effect that exists helps significantly (z > 2) wherever the
-    // recording excites it and hurts nowhere; one fitted to chance helps some blocks and hurts
-    // others. `t_stat` counts the blocks helped minus three times the blocks hurt.
+    // recording excites it, and what it costs elsewhere is small next to what it gains; one
+    // fitted to chance helps some blocks about as much as it hurts others. `t_stat` is the
+    // number of blocks helped, or 0 when the blocks hurt lose more than a quarter of what the
+    // blocks helped gain.
     let blocks = scorer.paired(current, &spec);
     let z = |(drop, diff2): (f64, f64)| drop / (2.0 * sigma.max(1e-6) * diff2.sqrt() + 1e-12);
-    let (better, worse) = blocks.iter().fold((0usize, 0usize), |(b, w), &p| {
-        (b + usize::from(z(p) > 2.0), w + usize::from(z(p) < -2.0))
-    });
-    let t_stat = better as f64 - 3.0 * worse as f64;
+    let (mut better, mut helped, mut hurt) = (0usize, 0.0, 0.0);
+    for &p in &blocks {
+        if z(p) > 2.0 {
+            better += 1;
+            helped += p.0;
+        } else if z(p) < -2.0 {
+            hurt -= p.0;
+        }
+    }
+    let t_stat = if hurt * 4.0 <= helped {
+        better as f64
+    } else {
+        0.0
+    };
     let excess = (cur.held - held_noise).max(1e-12);
     let excess_share = (cur.held - errors.held) / excess.max(0.05 * cur.held);
     let n_eff = (n_fit as f64 / corr_len).max(10.0);
