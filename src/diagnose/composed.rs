@@ -118,6 +118,8 @@ pub enum Knob {
     Stickband,
     /// Slip jump as a fraction of S.
     JumpFraction,
+    /// Breakaway distance of stick-slip inside the positioner loop, %.
+    Breakaway,
     /// Deadband width, %.
     Deadband,
     /// Lowest travel, %.
@@ -146,6 +148,7 @@ impl Knob {
             Knob::MinSpeed => "min_speed_pct_per_s",
             Knob::Stickband => "stickband_pct",
             Knob::JumpFraction => "jump_fraction",
+            Knob::Breakaway => "breakaway_pct",
             Knob::Deadband => "deadband_pct",
             Knob::TravelMin => "travel_min_pct",
             Knob::TravelMax => "travel_max_pct",
@@ -201,6 +204,7 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
                 0.0
             }
         }
+        Knob::Breakaway => e.breakaway_pct,
         Knob::Deadband => e.deadband_pct,
         Knob::TravelMin => spec.travel.min_pct,
         Knob::TravelMax => spec.travel.max_pct,
@@ -239,6 +243,7 @@ pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
             e.jumpband_pct = frac * v;
         }
         Knob::JumpFraction => e.jumpband_pct = v.clamp(0.0, 1.0) * e.stickband_pct,
+        Knob::Breakaway => e.breakaway_pct = v,
         Knob::Deadband => e.deadband_pct = v,
         Knob::TravelMin => spec.travel.min_pct = v,
         Knob::TravelMax => spec.travel.max_pct = v,

@@ -379,7 +379,9 @@ fn candidates(
         Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => {
             vec![vec![f(Knob::MinSpeed, 0.01, 2.0, 0.2)]]
         }
-        Effect::Stiction if get(Knob::Stickband) == 0.0 => vec![
+        // Stick-slip either on the valve's input (Choudhury) or inside the positioner loop
+        // (breakaway: sticks when slow, slips past the target, hunts).
+        Effect::Stiction if get(Knob::Stickband) == 0.0 && get(Knob::Breakaway) == 0.0 => vec![
             vec![
                 f(Knob::Stickband, 0.05, 10.0, 0.5),
                 f(Knob::JumpFraction, 0.0, 1.0, 0.5),
@@ -388,6 +390,7 @@ fn candidates(
                 f(Knob::Stickband, 0.05, 10.0, 2.0),
                 f(Knob::JumpFraction, 0.0, 1.0, 0.5),
             ],
+            vec![f(Knob::Breakaway, 0.05, 10.0, 0.5)],
         ],
         Effect::Deadband if get(Knob::Deadband) == 0.0 => {
             vec![vec![f(Knob::Deadband, 0.02, 10.0, 0.5)]]
@@ -827,7 +830,7 @@ fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool {
                 && oa.min(ob) >= 0.7 * a.min(b)
         }
         Effect::MinSpeed => g(Knob::MinSpeed) >= 0.02,
-        Effect::Stiction => g(Knob::Stickband) >= 0.1,
+        Effect::Stiction => g(Knob::Stickband) >= 0.1 || g(Knob::Breakaway) >= 0.1,
         Effect::Deadband => g(Knob::Deadband) >= 0.05,
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
         Effect::Quantization => g(Knob::Quantum) > 0.0,
@@ -974,10 +977,20 @@ fn explain(
         Effect::Stiction => {
             let jumps = facts.holds.iter().filter(|h| h.max_jump_pct > 5.0 * sigma.max(0.01)).count();
             format!(
-                "{rest}{rev}{jumps} of {} holds show a sudden jump of V_P after it had settled: stick-slip with a stickband of {:.2} % and jumps of {:.2} %",
+                "{rest}{rev}{jumps} of {} holds show a sudden jump of V_P after it had settled: {}",
                 facts.holds.len(),
-                g(Knob::Stickband),
-                g(Knob::Stickband) * g(Knob::JumpFraction)
+                if g(Knob::Breakaway) > 0.0 {
+                    format!(
+                        "stick-slip inside the positioner loop: the valve sticks when it slows and breaks away {:.2} % later, overshooting and hunting",
+                        g(Knob::Breakaway)
+                    )
+                } else {
+                    format!(
+                        "stick-slip with a stickband of {:.2} % and jumps of {:.2} %",
+                        g(Knob::Stickband),
+                        g(Knob::Stickband) * g(Knob::JumpFraction)
+                    )
+                }
             )
         }
         Effect::Deadband => {

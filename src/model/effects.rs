@@ -3,8 +3,8 @@
 //! Each effect is a parameter of the composed valve that is off at its default, so "add a
 //! deadband" means setting `deadband_pct`, not writing a new model. Effects that live inside
 //! the pin-cart II core (backlash, state-dependent delay, slew rate, minimum speed) are
-//! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s` and `open_slowdown`
-//! here, which only pin-cart II uses); the others wrap any core:
+//! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s`, `open_slowdown` and
+//! `breakaway_pct` here, which only pin-cart II uses); the others wrap any core:
 //!
 //! ```text
 //! O_P ─▶ T_d ─▶ calibration ─▶ deadband ─▶ stiction ─▶ core ─▶ travel clamp ─▶ quantization ─▶ V_P
@@ -50,6 +50,11 @@ pub struct Effects {
     /// by `1 / (1 + r V / 100)`, so fully open responds `1 + r` times slower than closed.
     #[serde(skip_serializing_if = "is_zero")]
     pub open_slowdown: f64,
+    /// Stick-slip inside pin-cart II's loop, % (0 = none): a valve that slows below this many %
+    /// per second sticks until the positioner has pushed this far beyond the cart's side, then
+    /// slips the whole way, so it overshoots and hunts around a steady O_P.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub breakaway_pct: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -71,6 +76,7 @@ impl Default for Effects {
             quantization_pct: 0.0,
             closing_slew_pct_per_s: 0.0,
             open_slowdown: 0.0,
+            breakaway_pct: 0.0,
         }
     }
 }

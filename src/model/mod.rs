@@ -471,6 +471,8 @@ impl ModelSpec {
             );
             need(e.open_slowdown == 0.0, Some("effects"), "open_slowdown", e.open_slowdown,
                 "an opening-dependent speed needs model = \"pincart2\" (the only core with a pin speed)");
+            need(e.breakaway_pct == 0.0, Some("effects"), "breakaway_pct", e.breakaway_pct,
+                "stick-slip by breakaway needs model = \"pincart2\" (use stickband_pct with other models)");
         }
         out
     }
@@ -523,8 +525,7 @@ impl Valve {
             )),
             ModelKind::Pincart2 => Core::PinCart(PinCart::two(
                 spec.pincart2.as_ref().ok_or_else(missing)?,
-                spec.effects.closing_slew_pct_per_s,
-                spec.effects.open_slowdown,
+                &spec.effects,
                 dt,
             )),
         };

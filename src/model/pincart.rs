@@ -23,6 +23,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Effects;
+
 /// Pin-cart I parameters (Table 2: B_L, P_k; dead time lives in the valve).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -86,6 +88,10 @@ enum PinLaw {
 pub(crate) struct PinCart {
     law: PinLaw,
     half: f64,
+    /// Stick-slip: how far beyond a side the pin must push a cart that has stopped, %.
+    breakaway: f64,
+    /// The cart stopped or crawled in the last sample (only tracked with a breakaway).
+    stuck: bool,
     dt: f64,
     /// Pin position.
     y: f64,
@@ -102,28 +108,34 @@ impl PinCart {
         )
     }
 
-    /// Pin-cart II with the core-level effects: `closing_slew` (%/s) > 0 gives closing its own
-    /// slew rate (asymmetry); `slowdown` r > 0 makes the proportional pin speed fall with
-    /// opening as `1 / (1 + r V / 100)` (a pneumatic chamber that grows with opening: slower
-    /// response, same slew limit).
-    pub(crate) fn two(p: &PinCart2Params, closing_slew: f64, slowdown: f64, dt: f64) -> Self {
-        let close_max = if closing_slew > 0.0 {
-            closing_slew
+    /// Pin-cart II with the core-level effects of `fx`: `closing_slew_pct_per_s` > 0 gives
+    /// closing its own slew rate (asymmetry); `open_slowdown` r > 0 makes the proportional pin
+    /// speed fall with opening as `1 / (1 + r V / 100)` (a pneumatic chamber that grows with
+    /// opening: slower response, same slew limit); `breakaway_pct` > 0 makes the cart stick
+    /// whenever it stops, until the pin pushes that much beyond the side, then slip.
+    pub(crate) fn two(p: &PinCart2Params, fx: &Effects, dt: f64) -> Self {
+        let close_max = if fx.closing_slew_pct_per_s > 0.0 {
+            fx.closing_slew_pct_per_s
         } else {
             p.dy_max_pct_per_s
         };
         let law = PinLaw::StateDependent {
             p: *p,
             close_max,
-            slowdown,
+            slowdown: fx.open_slowdown,
         };
-        Self::with_law(law, p.backlash_pct, dt)
+        PinCart {
+            breakaway: fx.breakaway_pct,
+            ..Self::with_law(law, p.backlash_pct, dt)
+        }
     }
 
     fn with_law(law: PinLaw, backlash: f64, dt: f64) -> Self {
         PinCart {
             law,
             half: backlash / 2.0,
+            breakaway: 0.0,
+            stuck: false,
             dt,
             y: 0.0,
             v: 0.0,
@@ -150,12 +162,22 @@ impl PinCart {
             } => self.pin_step_two(&p, close_max, slowdown, e),
         };
         self.y += dy;
-        // eq. (3): the cart follows only when the pin pushes a side.
-        if self.y - self.v >= self.half {
+        // eq. (3): the cart follows only when the pin pushes a side; a stuck cart only once the
+        // pin has pushed `breakaway` beyond it, and then it slips the whole way at once.
+        let reach = if self.stuck {
+            self.half + self.breakaway
+        } else {
+            self.half
+        };
+        let before = self.v;
+        if self.y - self.v >= reach {
             self.v = self.y - self.half;
-        } else if self.y - self.v <= -self.half {
+        } else if self.y - self.v <= -reach {
             self.v = self.y + self.half;
         }
+        // It sticks once it crawls slower than the breakaway distance per second (static
+        // friction takes over from sliding friction).
+        self.stuck = self.breakaway > 0.0 && (self.v - before).abs() < self.breakaway * self.dt;
         self.v
     }
 
@@ -195,7 +217,8 @@ impl PinCart {
     #[inline]
     pub(crate) fn set_position(&mut self, v: f64) {
         self.v = v;
-        self.y = self.y.clamp(v - self.half, v + self.half);
+        let reach = self.half + self.breakaway;
+        self.y = self.y.clamp(v - reach, v + reach);
     }
 
     /// Pin position relative to the cart centre (for invariant tests).

@@ -263,7 +263,7 @@ proptest! {
             let mut p = bundled(ModelKind::Pincart2).pincart2.unwrap();
             p.p_gain_per_s = gain;
             p.backlash_pct = backlash;
-            PinCart::two(&p, 0.0, 0.0, DT)
+            PinCart::two(&p, &Effects::default(), DT)
         };
         core.reset(50.0);
         for &u in &ops {
@@ -509,6 +509,41 @@ fn slow_sampling_keeps_every_model_stable() {
         let mut v = Valve::new(&bundled(kind), 1.0).unwrap();
         v.reset(40.0, 40.0);
         let out: Vec<f64> = (0..60).map(|_| v.step(60.0)).collect();
-        assert!(out.iter().all(|&y| (40.0..=60.0 + 1e-9).contains(&y)), "{kind}: {out:?}");
+        assert!(
+            out.iter().all(|&y| (40.0..=60.0 + 1e-9).contains(&y)),
+            "{kind}: {out:?}"
+        );
     }
+}
+
+#[test]
+fn breakaway_makes_the_valve_hunt_around_a_steady_op() {
+    let spec = ModelSpec {
+        effects: Effects {
+            breakaway_pct: 0.5,
+            ..Effects::default()
+        },
+        ..bundled(ModelKind::Pincart2)
+    };
+    let mut v = Valve::new(&spec, DT).unwrap();
+    v.reset(50.0, 50.0);
+    let out = run(&mut v, 52.0, 6000);
+    let tail = &out[2000..];
+    // Stick, slip past the target, stick again: the position keeps crossing 52 % in jumps.
+    let crossings = tail
+        .windows(2)
+        .filter(|w| (w[0] - 52.0) * (w[1] - 52.0) < 0.0)
+        .count();
+    let jumps = tail
+        .windows(2)
+        .filter(|w| (w[1] - w[0]).abs() >= 0.4)
+        .count();
+    assert!(
+        crossings >= 4 && jumps >= 4,
+        "{crossings} crossings, {jumps} jumps"
+    );
+    // Without breakaway it settles.
+    let mut calm = Valve::new(&bundled(ModelKind::Pincart2), DT).unwrap();
+    calm.reset(50.0, 50.0);
+    assert!((run(&mut calm, 52.0, 6000)[5999] - 52.0).abs() < 1e-9);
 }
