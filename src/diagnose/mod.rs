@@ -592,7 +592,7 @@ pub fn diagnose(
         let trials: Vec<Trial> = jobs
             .par_iter()
             .map(|(effect, free)| {
-                let (spec, errors) = refit(&scorer, &current, free, 200);
+                let (spec, errors) = refit(&scorer, &current, free, 120);
                 judge(
                     &scorer,
                     &current,
