@@ -151,7 +151,7 @@ impl PinCart {
     #[inline]
     pub(crate) fn step(&mut self, u: f64) -> f64 {
         let e = u - self.v; // eq. (1)
-        let dy = match self.law {
+        let dy = match &self.law {
             // eq. (2); one sample never carries the pin past the target, which keeps slow
             // sampling (P_k dt > 1, e.g. 1 Hz data) stable and changes nothing at 100 Hz.
             PinLaw::Proportional { k } => (k * self.dt).min(1.0) * e,
@@ -159,7 +159,7 @@ impl PinCart {
                 p,
                 close_max,
                 slowdown,
-            } => self.pin_step_two(&p, close_max, slowdown, e),
+            } => self.pin_step_two(p, *close_max, *slowdown, e),
         };
         self.y += dy;
         // eq. (3): the cart follows only when the pin pushes a side; a stuck cart only once the
