@@ -23,3 +23,16 @@ pub mod recording;
 pub mod report;
 pub mod synth;
 pub mod toml_file;
+
+/// Sends `tracing` logs to stderr; `RUST_LOG` overrides the default level `info`. Used by both
+/// binaries (`valve-bridge`, `sim-device`).
+pub fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .compact()
+        .init();
+}

@@ -29,7 +29,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    cli::init_tracing();
+    valve_bridge::init_tracing();
     let result = match Cli::parse().command {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Run(a) => cli::run::run(a),

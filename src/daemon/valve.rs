@@ -23,19 +23,8 @@ use rand_distr::{Distribution, Normal};
 use super::config::{ValveConfig, ValveKind};
 use crate::model::{ModelError, Valve};
 
-/// Why a transaction gave no V_P.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum Fault {
-    /// The valve did not answer in time.
-    #[error("timeout: {0}")]
-    Timeout(String),
-    /// The valve answered with an error, or the answer was unusable.
-    #[error("error: {0}")]
-    Error(String),
-    /// The link to the valve is down.
-    #[error("disconnected: {0}")]
-    Disconnected(String),
-}
+/// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
+pub use crate::modbus::client::Fault;
 
 /// A valve the loop can drive.
 #[derive(Debug)]
