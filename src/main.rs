@@ -24,6 +24,10 @@ enum Command {
     Run(cli::run::Args),
     /// Find where a model and a recording differ, name the missing physics, add it, show the gain.
     Diagnose(cli::diagnose::Args),
+    /// Fit every model of the paper to a recording: Table 1 (with held-out scores), Table 2, model files.
+    Identify(cli::identify::Args),
+    /// Step-delay analysis: same-direction and reversal delays, pin-cart II's delay polynomial.
+    Steps(cli::steps::Args),
     /// Demonstrations: `demo concealed` hides an effect in a recording and diagnoses it.
     Demo(cli::demo::Args),
 }
@@ -35,6 +39,8 @@ fn main() -> std::process::ExitCode {
         Command::Run(a) => cli::run::run(a),
         Command::Diagnose(a) => cli::diagnose::run(a),
         Command::Demo(a) => cli::demo::run(a),
+        Command::Identify(a) => cli::identify::run(a),
+        Command::Steps(a) => cli::steps::run(a),
     };
     cli::report(result)
 }

@@ -2,9 +2,11 @@
 
 pub mod demo;
 pub mod diagnose;
+pub mod identify;
 pub mod input;
 pub mod run;
 pub mod simulate;
+pub mod steps;
 
 use std::process::ExitCode;
 

@@ -2,9 +2,11 @@
 //!
 //! [`diagnosis_html`] turns a [`Diagnosis`] and its recording into one page (no server, no
 //! external files): the recording against the model before and after, the residual, the worst
-//! windows zoomed in, the step-delay evidence and the Table 1 rows. This module only formats
-//! results; it computes nothing about the valve.
+//! windows zoomed in, the step-delay evidence and the Table 1 rows.
+//! [`identify::identification_html`] does the same for an identification (Tables 1 and 2, the
+//! paper's Figs. 5-10). This module only formats results; it computes nothing about the valve.
 
+pub mod identify;
 pub mod plot;
 
 use std::fmt::Write;

@@ -1,4 +1,5 @@
-//! SVG charts with plotters: time series (several lines over one time axis) and scatter plots.
+//! SVG charts with plotters: time series (several lines over one time axis), scatter plots
+//! (optionally with curves over them) and bundles of curves coloured on a blue-yellow scale.
 //!
 //! Charts come back as SVG text to embed in an HTML page. Long series are thinned to at most
 //! [`MAX_POINTS`] points per line by keeping each bucket's min and max, so spikes survive.
@@ -118,6 +119,21 @@ pub type PointGroup<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
 
 /// A scatter chart of labelled point groups.
 pub fn scatter(title: &str, x_label: &str, y_label: &str, groups: &[PointGroup]) -> String {
+    scatter_lines(title, x_label, y_label, groups, &[])
+}
+
+/// A named polyline of (x, y) points of one colour, drawn over a scatter chart.
+pub type Curve<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
+
+/// A scatter chart of labelled point groups with labelled curves over it (e.g. a fitted
+/// polynomial); the axes span the points.
+pub fn scatter_lines(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    groups: &[PointGroup],
+    curves: &[Curve],
+) -> String {
     let mut svg = String::new();
     let pts = || groups.iter().flat_map(|g| g.2.iter());
     if pts().next().is_none() {
@@ -152,6 +168,16 @@ pub fn scatter(title: &str, x_label: &str, y_label: &str, groups: &[PointGroup])
             .x_desc(x_label)
             .y_desc(y_label)
             .draw();
+        for (name, color, points) in curves {
+            let color = *color;
+            if let Ok(ann) = chart.draw_series(LineSeries::new(
+                points.iter().copied(),
+                color.stroke_width(2),
+            )) {
+                ann.label(*name)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            }
+        }
         for (name, color, points) in groups {
             let color = *color;
             if let Ok(ann) =
@@ -166,6 +192,103 @@ pub fn scatter(title: &str, x_label: &str, y_label: &str, groups: &[PointGroup])
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .draw();
+        let _ = root.present();
+    }
+    svg
+}
+
+/// Colour of a value 0-1 on a blue (0) to yellow (1) scale, like the paper's Fig. 6.
+pub fn blue_to_yellow(x: f64) -> RGBColor {
+    let x = if x.is_finite() {
+        x.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    // Endpoints and middle of a viridis-like ramp.
+    let stops = [
+        (68.0, 1.0, 84.0),
+        (33.0, 145.0, 140.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let (a, b, f) = if x < 0.5 {
+        (stops[0], stops[1], x * 2.0)
+    } else {
+        (stops[1], stops[2], x * 2.0 - 1.0)
+    };
+    let mix = |p: f64, q: f64| (p + (q - p) * f).round() as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+/// Many unlabelled curves of their own colours over shared axes (e.g. step responses
+/// coloured by initial opening); `note` is drawn as the legend's only entry.
+pub fn curves(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    curves: &[(RGBColor, Vec<(f64, f64)>)],
+    note: &str,
+) -> String {
+    let mut svg = String::new();
+    let pts = || {
+        curves
+            .iter()
+            .flat_map(|c| c.1.iter())
+            .filter(|p| p.1.is_finite())
+    };
+    if pts().next().is_none() {
+        return svg;
+    }
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 360)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let (mut x0, mut x1, mut y0, mut y1) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for p in pts() {
+            x0 = x0.min(p.0);
+            x1 = x1.max(p.0);
+            y0 = y0.min(p.1);
+            y1 = y1.max(p.1);
+        }
+        let pad = ((y1 - y0) * 0.05).max(1e-3);
+        let chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(55)
+            .build_cartesian_2d(x0..x1.max(x0 + 1e-9), (y0 - pad)..(y1 + pad));
+        let Ok(mut chart) = chart else {
+            return String::new();
+        };
+        let _ = chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .light_line_style(WHITE.mix(0.0))
+            .draw();
+        for (i, (color, points)) in curves.iter().enumerate() {
+            let color = *color;
+            if let Ok(ann) = chart.draw_series(LineSeries::new(
+                points.iter().copied(),
+                color.mix(0.8).stroke_width(1),
+            )) {
+                if i == 0 && !note.is_empty() {
+                    ann.label(note).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], blue_to_yellow(0.5))
+                    });
+                }
+            }
+        }
+        if !note.is_empty() {
+            let _ = chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw();
+        }
         let _ = root.present();
     }
     svg
@@ -203,5 +326,22 @@ mod tests {
         assert!(svg.starts_with("<svg") && svg.contains("sin"));
         let s = scatter("s", "a", "b", &[("g", AFTER, vec![(1.0, 2.0), (3.0, 1.0)])]);
         assert!(s.contains("<circle"));
+        let s = scatter_lines(
+            "s",
+            "a",
+            "b",
+            &[("g", AFTER, vec![(1.0, 2.0), (3.0, 1.0)])],
+            &[("fit", BEFORE, vec![(1.0, 1.5), (3.0, 1.5)])],
+        );
+        assert!(s.contains("<circle") && s.contains("fit"));
+        let c = curves(
+            "c",
+            "t",
+            "y",
+            &[(blue_to_yellow(0.0), vec![(0.0, 0.0), (1.0, 1.0)])],
+            "blue: closed",
+        );
+        assert!(c.starts_with("<svg") && c.contains("blue: closed"));
+        assert_eq!(blue_to_yellow(1.0), RGBColor(253, 231, 37));
     }
 }

@@ -1,0 +1,368 @@
+//! Step-delay analysis (the paper's Section 4.1, Figs. 5-7): find the steps of O_P, measure how
+//! long V_P takes to answer each, split them into same-direction steps and reversals, fit the
+//! second-order polynomial of the reversal delay against the initial opening, and derive
+//! pin-cart II's eq. (7) coefficients from it.
+//!
+//! A step is a jump of O_P of at least [`StepOptions::min_size_pct`] in one sample, followed by
+//! a hold (O_P within a noise tolerance of its new level) of at least
+//! [`StepOptions::min_hold_s`]. Its delay is the time until V_P has moved
+//! [`StepOptions::fraction`] of the step towards the new level (and at least four noise
+//! standard deviations). It is a *reversal* when it goes against the previous movement of O_P.
+//!
+//! Reading of eq. (7) (see `model::pincart`): a reversal costs T_d + the cart-crossing time +
+//! the first rise, a same-direction step T_d + the first rise; so the crossing time at opening
+//! V is the reversal polynomial minus the mean same-direction delay.
+//!
+//! Not here: anything that needs a model. The analysis only reads O_P and V_P.
+
+use serde::Serialize;
+
+use super::params::crossing_poly;
+
+/// What counts as a step and when it has answered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepOptions {
+    /// Smallest O_P jump that counts as a step, %.
+    pub min_size_pct: f64,
+    /// Share of the step V_P must have covered for the delay to end (0-1).
+    pub fraction: f64,
+    /// Shortest hold of O_P after the jump, s (at least three samples).
+    pub min_hold_s: f64,
+}
+
+impl Default for StepOptions {
+    fn default() -> Self {
+        StepOptions {
+            min_size_pct: 0.5,
+            fraction: 0.1,
+            min_hold_s: 1.0,
+        }
+    }
+}
+
+/// One step of O_P and how V_P answered it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Step {
+    /// Sample index of the jump.
+    pub index: usize,
+    /// One past the last sample of the hold after it.
+    pub hold_end: usize,
+    /// Time of the jump, s from the start of the recording.
+    pub t_s: f64,
+    /// V_P just before the jump: the initial opening, %.
+    pub from_pct: f64,
+    /// O_P jump, % (signed).
+    pub size_pct: f64,
+    /// Against the previous movement of O_P; `None` for the first movement.
+    pub reversal: Option<bool>,
+    /// Time until V_P moved the set fraction of the step, s; `None` if it never did in the hold.
+    pub delay_s: Option<f64>,
+    /// Time until V_P covered 63 % of the step, s (when it did within the hold).
+    pub t63_s: Option<f64>,
+}
+
+/// Mean, spread and count of a group of delays.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Population {
+    pub mean_s: f64,
+    /// Sample standard deviation (0 for fewer than two).
+    pub sd_s: f64,
+    pub count: usize,
+}
+
+impl std::fmt::Display for Population {
+    /// `0.452 ± 0.031 s (n = 40)`, or `none`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.count == 0 {
+            f.write_str("none")
+        } else {
+            write!(
+                f,
+                "{:.3} ± {:.3} s (n = {})",
+                self.mean_s, self.sd_s, self.count
+            )
+        }
+    }
+}
+
+impl Population {
+    fn of(x: &[f64]) -> Self {
+        let n = x.len();
+        if n == 0 {
+            return Population {
+                mean_s: f64::NAN,
+                sd_s: 0.0,
+                count: 0,
+            };
+        }
+        let mean = x.iter().sum::<f64>() / n as f64;
+        let sd = if n > 1 {
+            (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+        } else {
+            0.0
+        };
+        Population {
+            mean_s: mean,
+            sd_s: sd,
+            count: n,
+        }
+    }
+}
+
+/// A second-order polynomial `a V² + b V + c` of the opening V in %.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Poly {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+}
+
+impl Poly {
+    /// Value at opening `v` (%).
+    pub fn at(&self, v: f64) -> f64 {
+        (self.a * v + self.b) * v + self.c
+    }
+}
+
+/// Pin-cart II's eq. (7) coefficients derived from the step delays.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CrossingSeed {
+    pub a_p: f64,
+    pub b_p: f64,
+    pub c_p: f64,
+    /// Crossing times at 0, 50 and 100 % opening, s (never negative).
+    pub at_0_50_100_s: [f64; 3],
+}
+
+/// Everything the step analysis found.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StepAnalysis {
+    pub options_fraction: f64,
+    pub steps: Vec<Step>,
+    /// Delays of steps in the same direction as the previous movement.
+    pub same: Population,
+    /// Delays of reversals.
+    pub reversal: Population,
+    /// Least-squares fit of the reversal delay against the initial opening (needs five
+    /// reversals spread over at least 10 % of travel).
+    pub reversal_poly: Option<Poly>,
+    /// Pin-cart II's a_p, b_p, c_p: the reversal polynomial minus the mean same-direction
+    /// delay (needs the polynomial and a same-direction delay).
+    pub pincart2: Option<CrossingSeed>,
+    /// Noise standard deviation of V_P used for the thresholds, %.
+    pub noise_pct: f64,
+}
+
+/// Robust noise standard deviation of a signal from its sample-to-sample differences (median
+/// absolute difference / (0.6745 √2)); movements are rare enough not to move the median.
+pub fn noise_sd(x: &[f64]) -> f64 {
+    let mut d: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let k = d.len() / 2;
+    let (_, med, _) = d.select_nth_unstable_by(k, f64::total_cmp);
+    *med / (0.6745 * std::f64::consts::SQRT_2)
+}
+
+/// Analyses the steps of `op` and the answers in `vp`, sampled every `dt` seconds.
+pub fn analyse(op: &[f64], vp: &[f64], dt: f64, opts: &StepOptions) -> StepAnalysis {
+    let n = op.len().min(vp.len());
+    let sigma = noise_sd(&vp[..n]);
+    let op_tol = (4.0 * noise_sd(&op[..n])).max(1e-6);
+    let min_hold = ((opts.min_hold_s / dt).ceil() as usize).max(3);
+    let mut steps = Vec::new();
+    let mut last_dir = 0.0;
+    let mut k = 1;
+    while k < n {
+        let size = op[k] - op[k - 1];
+        if size.abs() <= op_tol {
+            k += 1;
+            continue;
+        }
+        let dir = size.signum();
+        let a = k;
+        let mut end = a + 1;
+        while end < n && (op[end] - op[a]).abs() <= op_tol {
+            end += 1;
+        }
+        if size.abs() >= opts.min_size_pct && end - a >= min_hold {
+            let v0 = vp[a - 1];
+            let moved = |share: f64| {
+                let need = (share * size.abs()).max(4.0 * sigma);
+                (a..end)
+                    .find(|&j| (vp[j] - v0) * dir >= need)
+                    .map(|j| (j - a) as f64 * dt)
+            };
+            steps.push(Step {
+                index: a,
+                hold_end: end,
+                t_s: a as f64 * dt,
+                from_pct: v0,
+                size_pct: size,
+                reversal: (last_dir != 0.0).then_some(dir != last_dir),
+                delay_s: moved(opts.fraction),
+                t63_s: moved(0.63),
+            });
+        }
+        last_dir = dir;
+        k = end;
+    }
+    let delays = |rev: bool| -> Vec<(f64, f64)> {
+        steps
+            .iter()
+            .filter(|s| s.reversal == Some(rev))
+            .filter_map(|s| s.delay_s.map(|d| (s.from_pct, d)))
+            .collect()
+    };
+    let same_d: Vec<f64> = delays(false).into_iter().map(|p| p.1).collect();
+    let rev_pts = delays(true);
+    let rev_d: Vec<f64> = rev_pts.iter().map(|p| p.1).collect();
+    let same = Population::of(&same_d);
+    let reversal = Population::of(&rev_d);
+    let reversal_poly = fit_quadratic(&rev_pts);
+    let pincart2 = match (reversal_poly, same.count > 0) {
+        (Some(p), true) => {
+            let t = [0.0, 50.0, 100.0].map(|v| (p.at(v) - same.mean_s).max(0.0));
+            let (a_p, b_p, c_p) = crossing_poly(t[0], t[1], t[2]);
+            Some(CrossingSeed {
+                a_p,
+                b_p,
+                c_p,
+                at_0_50_100_s: t,
+            })
+        }
+        _ => None,
+    };
+    StepAnalysis {
+        options_fraction: opts.fraction,
+        steps,
+        same,
+        reversal,
+        reversal_poly,
+        pincart2,
+        noise_pct: sigma,
+    }
+}
+
+/// Least-squares `a x² + b x + c` through `(x, y)` points; `None` with fewer than five points
+/// or less than 10 % spread of x. Solved on x / 100 by Gaussian elimination of the 3×3 normal
+/// equations with partial pivoting: small enough that a linear-algebra crate would only add a
+/// dependency.
+pub fn fit_quadratic(pts: &[(f64, f64)]) -> Option<Poly> {
+    if pts.len() < 5 {
+        return None;
+    }
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+            (l.min(p.0), h.max(p.0))
+        });
+    if hi - lo < 10.0 {
+        return None;
+    }
+    // Normal equations of [x², x, 1] with x scaled to 0-1.
+    let mut m = [[0.0f64; 4]; 3];
+    for &(x, y) in pts {
+        let s = x / 100.0;
+        let row = [s * s, s, 1.0];
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += row[i] * row[j];
+            }
+            m[i][3] += row[i] * y;
+        }
+    }
+    for col in 0..3 {
+        let piv = (col..3).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
+        m.swap(col, piv);
+        if m[col][col].abs() < 1e-12 {
+            return None;
+        }
+        let pivot = m[col];
+        for (r, row) in m.iter_mut().enumerate() {
+            if r != col {
+                let f = row[col] / pivot[col];
+                for (x, p) in row.iter_mut().zip(pivot).skip(col) {
+                    *x -= f * p;
+                }
+            }
+        }
+    }
+    let sol = [m[0][3] / m[0][0], m[1][3] / m[1][1], m[2][3] / m[2][2]];
+    Some(Poly {
+        a: sol[0] / 1e4,
+        b: sol[1] / 100.0,
+        c: sol[2],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, ModelKind, Valve};
+
+    #[test]
+    fn quadratic_is_recovered() {
+        let pts: Vec<(f64, f64)> = (0..20)
+            .map(|k| {
+                let v = 20.0 + 4.0 * k as f64;
+                (v, 2e-5 * v * v + 3e-3 * v + 0.7)
+            })
+            .collect();
+        let p = fit_quadratic(&pts).unwrap();
+        assert!(
+            (p.a - 2e-5).abs() < 1e-10 && (p.b - 3e-3).abs() < 1e-8 && (p.c - 0.7).abs() < 1e-6
+        );
+        assert!(fit_quadratic(&pts[..4]).is_none());
+    }
+
+    #[test]
+    fn reversals_take_longer_and_give_the_crossing_polynomial() {
+        // Pin-cart II with the bundled crossing times 0.3-0.8 s, driven by alternating and
+        // repeated steps over the whole range.
+        let spec = bundled(ModelKind::Pincart2);
+        let dt = 0.01;
+        let mut levels = Vec::new();
+        for i in 0..40 {
+            let base = 15.0 + 2.0 * i as f64;
+            levels.extend([base, base + 3.0, base + 6.0, base + 2.0]);
+        }
+        let op: Vec<f64> = levels
+            .iter()
+            .flat_map(|&l| std::iter::repeat_n(l, 400))
+            .collect();
+        let mut valve = Valve::new(&spec, dt).unwrap();
+        let vp = valve.simulate(&op, op[0]);
+        let a = analyse(&op, &vp, dt, &StepOptions::default());
+        assert!(
+            a.same.count >= 40 && a.reversal.count >= 40,
+            "{:?} {:?}",
+            a.same,
+            a.reversal
+        );
+        assert!(
+            a.reversal.mean_s > a.same.mean_s + 0.3,
+            "{:?} {:?}",
+            a.same,
+            a.reversal
+        );
+        let c = a.pincart2.expect("crossing polynomial");
+        let truth = spec.pincart2.unwrap();
+        for (v, got) in [0.0, 50.0, 100.0].into_iter().zip(c.at_0_50_100_s) {
+            let want = truth.crossing_time_s(v);
+            assert!((got - want).abs() < 0.15, "at {v} %: {got} vs {want}");
+        }
+        // The first movement has no direction to compare with.
+        assert_eq!(a.steps[0].reversal, None);
+    }
+
+    #[test]
+    fn noise_estimate_ignores_rare_jumps() {
+        let x: Vec<f64> = (0..1000)
+            .map(|k| if k < 500 { 0.0 } else { 10.0 } + if k % 2 == 0 { 0.1 } else { -0.1 })
+            .collect();
+        let s = noise_sd(&x);
+        assert!(s > 0.15 && s < 0.3, "{s}");
+    }
+}

@@ -1,0 +1,395 @@
+//! The identification report: one self-contained HTML page (inline SVG, no server, no external
+//! files) with Table 1 (plus held-out scores and AIC/BIC), Table 2, the maintenance figures and
+//! the plots of the paper: measured against every model over the whole recording and zoomed
+//! into the worst windows (Figs. 8-10), the residuals, the step responses coloured by initial
+//! opening (Figs. 5/6) and the delay against opening with its polynomial (Fig. 7).
+//!
+//! Only formats an [`Identification`]; computes nothing about the valve beyond choosing which
+//! windows to zoom into.
+
+use std::fmt::Write;
+
+use plotters::style::RGBColor;
+
+use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
+use super::{esc, row};
+use crate::fit::{Identification, ModelFit};
+use crate::model::ModelKind;
+
+/// Line colour of each model in the charts.
+pub fn model_color(kind: ModelKind) -> RGBColor {
+    match kind {
+        ModelKind::Modelless => RGBColor(150, 150, 150),
+        ModelKind::Delayed => RGBColor(148, 103, 189),
+        ModelKind::Fopdt => BEFORE,
+        ModelKind::Stiction => RGBColor(255, 127, 14),
+        ModelKind::Pincart1 => EXTRA,
+        ModelKind::Pincart2 => AFTER,
+    }
+}
+
+/// Length of a zoom window, s (at least 30 samples).
+const ZOOM_S: f64 = 10.0;
+/// Number of worst windows zoomed into.
+const ZOOMS: usize = 3;
+/// Most step responses drawn.
+const MAX_RESPONSES: usize = 400;
+/// Length of a drawn step response, s.
+const RESPONSE_S: f64 = 4.0;
+
+/// The `count` non-overlapping windows of `len` samples inside `mask` with the largest squared
+/// error between `a` and `b`, largest first, as sample ranges.
+pub fn worst_windows(
+    a: &[f64],
+    b: &[f64],
+    mask: &[bool],
+    len: usize,
+    count: usize,
+) -> Vec<std::ops::Range<usize>> {
+    let n = a.len().min(b.len()).min(mask.len());
+    if n < len || len == 0 {
+        return Vec::new();
+    }
+    let e: Vec<f64> = (0..n)
+        .map(|k| if mask[k] { (a[k] - b[k]).powi(2) } else { 0.0 })
+        .collect();
+    let mut sums: Vec<(f64, usize)> = Vec::new();
+    let mut s: f64 = e[..len].iter().sum();
+    let step = (len / 4).max(1);
+    for start in 0..=n - len {
+        if start > 0 {
+            s += e[start + len - 1] - e[start - 1];
+        }
+        if start % step == 0 {
+            sums.push((s, start));
+        }
+    }
+    sums.sort_by(|x, y| y.0.total_cmp(&x.0));
+    let mut out: Vec<std::ops::Range<usize>> = Vec::new();
+    for (v, start) in sums {
+        if out.len() == count || v <= 0.0 {
+            break;
+        }
+        let r = start..start + len;
+        if out.iter().all(|o| r.end <= o.start || r.start >= o.end) {
+            out.push(r);
+        }
+    }
+    out
+}
+
+fn params_text(r: &ModelFit) -> String {
+    let p: Vec<String> = r
+        .params()
+        .iter()
+        .map(|(k, v, u)| format!("{k} = {v:.4} {u}"))
+        .collect();
+    if p.is_empty() {
+        "–".into()
+    } else {
+        p.join(", ")
+    }
+}
+
+fn opt(x: Option<f64>) -> String {
+    x.filter(|v| v.is_finite())
+        .map_or("–".into(), |v| format!("{v:.2}"))
+}
+
+/// The identification report of a recording (`t`, `op`, `vp`) as one HTML page.
+pub fn identification_html(
+    title: &str,
+    t: &[f64],
+    op: &[f64],
+    vp: &[f64],
+    id: &Identification,
+) -> String {
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>Identification: {0}</title><style>\
+         body{{font-family:sans-serif;max-width:960px;margin:auto;color:#222}}\
+         table{{border-collapse:collapse;margin:6px 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
+         td:first-child{{text-align:left}}td.l{{text-align:left}}</style></head><body>\
+         <h1>Identification: {0}</h1>",
+        esc(title)
+    );
+    let wins: Vec<String> = id
+        .windows
+        .iter()
+        .map(|w| format!("{:.2}–{:.2} s", w.start_s, w.end_s))
+        .collect();
+    let _ = write!(
+        h,
+        "<p>{} samples at {} s. Windows fitted and scored ({}): {}. {} samples scored; held out: {} ({}).</p>",
+        id.n_samples,
+        id.sample_period_s,
+        if id.windows_auto {
+            "saturation at 0/100 % left out automatically"
+        } else {
+            "given"
+        },
+        esc(&wins.join(", ")),
+        id.n_scored,
+        id.n_heldout,
+        esc(&id.split.describe())
+    );
+    h.push_str(
+        "<h2>Table 1: free-run simulation error over the windows</h2><table><tr><th>model</th><th>MAE</th>\
+         <th>MAE filtered</th><th>R²</th><th>SSE (%²)</th><th>Rel. SSE</th><th>samples</th></tr>",
+    );
+    for r in &id.rows {
+        h.push_str(&row(r.kind.display_name(), &r.scores));
+    }
+    h.push_str("</table><h2>Held-out scores and information criteria</h2><p>Held out: each model fitted on the fit blocks only and scored on the blocks it never saw. AIC and BIC over all scored samples (lower is better).</p>\
+        <table><tr><th>model</th><th>held-out SSE (%²)</th><th>held-out Rel. SSE</th><th>parameters</th><th>AIC</th><th>BIC</th></tr>");
+    for r in &id.rows {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{:.3}</td><td>{:.2} %</td><td>{}</td><td>{:.1}</td><td>{:.1}</td></tr>",
+            r.kind.display_name(),
+            r.heldout.sse,
+            100.0 * r.heldout.rel_sse,
+            r.n_params,
+            r.aic,
+            r.bic
+        );
+    }
+    h.push_str("</table><h2>Table 2: fitted parameters</h2><table><tr><th>model</th><th>parameters</th><th>count</th></tr>");
+    for r in &id.rows {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
+            r.kind.display_name(),
+            esc(&params_text(r)),
+            r.n_params
+        );
+    }
+    h.push_str("</table><h2>Maintenance figures of the fitted models</h2><p>Measured by running standard tests through each fitted model around 50 % opening: steps of 1 % and 10 % approached from below, a 0.05 %/s ramp up and down, and a 10–90–10 % stroke.</p>\
+        <table><tr><th>model</th><th>dead time (s)</th><th>1 % T63 / T86 (s)</th><th>10 % T63 / T86 (s)</th><th>dead band in ramp (%)</th><th>backlash / band parameter (%)</th><th>stick-slip (%)</th><th>max speed open / close (%/s)</th></tr>");
+    for r in &id.rows {
+        let f = &r.figures;
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{:.3}</td><td>{} / {}</td><td>{} / {}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{:.1} / {:.1}</td></tr>",
+            r.kind.display_name(),
+            f.dead_time_s,
+            opt(f.t63_small_s),
+            opt(f.t86_small_s),
+            opt(f.t63_large_s),
+            opt(f.t86_large_s),
+            f.dead_band_pct,
+            f.backlash_pct,
+            f.stick_slip_pct,
+            f.max_speed_open_pct_per_s,
+            f.max_speed_close_pct_per_s
+        );
+    }
+    h.push_str("</table>");
+    let n = t.len().min(op.len()).min(vp.len());
+    let series = |with_op: bool| {
+        let mut s = Vec::new();
+        if with_op {
+            s.push(Series {
+                name: "O_P",
+                y: &op[..n],
+                color: RGBColor(190, 190, 190),
+            });
+        }
+        s.push(Series {
+            name: "V_P measured",
+            y: &vp[..n],
+            color: MEASURED,
+        });
+        for r in id.rows.iter().filter(|r| r.kind != ModelKind::Modelless) {
+            s.push(Series {
+                name: r.kind.display_name(),
+                y: &r.sim[..n],
+                color: model_color(r.kind),
+            });
+        }
+        s
+    };
+    h.push_str("<h2>Measured and simulated V_P</h2>");
+    h.push_str(&plot::lines(
+        "whole recording (free run from the first sample)",
+        "position (%)",
+        t,
+        &series(true),
+        0..n,
+    ));
+    let best = id
+        .rows
+        .iter()
+        .filter(|r| r.scores.sse.is_finite())
+        .min_by(|a, b| a.scores.sse.total_cmp(&b.scores.sse));
+    if let Some(best) = best {
+        let len = ((ZOOM_S / id.sample_period_s).round() as usize).max(30);
+        let zooms = worst_windows(vp, &best.sim, &id.scored_mask, len, ZOOMS);
+        if !zooms.is_empty() {
+            let _ = write!(
+                h,
+                "<h2>Worst windows of the best model ({})</h2>",
+                best.kind.display_name()
+            );
+        }
+        for z in zooms {
+            let a = z.start.saturating_sub(len / 5);
+            let b = (z.end + len / 5).min(n);
+            h.push_str(&plot::lines(
+                &format!("{:.1}–{:.1} s", t[a], t[b - 1]),
+                "position (%)",
+                t,
+                &series(true),
+                a..b,
+            ));
+        }
+    }
+    let residuals: Vec<(ModelKind, Vec<f64>)> = id
+        .rows
+        .iter()
+        .filter(|r| r.kind != ModelKind::Modelless)
+        .map(|r| {
+            (
+                r.kind,
+                vp[..n].iter().zip(&r.sim).map(|(m, s)| m - s).collect(),
+            )
+        })
+        .collect();
+    let res_series: Vec<Series> = residuals
+        .iter()
+        .map(|(k, y)| Series {
+            name: k.display_name(),
+            y,
+            color: model_color(*k),
+        })
+        .collect();
+    h.push_str("<h2>Residual over time</h2>");
+    h.push_str(&plot::lines(
+        "measured − simulated V_P",
+        "residual (%)",
+        t,
+        &res_series,
+        0..n,
+    ));
+    steps_section(&mut h, vp, id);
+    h.push_str("</body></html>");
+    h
+}
+
+/// Figs. 5/6 and 7: step responses coloured by initial opening, delay against opening.
+fn steps_section(h: &mut String, vp: &[f64], id: &Identification) {
+    let s = &id.steps;
+    let dt = id.sample_period_s;
+    let _ = write!(
+        h,
+        "<h2>Step delays (Section 4.1)</h2><p>{} steps; delay until V_P covered {:.0} % of the step. Same direction: {}. Reversal: {}.</p>",
+        s.steps.len(),
+        100.0 * s.options_fraction,
+        s.same,
+        s.reversal
+    );
+    if let (Some(p), Some(c)) = (&s.reversal_poly, &s.pincart2) {
+        let _ = write!(
+            h,
+            "<p>Reversal delay = {:.4e} V² + {:.4e} V + {:.4} s. Pin-cart II from it: a_p = {:.4e}, b_p = {:.4e}, c_p = {:.4} (crossing {:.3} / {:.3} / {:.3} s at 0 / 50 / 100 %).</p>",
+            p.a, p.b, p.c, c.a_p, c.b_p, c.c_p, c.at_0_50_100_s[0], c.at_0_50_100_s[1], c.at_0_50_100_s[2]
+        );
+    }
+    let len = ((RESPONSE_S / dt).round() as usize).max(3);
+    let (lo, hi) = s
+        .steps
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), st| {
+            (l.min(st.from_pct), u.max(st.from_pct))
+        });
+    let curves: Vec<(RGBColor, Vec<(f64, f64)>)> = s
+        .steps
+        .iter()
+        .filter_map(|st| st.reversal.map(|r| (st, r)))
+        .take(MAX_RESPONSES)
+        .map(|(st, rev)| {
+            let v0 = vp[st.index - 1];
+            let sign = st.size_pct.signum() * if rev { -1.0 } else { 1.0 };
+            let end = st.hold_end.min(st.index + len).min(vp.len());
+            let pts = (st.index - 1..end)
+                .map(|k| {
+                    (
+                        (k as f64 - st.index as f64 + 1.0) * dt,
+                        sign * (vp[k] - v0) / st.size_pct.abs(),
+                    )
+                })
+                .collect();
+            (
+                plot::blue_to_yellow((st.from_pct - lo) / (hi - lo).max(1e-9)),
+                pts,
+            )
+        })
+        .collect();
+    h.push_str(&plot::curves(
+        "step responses, normalised: up = same direction, down = reversal (Fig. 6)",
+        "time since the step (s)",
+        "share of the step",
+        &curves,
+        &format!("colour: initial opening, blue {lo:.0} % to yellow {hi:.0} %"),
+    ));
+    let pts = |rev: bool| {
+        s.steps
+            .iter()
+            .filter(|st| st.reversal == Some(rev))
+            .filter_map(|st| st.delay_s.map(|d| (st.from_pct, d)))
+            .collect::<Vec<_>>()
+    };
+    let mut lines = Vec::new();
+    if s.same.count > 0 && lo.is_finite() {
+        lines.push((
+            "mean same-direction delay",
+            MEASURED,
+            vec![(lo, s.same.mean_s), (hi, s.same.mean_s)],
+        ));
+    }
+    if let Some(p) = &s.reversal_poly {
+        lines.push((
+            "reversal polynomial",
+            BEFORE,
+            (0..=50)
+                .map(|i| {
+                    let v = lo + (hi - lo) * i as f64 / 50.0;
+                    (v, p.at(v))
+                })
+                .collect(),
+        ));
+    }
+    h.push_str(&plot::scatter_lines(
+        "delay against initial opening (Fig. 7)",
+        "V_P at the step (%)",
+        "delay (s)",
+        &[
+            ("same direction", AFTER, pts(false)),
+            ("reversal", BEFORE, pts(true)),
+        ],
+        &lines,
+    ));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn worst_windows_do_not_overlap_and_find_the_bump() {
+        let a = vec![0.0; 1000];
+        let mut b = vec![0.0; 1000];
+        for v in &mut b[500..520] {
+            *v = 3.0;
+        }
+        for v in &mut b[100..110] {
+            *v = 1.0;
+        }
+        let mask = vec![true; 1000];
+        let w = worst_windows(&a, &b, &mask, 50, 3);
+        assert_eq!(w.len(), 2);
+        assert!(w[0].start <= 500 && w[0].end >= 520, "{w:?}");
+        assert!(w[1].start <= 100 && w[1].end >= 110, "{w:?}");
+    }
+}
