@@ -15,6 +15,8 @@ use std::sync::Arc;
 
 use serde::Deserialize;
 
+use crate::modbus::link::{RtuLink, TcpLink};
+use crate::modbus::map::RegisterMap;
 use crate::model::{bundled, ModelError, ModelKind, ModelSpec};
 use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
 use crate::toml_file::{self, TomlError};
@@ -105,6 +107,15 @@ pub struct ValveConfig {
     /// `[valve.emulated]`.
     #[serde(default)]
     pub emulated: EmulatedConfig,
+    /// `[valve.modbus-tcp]`.
+    #[serde(rename = "modbus-tcp")]
+    pub tcp: Option<TcpLink>,
+    /// `[valve.modbus-rtu]`.
+    #[serde(rename = "modbus-rtu")]
+    pub rtu: Option<RtuLink>,
+    /// `[valve.registers]`: the positioner's register map (Modbus kinds).
+    #[serde(default)]
+    pub registers: RegisterMap,
 }
 
 /// Valve backends.
@@ -114,6 +125,26 @@ pub enum ValveKind {
     /// A model from `config/models/` stepped once per cycle.
     #[default]
     Emulated,
+    /// A positioner (or `sim-device`) over Modbus TCP, `[valve.modbus-tcp]`.
+    ModbusTcp,
+    /// A positioner on a serial line, Modbus RTU, `[valve.modbus-rtu]`.
+    ModbusRtu,
+}
+
+impl ValveKind {
+    /// True for a simulated valve, which may run on the virtual clock.
+    pub fn is_simulated(self) -> bool {
+        self == ValveKind::Emulated
+    }
+
+    /// The name used in config files.
+    pub fn tag(self) -> &'static str {
+        match self {
+            ValveKind::Emulated => "emulated",
+            ValveKind::ModbusTcp => "modbus-tcp",
+            ValveKind::ModbusRtu => "modbus-rtu",
+        }
+    }
 }
 
 /// `[valve.emulated]`: the model and the measurement noise.
@@ -503,6 +534,63 @@ impl Config {
                 "model_file",
                 format!("cannot use model file `{}`: {err} (a model file looks like config/models/pincart2.toml)", file.display()),
             ));
+        }
+
+        self.valve
+            .registers
+            .check_in(text, path, "valve.registers")?;
+        let link = match self.valve.kind {
+            ValveKind::Emulated => None,
+            ValveKind::ModbusTcp => Some((
+                "valve.modbus-tcp",
+                self.valve
+                    .tcp
+                    .as_ref()
+                    .map(|t| (t.violation(), t.timeout_ms)),
+            )),
+            ValveKind::ModbusRtu => Some((
+                "valve.modbus-rtu",
+                self.valve
+                    .rtu
+                    .as_ref()
+                    .map(|r| (r.violation(), r.timeout_ms)),
+            )),
+        };
+        if let Some((table, settings)) = link {
+            let Some((violation, timeout_ms)) = settings else {
+                return Err(TomlError::Invalid {
+                    path: path.to_path_buf(),
+                    line: toml_file::line_of(text, Some("valve"), "kind").unwrap_or(1),
+                    key: table.to_string(),
+                    message: format!(
+                        "kind = \"{}\" needs this table, e.g. {}",
+                        self.valve.kind.tag(),
+                        if self.valve.kind == ValveKind::ModbusTcp {
+                            "address = \"127.0.0.1:5502\""
+                        } else {
+                            "port = \"/dev/ttyUSB0\""
+                        }
+                    ),
+                });
+            };
+            if let Some((key, message)) = violation {
+                return Err(bad(table, key, message));
+            }
+            // The deadline must leave the loop its rhythm: a reply may take at most one period.
+            let period_ms = l.period_s() * 1e3;
+            if let Some(t) = timeout_ms {
+                if !(t.is_finite() && t > 0.0 && t < period_ms) {
+                    return Err(bad(
+                        table,
+                        "timeout_ms",
+                        format!(
+                            "{t} is not allowed: a deadline in ms, above 0 and below the loop \
+                             period ({period_ms} ms at rate_hz = {}); leave it out for 80 % of the period",
+                            l.rate_hz
+                        ),
+                    ));
+                }
+            }
         }
 
         let s = &self.source;

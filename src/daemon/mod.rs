@@ -41,9 +41,8 @@ use schedule::{Schedule, Slot};
 use source::Source;
 pub use stats::Summary;
 use stats::{Live, Stats, StopReason};
-use valve::{Backend, Fault};
+use valve::{Backend, BackendError, Fault};
 
-use crate::model::ModelError;
 use crate::toml_file::TomlError;
 
 /// Why the daemon could not start or finish.
@@ -52,9 +51,9 @@ pub enum DaemonError {
     /// The configuration is invalid.
     #[error(transparent)]
     Config(#[from] TomlError),
-    /// The valve model cannot be built.
-    #[error("valve model: {0}")]
-    Model(#[from] ModelError),
+    /// The valve backend cannot start (model, Modbus settings, bus budget, connection).
+    #[error(transparent)]
+    Valve(#[from] BackendError),
     /// `--duration` is not a positive number.
     #[error("--duration {0}: must be a positive number of seconds")]
     Duration(f64),
@@ -124,6 +123,7 @@ struct LoopEnd {
     reason: StopReason,
     slots: u64,
     safe: Option<Sample>,
+    reconnects: Option<u64>,
 }
 
 /// Everything the loop thread owns.
@@ -156,15 +156,46 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let rate_hz = config.loop_.rate_hz;
     let period = config.loop_.period();
     let period_s = period.as_secs_f64();
-    let backend = Backend::new(&config.valve, period_s)?;
     let clock = if opts.virtual_clock {
         ClockKind::Virtual
     } else {
         config.loop_.clock
     };
-    if clock == ClockKind::Virtual && !backend.is_simulated() {
-        return Err(DaemonError::VirtualClock(backend.describe()));
+    if clock == ClockKind::Virtual && !config.valve.kind.is_simulated() {
+        return Err(DaemonError::VirtualClock(config.valve.kind.tag().into()));
     }
+    // The backend is opened on the loop thread, inside the runtime that will drive its I/O; the
+    // rest of the loop is handed over once it is open, so a valve that cannot be reached stops
+    // the start before any log file is created.
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let (parts_tx, parts_rx) =
+        std::sync::mpsc::channel::<Box<dyn FnOnce(Backend) -> Loop + Send>>();
+    let valve_cfg = config.valve.clone();
+    let control = std::thread::Builder::new()
+        .name("vb-loop".into())
+        .spawn(move || {
+            // On an error here `ready_tx` is dropped unsent and start() reads the error from the join.
+            let rt = loop_runtime()?;
+            let backend = rt.block_on(Backend::open(&valve_cfg, period_s))?;
+            ready_tx
+                .send(backend.describe())
+                .map_err(|_| DaemonError::Panicked("calling"))?;
+            // No parts: start() failed after the valve opened (the logger); nothing runs.
+            let build = parts_rx
+                .recv()
+                .map_err(|_| DaemonError::Panicked("calling"))?;
+            build(backend).run(rt)
+        })
+        .map_err(|source| DaemonError::Thread {
+            what: "loop thread",
+            source,
+        })?;
+    let Ok(valve) = ready_rx.recv() else {
+        return Err(match control.join() {
+            Ok(Err(e)) => e,
+            _ => DaemonError::Panicked("loop"),
+        });
+    };
     let source = Source::new(&config.source, period_s);
     let stop = Arc::new(AtomicBool::new(false));
     let live = Arc::new(Live::default());
@@ -174,13 +205,15 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .unwrap_or_else(|| config.log.dir.clone());
     let logger = Logger::start(&config.log, &dir, stop.clone())?;
     tracing::info!(
-        valve = %backend.describe(),
+        %valve,
         source = config.source.kind.tag(),
         rate_hz,
         clock = ?clock,
         "starting the loop"
     );
-    let state = Loop {
+    let tx = logger.tx;
+    let (loop_stop, loop_live) = (stop.clone(), live.clone());
+    let build = move |backend| Loop {
         clock,
         period,
         spin: Duration::from_micros(u64::from(config.loop_.spin_us)),
@@ -192,21 +225,17 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         max_slots: opts
             .duration_s
             .map(|d| (d * rate_hz).round().max(1.0) as u64),
-        stop: stop.clone(),
-        live: live.clone(),
-        tx: logger.tx,
+        stop: loop_stop,
+        live: loop_live,
+        tx,
         stats: Stats::new(),
         last_op: None,
         last_status: Status::Ok,
         last_skipped_k: None,
     };
-    let control = std::thread::Builder::new()
-        .name("vb-loop".into())
-        .spawn(move || state.run())
-        .map_err(|source| DaemonError::Thread {
-            what: "loop thread",
-            source,
-        })?;
+    parts_tx
+        .send(Box::new(build))
+        .map_err(|_| DaemonError::Panicked("loop"))?;
     Ok(Running {
         stop,
         live,
@@ -250,6 +279,7 @@ impl Running {
             slots: end.slots,
             rate_hz: self.rate_hz,
             safe: end.safe,
+            reconnects: end.reconnects,
             log,
         })
     }
@@ -320,7 +350,7 @@ fn show(bar: &ProgressBar, running: &Running) {
 
 impl Loop {
     /// The loop thread's body.
-    fn run(mut self) -> Result<LoopEnd, DaemonError> {
+    fn run(mut self, rt: tokio::runtime::Runtime) -> Result<LoopEnd, DaemonError> {
         schedule::tighten_timer_slack();
         if self.realtime_priority > 0 && self.clock == ClockKind::Real {
             match schedule::realtime_priority(self.realtime_priority) {
@@ -335,13 +365,6 @@ impl Loop {
                 ),
             }
         }
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .map_err(|source| DaemonError::Thread {
-                what: "loop runtime",
-                source,
-            })?;
         // The grid starts once the thread is ready, so slot 0 is not late by the set-up.
         let mut schedule = match self.clock {
             ClockKind::Real => Schedule::real(self.period, self.spin),
@@ -421,6 +444,7 @@ impl Loop {
             reason,
             slots: k_end,
             safe,
+            reconnects: self.backend.reconnects(),
         })
     }
 
@@ -474,6 +498,17 @@ impl Loop {
             .send(row)
             .map_err(|_| DaemonError::Panicked("logger"))
     }
+}
+
+/// The loop thread's current-thread runtime, which runs every valve transaction.
+fn loop_runtime() -> Result<tokio::runtime::Runtime, DaemonError> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|source| DaemonError::Thread {
+            what: "loop runtime",
+            source,
+        })
 }
 
 /// A duration in µs with ns resolution (`0.021`, not `0.020999999999999998`).

@@ -165,6 +165,8 @@ pub struct Summary {
     pub rate_hz: f64,
     /// The stop-action row, if one was sent.
     pub safe: Option<Sample>,
+    /// Times a Modbus link was reopened after a fault (None: not a Modbus valve).
+    pub reconnects: Option<u64>,
     /// What the logger wrote.
     pub log: LogReport,
 }
@@ -210,6 +212,9 @@ impl fmt::Display for Summary {
             s.count(Status::Disconnected)
         )?;
         writeln!(f, "missed cycles: {}", self.missed())?;
+        if let Some(n) = self.reconnects {
+            writeln!(f, "reconnects: {n}")?;
+        }
         writeln!(
             f,
             "timing error |actual - scheduled|: p50 {:.2} us, p99 {:.2} us, max {:.2} us",

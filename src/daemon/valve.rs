@@ -6,9 +6,16 @@
 //! runs on the loop thread's current-thread tokio runtime, so a network backend can `await` its
 //! I/O (with its own timeout, well inside one period) without any other thread.
 //!
-//! Adding a backend (Modbus RTU/TCP): add a `ValveKind` variant and its `[valve.<kind>]` table in
-//! `config.rs`, a variant here, its arm in [`Backend::new`], [`Backend::transact`] and
-//! [`Backend::is_simulated`]. Nothing else in the daemon changes.
+//! Adding a backend: add a `ValveKind` variant and its `[valve.<kind>]` table in `config.rs`, a
+//! variant here, and its arm in [`Backend::open`], [`Backend::transact`] and
+//! [`Backend::describe`]. Nothing else in the daemon changes. [`Backend::open`] runs on the loop
+//! thread's runtime, so a network backend's sockets belong to the runtime that drives them.
+//!
+//! The `modbus-tcp` / `modbus-rtu` backends are [`ModbusValve`]: one cycle writes O_P and reads
+//! V_P under the link's deadline; its faults are logged as they come (`timeout`, `error`,
+//! `disconnected`), the link is reopened in the background of later cycles, and the number of
+//! reconnections goes into the summary. A real device runs on its own clock, so slots the loop
+//! skipped are simply not sent.
 //!
 //! The `emulated` backend steps a [`crate::model::Valve`] once per slot, in real time: slots the
 //! loop skipped are stepped with the O_P the valve was holding, so the emulated valve never falls
@@ -21,22 +28,56 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::config::{ValveConfig, ValveKind};
+use crate::modbus::client::{Link, ModbusValve, OpenError};
 use crate::model::{ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
 pub use crate::modbus::client::Fault;
 
-/// A valve the loop can drive.
+/// Why the valve backend cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum BackendError {
+    /// The emulated valve's model cannot be built.
+    #[error("valve model: {0}")]
+    Model(#[from] ModelError),
+    /// The Modbus valve cannot be opened.
+    #[error(transparent)]
+    Modbus(#[from] OpenError),
+    /// `kind` names a Modbus link whose table is missing (a config not checked by `Config::load`).
+    #[error("[valve] kind = \"{0}\" needs its [valve.{0}] table")]
+    MissingTable(&'static str),
+}
+
+/// A valve the loop can drive. Both variants are large and boxed once at start-up, so moving the
+/// backend into the loop thread copies a pointer.
 #[derive(Debug)]
 pub enum Backend {
     /// A model advanced in real time.
-    Emulated(Emulated),
+    Emulated(Box<Emulated>),
+    /// A positioner over Modbus TCP or RTU.
+    Modbus(Box<ModbusValve>),
 }
 
 impl Backend {
-    /// The backend `[valve]` selects, for a loop of period `period_s`.
-    pub fn new(cfg: &ValveConfig, period_s: f64) -> Result<Backend, ModelError> {
+    /// Opens the backend `[valve]` selects, for a loop of period `period_s` (connecting to a
+    /// Modbus device); to be awaited on the runtime that will run its transactions.
+    pub async fn open(cfg: &ValveConfig, period_s: f64) -> Result<Backend, BackendError> {
+        let modbus = |link: Option<Link>| {
+            link.ok_or(BackendError::MissingTable(cfg.kind.tag()))
+                .map(|l| ModbusValve::open(l, cfg.registers, period_s))
+        };
         match cfg.kind {
+            ValveKind::ModbusTcp => {
+                let valve = modbus(cfg.tcp.clone().map(Link::Tcp))?.await?;
+                Ok(Backend::Modbus(Box::new(valve)))
+            }
+            ValveKind::ModbusRtu => {
+                let valve = modbus(cfg.rtu.clone().map(Link::Rtu))?.await?;
+                if let Some(b) = valve.budget() {
+                    tracing::info!("{}", b.describe());
+                }
+                Ok(Backend::Modbus(Box::new(valve)))
+            }
             ValveKind::Emulated => {
                 let e = &cfg.emulated;
                 let spec = e.model_spec()?;
@@ -52,11 +93,11 @@ impl Backend {
                 } else {
                     None
                 };
-                Ok(Backend::Emulated(Emulated {
+                Ok(Backend::Emulated(Box::new(Emulated {
                     valve: Valve::new(&spec, period_s)?,
                     last: None,
                     noise,
-                }))
+                })))
             }
         }
     }
@@ -65,13 +106,15 @@ impl Backend {
     pub async fn transact(&mut self, op_pct: f64, k: u64) -> Result<f64, Fault> {
         match self {
             Backend::Emulated(e) => Ok(e.step_to(op_pct, k)),
+            Backend::Modbus(m) => m.transact(op_pct).await.map(|r| r.vp_pct),
         }
     }
 
-    /// True when the valve is a simulation, which may run on the virtual clock.
-    pub fn is_simulated(&self) -> bool {
+    /// How many times a Modbus link was reopened after a fault (None: not a Modbus valve).
+    pub fn reconnects(&self) -> Option<u64> {
         match self {
-            Backend::Emulated(_) => true,
+            Backend::Emulated(_) => None,
+            Backend::Modbus(m) => Some(m.reconnects()),
         }
     }
 
@@ -79,6 +122,7 @@ impl Backend {
     pub fn describe(&self) -> String {
         match self {
             Backend::Emulated(e) => format!("emulated {}", e.valve.spec().model.display_name()),
+            Backend::Modbus(m) => m.describe(),
         }
     }
 }
@@ -121,7 +165,10 @@ mod tests {
 
     fn backend(toml: &str) -> Backend {
         let cfg = Config::from_toml(toml, Path::new("t.toml")).unwrap();
-        Backend::new(&cfg.valve, 0.01).unwrap()
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        rt.block_on(Backend::open(&cfg.valve, 0.01)).unwrap()
     }
 
     fn run(b: &mut Backend, ops: &[(u64, f64)]) -> Vec<f64> {
