@@ -34,6 +34,8 @@ const ZOOM_S: f64 = 10.0;
 const ZOOMS: usize = 3;
 /// Most step responses drawn.
 const MAX_RESPONSES: usize = 400;
+/// Largest normalised response drawn in the step overlay (share of the step).
+const MAX_SHARE: f64 = 2.5;
 /// Length of a drawn step response, s.
 const RESPONSE_S: f64 = 4.0;
 
@@ -326,12 +328,23 @@ fn steps_section(h: &mut String, vp: &[f64], id: &Identification) {
             )
         })
         .collect();
+    // A small step taken while the valve still travels from the previous one normalises to many
+    // times its size and would squash every other curve: such responses are left out (counted).
+    let all = curves.len();
+    let curves: Vec<_> = curves
+        .into_iter()
+        .filter(|(_, pts)| pts.iter().all(|p: &(f64, f64)| p.1.abs() <= MAX_SHARE))
+        .collect();
+    let left_out = match all - curves.len() {
+        0 => String::new(),
+        n => format!("; {n} steps beyond ±{MAX_SHARE} left out"),
+    };
     h.push_str(&plot::curves(
         "step responses, normalised: up = same direction, down = reversal (Fig. 6)",
         "time since the step (s)",
         "share of the step",
         &curves,
-        &format!("colour: initial opening, blue {lo:.0} % to yellow {hi:.0} %"),
+        &format!("colour: initial opening, blue {lo:.0} % to yellow {hi:.0} %{left_out}"),
     ));
     let pts = |rev: bool| {
         s.steps
