@@ -4,6 +4,8 @@
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
+use crate::fit::steps::{self, StepOptions};
+
 /// One step of O_P and how V_P answered it.
 #[derive(Debug, Clone, Copy)]
 pub struct StepResponse {
@@ -43,14 +45,13 @@ pub struct Facts {
     pub reversals: usize,
 }
 
-/// Measures the facts of a recording sampled every `dt` with V_P noise `sigma`.
-pub fn measure(op: &[f64], vp: &[f64], dt: f64, sigma: f64) -> Facts {
-    let (steps, holds) = steps_and_holds(op, vp, dt, sigma);
+/// Measures the facts of a recording sampled every `dt`.
+pub fn measure(op: &[f64], vp: &[f64], dt: f64) -> Facts {
     let (open_speed, close_speed) = speeds(vp, dt);
     Facts {
         reversals: count_reversals(op),
-        steps,
-        holds,
+        steps: step_responses(op, vp, dt),
+        holds: holds(op, vp, dt),
         open_speed,
         close_speed,
         lattice_pct: lattice(vp),
@@ -73,47 +74,41 @@ fn count_reversals(op: &[f64]) -> usize {
     n
 }
 
-fn steps_and_holds(op: &[f64], vp: &[f64], dt: f64, sigma: f64) -> (Vec<StepResponse>, Vec<Hold>) {
+/// The step delays of the step analysis (`fit::steps`), for steps of at least 0.3 % held for
+/// a second that V_P answered.
+fn step_responses(op: &[f64], vp: &[f64], dt: f64) -> Vec<StepResponse> {
+    let opts = StepOptions {
+        min_size_pct: 0.3,
+        fraction: 0.1,
+        min_hold_s: 1.0,
+    };
+    steps::analyse(op, vp, dt, &opts)
+        .steps
+        .into_iter()
+        .filter_map(|s| {
+            s.delay_s.map(|delay_s| StepResponse {
+                t_s: s.t_s,
+                from_pct: s.from_pct,
+                size_pct: s.size_pct,
+                reversal: s.reversal == Some(true),
+                delay_s,
+            })
+        })
+        .collect()
+}
+
+/// Stretches of constant O_P of at least 3 s, with the settled V_P of their last second.
+fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
     let n = op.len();
     let min_hold = (3.0 / dt) as usize;
     let settle = (1.0 / dt) as usize;
-    // Constant stretches of O_P.
-    let mut segments = Vec::new();
-    let mut a = 0;
-    for k in 1..=n {
-        if k == n || (op[k] - op[k - 1]).abs() > 1e-9 {
-            segments.push((a, k));
-            a = k;
-        }
-    }
-    let mut steps = Vec::new();
     let mut holds = Vec::new();
-    let mut last_dir = 0.0;
-    for (i, &(a, b)) in segments.iter().enumerate() {
-        if i > 0 {
-            let size = op[a] - op[a - 1];
-            let dir = size.signum();
-            if size.abs() >= 0.3 && b - a >= settle {
-                let v0 = vp[a];
-                let need = (0.1 * size.abs()).max(4.0 * sigma);
-                let delay = (a..b)
-                    .find(|&k| (vp[k] - v0) * dir >= need)
-                    .map(|k| (k - a) as f64 * dt);
-                if let Some(delay_s) = delay {
-                    steps.push(StepResponse {
-                        t_s: a as f64 * dt,
-                        from_pct: v0,
-                        size_pct: size,
-                        reversal: last_dir != 0.0 && dir != last_dir,
-                        delay_s,
-                    });
-                }
-            }
-            if size.abs() > 1e-9 {
-                last_dir = dir;
-            }
+    let mut a = 0;
+    for b in 1..=n {
+        if b < n && (op[b] - op[b - 1]).abs() <= 1e-9 {
+            continue;
         }
-        if b - a >= min_hold && i > 0 {
+        if b - a >= min_hold && a > 0 {
             let tail = &vp[b - settle..b];
             let mean = tail.iter().sum::<f64>() / tail.len() as f64;
             let max_jump = vp[a + settle..b]
@@ -127,8 +122,9 @@ fn steps_and_holds(op: &[f64], vp: &[f64], dt: f64, sigma: f64) -> (Vec<StepResp
                 max_jump_pct: max_jump,
             });
         }
+        a = b;
     }
-    (steps, holds)
+    holds
 }
 
 fn speeds(vp: &[f64], dt: f64) -> (f64, f64) {
@@ -246,7 +242,7 @@ mod tests {
                 }
             })
             .collect();
-        let f = measure(&op, &vp, dt, 0.01);
+        let f = measure(&op, &vp, dt);
         assert_eq!(f.steps.len(), 2);
         assert!(!f.steps[0].reversal && f.steps[1].reversal);
         assert!((f.steps[0].delay_s - 0.3).abs() < 1e-9 && (f.steps[1].delay_s - 0.8).abs() < 1e-9);

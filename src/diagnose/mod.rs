@@ -22,11 +22,11 @@
 pub mod composed;
 pub mod evidence;
 pub mod locate;
-mod search;
 
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::fit;
 use crate::metrics::{self, Scores};
 use crate::model::{FopdtParams, ModelKind, ModelSpec, Valve};
 pub use composed::Effect;
@@ -40,6 +40,8 @@ pub const NOMINAL_DEAD_TIME_S: f64 = 0.2;
 pub const NOMINAL_MIN_SLEW_PCT_PER_S: f64 = 40.0;
 /// Most effects one diagnosis adds.
 const ROUNDS: usize = 4;
+/// Edge of a refit's initial simplex, as a share of each knob's (possibly logarithmic) range.
+const REFIT_STEP: f64 = 0.2;
 
 /// The starting point, scored.
 #[derive(Debug, Clone, Serialize)]
@@ -214,29 +216,40 @@ struct Free {
 /// are searched on a log scale, so the simplex moves in proportions rather than in steps that
 /// are coarse for small values.
 fn refit(scorer: &Scorer, spec: &ModelSpec, free: &[Free], iters: u64) -> (ModelSpec, Errors) {
+    // Each knob maps to a unit interval of the search cube, linearly or on a log scale.
     let log: Vec<bool> = free
         .iter()
         .map(|f| f.lo > 0.0 && f.hi / f.lo > 20.0)
         .collect();
     let to = |i: usize, v: f64| if log[i] { v.ln() } else { v };
-    let from = |i: usize, v: f64| if log[i] { v.exp() } else { v };
-    let lo: Vec<f64> = free.iter().enumerate().map(|(i, f)| to(i, f.lo)).collect();
-    let hi: Vec<f64> = free.iter().enumerate().map(|(i, f)| to(i, f.hi)).collect();
-    let x0: Vec<f64> = free
+    let span = |i: usize| (to(i, free[i].lo), to(i, free[i].hi));
+    let from_unit = |i: usize, u: f64| {
+        let (lo, hi) = span(i);
+        let v = lo + u * (hi - lo);
+        if log[i] {
+            v.exp()
+        } else {
+            v
+        }
+    };
+    let u0: Vec<f64> = free
         .iter()
         .enumerate()
-        .map(|(i, f)| to(i, f.init.clamp(f.lo, f.hi)))
+        .map(|(i, f)| {
+            let (lo, hi) = span(i);
+            (to(i, f.init.clamp(f.lo, f.hi)) - lo) / (hi - lo).max(f64::MIN_POSITIVE)
+        })
         .collect();
-    let build = |x: &[f64]| {
+    let build = |u: &[f64]| {
         let mut s = spec.clone();
-        for (i, (f, &v)) in free.iter().zip(x).enumerate() {
-            composed::set(&mut s, f.knob, from(i, v).clamp(f.lo, f.hi));
+        for (i, (f, &v)) in free.iter().zip(u).enumerate() {
+            composed::set(&mut s, f.knob, from_unit(i, v).clamp(f.lo, f.hi));
         }
         s
     };
-    let cost = |x: &[f64]| scorer.errors(&build(x)).fit;
-    let (x, _) = search::minimize(&cost, &x0, &lo, &hi, iters);
-    let best = build(&x);
+    let cost = |u: &[f64]| scorer.errors(&build(u)).fit;
+    let local = fit::search::nelder_mead(&cost, &u0, REFIT_STEP, iters);
+    let best = build(&local.best.u);
     let errors = scorer.errors(&best);
     (best, errors)
 }
@@ -517,7 +530,7 @@ pub fn diagnose(
         return Err(DiagnoseError::TooShort(n));
     }
     let sigma = locate::noise_floor(vp);
-    let facts = evidence::measure(op, vp, dt, sigma);
+    let facts = evidence::measure(op, vp, dt);
     // Blocks of a twentieth of the recording (10-120 s) give ten held-out blocks.
     let block_len = (((n as f64 * dt / 20.0).clamp(10.0, 120.0) / dt) as usize).max(1);
     let scorer = Scorer {
