@@ -110,8 +110,8 @@ impl PinCart {
 
     /// Pin-cart II with the core-level effects of `fx`: `closing_slew_pct_per_s` > 0 gives
     /// closing its own slew rate (asymmetry); `open_slowdown` r > 0 makes the proportional pin
-    /// speed fall with opening as `1 / (1 + r V / 100)` (a pneumatic chamber that grows with
-    /// opening: slower response, same slew limit); `breakaway_pct` > 0 makes the cart stick
+    /// speed and the slew limit fall with opening as `1 / (1 + r V / 100)` (a pneumatic chamber
+    /// that grows with opening: slower response and slower stroke); `breakaway_pct` > 0 makes the cart stick
     /// whenever it stops, until the pin pushes that much beyond the side, then slip.
     pub(crate) fn two(p: &PinCart2Params, fx: &Effects, dt: f64) -> Self {
         let close_max = if fx.closing_slew_pct_per_s > 0.0 {
@@ -191,17 +191,20 @@ impl PinCart {
         let rel = self.y - self.v;
         let pushing = d * rel >= self.half - 1e-12;
         if pushing {
-            let gain = if slowdown == 0.0 {
-                p.p_gain_per_s
+            // A chamber that grows with opening fills and vents more slowly: the response and
+            // the stroke speed fall alike (dy_min, the positioner's creep, does not).
+            let slow = if slowdown == 0.0 {
+                1.0
             } else {
-                p.p_gain_per_s / (1.0 + slowdown * self.v / 100.0)
+                1.0 / (1.0 + slowdown * self.v / 100.0)
             };
-            let speed = (gain * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
-            let max = if d > 0.0 {
-                p.dy_max_pct_per_s
-            } else {
-                close_max
-            };
+            let speed = (slow * p.p_gain_per_s * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
+            let max = slow
+                * if d > 0.0 {
+                    p.dy_max_pct_per_s
+                } else {
+                    close_max
+                };
             let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
             d * step
         } else {

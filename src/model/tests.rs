@@ -500,6 +500,17 @@ fn open_slowdown_makes_the_valve_slower_when_open() {
         open as f64 > 2.0 * closed as f64,
         "{closed} vs {open} samples"
     );
+    // The stroke speed falls alike: the fastest move of a large step is slower when open.
+    let fastest = |from: f64, to: f64| {
+        let mut v = Valve::new(&spec, DT).unwrap();
+        v.reset(from, from);
+        let out = run(&mut v, to, 1000);
+        out.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max) / DT
+    };
+    let slew = spec.pincart2.unwrap().dy_max_pct_per_s;
+    let (near_closed, near_open) = (fastest(5.0, 35.0), fastest(65.0, 95.0));
+    assert!((near_closed - slew / 1.1).abs() < 0.5, "{near_closed} %/s");
+    assert!(near_open < slew / 2.0, "{near_open} %/s");
 }
 
 #[test]
