@@ -26,14 +26,21 @@ pub mod report;
 pub mod synth;
 pub mod toml_file;
 
-/// Sends `tracing` logs to stderr; `RUST_LOG` overrides the default level `info`. Used by both
-/// binaries (`valve-bridge`, `sim-device`).
+/// The log filter when `RUST_LOG` is not set: `info`, except tokio-modbus's own per-frame
+/// decoding warnings (several multi-line entries per bad reply), which the Modbus client already
+/// reports once per fault in its own words.
+const DEFAULT_LOG_FILTER: &str = "info,tokio_modbus=error";
+
+/// Sends `tracing` logs to stderr, coloured only on a terminal; `RUST_LOG` overrides the default
+/// filter (`info`, tokio-modbus at `error`). Used by both binaries (`valve-bridge`, `sim-device`).
 pub fn init_tracing() {
+    use std::io::IsTerminal;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG_FILTER));
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .with_target(false)
         .compact()
         .init();

@@ -2,7 +2,7 @@
 //!
 //! Each subcommand lives in `src/cli/<name>.rs` with its arguments and a `run` function that
 //! calls the library. Errors are printed as one line (with their causes) and exit code 1; no
-//! backtrace. `RUST_LOG` sets the log level (default `info`).
+//! backtrace. `RUST_LOG` sets the log level (default `info`, see `valve_bridge::init_tracing`).
 
 mod cli;
 

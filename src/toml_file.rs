@@ -41,9 +41,15 @@ pub fn load<T: DeserializeOwned>(path: &Path) -> Result<(T, String), TomlError> 
 /// Parses TOML `text` (read from `path`, used in messages) into `T`.
 pub fn parse<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlError> {
     toml::from_str(text).map_err(|e| {
-        let offset = e.span().map(|s| s.start).unwrap_or(0);
-        let line = text[..offset.min(text.len())].matches('\n').count() + 1;
-        let key = key_at(text, line).unwrap_or_else(|| "(file)".into());
+        let offset = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
+        let before = &text[..offset];
+        let line = before.matches('\n').count() + 1;
+        let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+        let key = match (key_at(text, line), inline_key(&before[line_start..])) {
+            (Some(top), Some(inner)) => format!("{top}.{inner}"),
+            (Some(top), None) => top,
+            (None, _) => "(file)".into(),
+        };
         TomlError::Invalid {
             path: path.to_path_buf(),
             line,
@@ -120,6 +126,15 @@ fn key_at(text: &str, line: usize) -> Option<String> {
     table
 }
 
+/// The key of the inline-table entry whose value starts where `line_head` (a line up to an
+/// error) ends: `format` for `position = { address = 1, format = `. None outside inline tables.
+fn inline_key(line_head: &str) -> Option<&str> {
+    let (_, inner) = line_head.split_once('{')?;
+    let (entry, _) = inner.rsplit_once('=')?;
+    let key = entry.rsplit([',', '{']).next()?.trim().trim_matches('"');
+    (!key.is_empty()).then_some(key)
+}
+
 /// The table name of a `[table]` or `[[array]]` header line.
 fn header(line: &str) -> Option<String> {
     let inner = line.strip_prefix('[')?;
@@ -165,6 +180,26 @@ mod tests {
             .to_string();
         assert!(err.contains("c.toml:4: inner.rate:"), "{err}");
         assert!(err.contains("unknown field `rate`"), "{err}");
+    }
+
+    #[test]
+    fn keys_inside_inline_tables_are_named() {
+        #[derive(Debug, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code)]
+        struct Doc {
+            t: std::collections::BTreeMap<String, Inner>,
+        }
+        let text = "[t]\nx = { rate_hz = \"fast\" }\n";
+        let err = parse::<Doc>(text, Path::new("c.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("c.toml:2: t.x.rate_hz: invalid type"),
+            "{err}"
+        );
+        assert_eq!(inline_key("a = { b = 1, c = "), Some("c"));
+        assert_eq!(inline_key("a = "), None);
     }
 
     #[test]

@@ -4,7 +4,14 @@
 //!   log has one row per slot and the logged V_P follows an offline simulation of sim-device's
 //!   model (pin-cart II) on the same O_P;
 //! - sim-device killed mid-run and restarted on the same port: the loop keeps its rhythm, logs
-//!   `timeout`/`disconnected` rows with an empty V_P, reconnects, exits 0 and counts it all.
+//!   `timeout`/`disconnected` rows with an empty V_P, reconnects, exits 0 and counts it all;
+//! - injected faults (corrupted CRC on the pty, dropped replies, replies later than the deadline,
+//!   exception replies): each fault is a row of its kind with an empty V_P, one row per slot,
+//!   the summary counts exactly the rows of each status, and the log on stderr names the fault;
+//! - start-up errors (no device on the port, no serial port, a bad register map, a serial line
+//!   too slow for the loop rate): exit 1 with one line that says what, where and how to fix it.
+//!
+//! The daemon runs with `RUST_LOG` unset, as a user starts it: its stderr is the default log.
 //!
 //! sim-device is the workspace's other binary: `cargo test --workspace` builds it into the same
 //! directory as `valve-bridge` (its own integration tests need it); with `cargo test -p
@@ -20,6 +27,7 @@
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use valve_bridge::model::{bundled, ModelKind, Valve};
@@ -39,6 +47,7 @@ struct Row {
     op_pct: Option<f64>,
     vp_pct: Option<f64>,
     status: String,
+    latency_us: Option<f64>,
 }
 
 /// The sim-device binary, next to valve-bridge.
@@ -52,23 +61,29 @@ fn sim_device_bin() -> PathBuf {
     p
 }
 
+/// The shipped daemon configs for sim-device and the endpoint each names.
+const TCP_CONFIG: (&str, &str) = ("config/sim-device-tcp.toml", "127.0.0.1:5502");
+const RTU_CONFIG: (&str, &str) = ("config/sim-device-rtu.toml", "/tmp/vb-sim-device");
+
 /// A running sim-device and the endpoint it printed (`tcp: ADDR` or `pty: PATH`).
 struct SimDevice {
     child: Child,
     endpoint: String,
+    /// The shipped config of its link (see [`TCP_CONFIG`]).
+    shipped: (&'static str, &'static str),
 }
 
 impl SimDevice {
     fn start(args: &[&str]) -> SimDevice {
-        let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(if args.contains(&"--pty") {
-            "config/sim-device-rtu.toml"
+        let shipped = if args.contains(&"--pty") {
+            RTU_CONFIG
         } else {
-            "config/sim-device-tcp.toml"
-        });
+            TCP_CONFIG
+        };
         let mut child = Command::new(sim_device_bin())
             .args(args)
             .arg("--config")
-            .arg(config)
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join(shipped.0))
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -81,7 +96,17 @@ impl SimDevice {
         SimDevice {
             endpoint: endpoint.to_string(),
             child,
+            shipped,
         }
+    }
+
+    /// A daemon config for this device: its shipped config pointed at its endpoint, with
+    /// `edits` applied and `source` appended.
+    fn config(&self, dir: &Path, edits: &[(&str, &str)], source: &str) -> PathBuf {
+        let (file, endpoint) = self.shipped;
+        let mut all = vec![(endpoint, self.endpoint.as_str())];
+        all.extend_from_slice(edits);
+        config(dir, file, &all, source)
     }
 
     fn kill(&mut self) {
@@ -113,24 +138,32 @@ fn write_recording(dir: &Path) -> PathBuf {
     path
 }
 
-/// A daemon config: the shipped sim-device config with `from` replaced by `to`, replaying `rec`.
-fn config(dir: &Path, shipped: &str, from: &str, to: &str, rec: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(shipped))
-        .unwrap()
-        .replace(from, to);
-    assert!(text.contains(to), "{shipped} has no {from}");
-    let path = dir.join("daemon.toml");
-    std::fs::write(
-        &path,
-        format!(
-            "{text}\n[source]\nkind = \"replay\"\n[source.replay]\nfile = \"{}\"\n",
-            rec.display()
-        ),
+/// The `[source]` tables that replay `rec`.
+fn replay(rec: &Path) -> String {
+    format!(
+        "[source]\nkind = \"replay\"\n[source.replay]\nfile = \"{}\"\n",
+        rec.display()
     )
-    .unwrap();
+}
+
+/// A constant O_P of 40 %.
+const CONSTANT: &str = "[source]\nkind = \"constant\"\n[source.constant]\nop_pct = 40.0\n";
+
+/// A daemon config `daemon.toml`: the shipped config with each `(from, to)` replaced (each must
+/// occur) and `source` appended.
+fn config(dir: &Path, shipped: &str, edits: &[(&str, &str)], source: &str) -> PathBuf {
+    let mut text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(shipped)).unwrap();
+    for (from, to) in edits {
+        assert!(text.contains(from), "{shipped} has no {from}");
+        text = text.replace(from, to);
+    }
+    let path = dir.join("daemon.toml");
+    std::fs::write(&path, format!("{text}\n{source}")).unwrap();
     path
 }
 
+/// `valve-bridge run` with the default log level (`RUST_LOG` unset).
 fn run_cmd(cfg: &Path, log_dir: &Path, duration_s: f64) -> Command {
     let mut cmd = Command::new(BIN);
     cmd.args(["run", "--config"])
@@ -139,7 +172,7 @@ fn run_cmd(cfg: &Path, log_dir: &Path, duration_s: f64) -> Command {
         .arg(duration_s.to_string())
         .arg("--log-dir")
         .arg(log_dir)
-        .env("RUST_LOG", "info");
+        .env_remove("RUST_LOG");
     cmd
 }
 
@@ -164,8 +197,16 @@ fn stdout(out: &Output) -> String {
     text
 }
 
+/// Real-time runs take turns: on a small machine, parallel 100 Hz loops (each busy-waits before
+/// its deadlines) and their devices would make each other miss cycles.
+static REAL_TIME: Mutex<()> = Mutex::new(());
+
+fn real_time_turn() -> MutexGuard<'static, ()> {
+    REAL_TIME.lock().unwrap_or_else(|p| p.into_inner())
+}
+
 /// One row per slot on the 10 ms grid, plus the stop action's row.
-fn assert_rhythm(rows: &[Row], slots: usize) {
+fn assert_grid(rows: &[Row], slots: usize) {
     assert_eq!(
         rows.len(),
         slots + 1,
@@ -177,9 +218,16 @@ fn assert_rhythm(rows: &[Row], slots: usize) {
             "row {k} at {}",
             r.t_s
         );
-        assert_ne!(r.status, "skipped", "row {k}: a cycle overran");
     }
     assert_eq!(rows[slots].status, "safe-hold");
+}
+
+/// [`assert_grid`], and no slot missed.
+fn assert_rhythm(rows: &[Row], slots: usize) {
+    assert_grid(rows, slots);
+    for (k, r) in rows.iter().enumerate() {
+        assert_ne!(r.status, "skipped", "row {k}: a cycle overran");
+    }
 }
 
 /// Largest distance of a logged V_P from the offline range over slots k-LAG_WINDOW..=k.
@@ -209,11 +257,12 @@ fn worst_miss(rows: &[Row]) -> (f64, usize) {
     worst
 }
 
-fn replay_follows_model(shipped: &str, from: &str, device_args: &[&str]) {
+fn replay_follows_model(device_args: &[&str]) {
+    let _turn = real_time_turn();
     let dir = tempfile::tempdir().unwrap();
     let rec = write_recording(dir.path());
     let dev = SimDevice::start(device_args);
-    let cfg = config(dir.path(), shipped, from, &dev.endpoint, &rec);
+    let cfg = dev.config(dir.path(), &[], &replay(&rec));
     let logs = dir.path().join("logs");
     let out = run_cmd(&cfg, &logs, 3.0).output().unwrap();
     let summary = stdout(&out);
@@ -241,35 +290,22 @@ fn replay_follows_model(shipped: &str, from: &str, device_args: &[&str]) {
 
 #[test]
 fn tcp_replay_follows_the_model() {
-    replay_follows_model(
-        "config/sim-device-tcp.toml",
-        "127.0.0.1:5502",
-        &["--tcp", "127.0.0.1:0"],
-    );
+    replay_follows_model(&["--tcp", "127.0.0.1:0"]);
 }
 
 #[test]
 fn rtu_over_a_pty_replay_follows_the_model() {
-    replay_follows_model(
-        "config/sim-device-rtu.toml",
-        "/tmp/vb-sim-device",
-        &["--pty"],
-    );
+    replay_follows_model(&["--pty"]);
 }
 
 #[test]
 fn device_killed_and_restarted_keeps_the_rhythm_and_reconnects() {
+    let _turn = real_time_turn();
     let dir = tempfile::tempdir().unwrap();
     let rec = write_recording(dir.path());
     let mut dev = SimDevice::start(&["--tcp", "127.0.0.1:0"]);
     let addr = dev.endpoint.clone();
-    let cfg = config(
-        dir.path(),
-        "config/sim-device-tcp.toml",
-        "127.0.0.1:5502",
-        &addr,
-        &rec,
-    );
+    let cfg = dev.config(dir.path(), &[], &replay(&rec));
     let logs = dir.path().join("logs");
     let daemon = run_cmd(&cfg, &logs, 3.0)
         .stdout(Stdio::piped())
@@ -299,21 +335,373 @@ fn device_killed_and_restarted_keeps_the_rhythm_and_reconnects() {
     // Ok before the kill, and ok again at the end, after the reconnection.
     assert!(rows[..90].iter().all(|r| r.status == "ok"), "{summary}");
     assert!(rows[250..300].iter().all(|r| r.status == "ok"), "{summary}");
-    let count = |s: &str| rows[..300].iter().filter(|r| r.status == s).count();
-    assert!(
-        summary.contains(&format!(
-            "samples: 300 ({} ok, {} timeout, 0 error, {} disconnected)",
-            count("ok"),
-            count("timeout"),
-            count("disconnected")
-        )),
-        "{summary}"
+    let n = counts(&rows, 300, &summary);
+    assert_eq!(n.error, 0, "{summary}");
+    assert!(reconnects(&summary) >= 1, "{summary}");
+}
+
+/// Cycle rows per status.
+#[derive(Debug)]
+struct Counts {
+    ok: usize,
+    timeout: usize,
+    error: usize,
+    disconnected: usize,
+    skipped: usize,
+}
+
+/// The statuses of the first `slots` rows, checked against the summary's `samples:` and
+/// `missed cycles:` lines: the summary counts exactly the rows the log holds.
+fn counts(rows: &[Row], slots: usize, summary: &str) -> Counts {
+    let n = |s: &str| rows[..slots].iter().filter(|r| r.status == s).count();
+    let c = Counts {
+        ok: n("ok"),
+        timeout: n("timeout"),
+        error: n("error"),
+        disconnected: n("disconnected"),
+        skipped: n("skipped"),
+    };
+    assert_eq!(
+        c.ok + c.timeout + c.error + c.disconnected + c.skipped,
+        slots,
+        "unknown statuses in the log"
     );
-    let reconnects: u64 = summary
+    for line in [
+        format!(
+            "samples: {} ({} ok, {} timeout, {} error, {} disconnected)",
+            slots - c.skipped,
+            c.ok,
+            c.timeout,
+            c.error,
+            c.disconnected
+        ),
+        format!("missed cycles: {}", c.skipped),
+    ] {
+        assert!(
+            summary.lines().any(|l| l == line),
+            "the log rows give `{line}`; summary:\n{summary}"
+        );
+    }
+    c
+}
+
+/// The summary's reconnection count.
+fn reconnects(summary: &str) -> u64 {
+    summary
         .lines()
         .find_map(|l| l.strip_prefix("reconnects: "))
         .expect("reconnects line")
         .parse()
+        .unwrap()
+}
+
+/// Slots of a fault run (2 s at 100 Hz).
+const FAULT_SLOTS: usize = 200;
+
+/// What a daemon run against a faulty device left: its log rows, its summary and its stderr.
+struct FaultRun {
+    rows: Vec<Row>,
+    summary: String,
+    stderr: String,
+}
+
+/// Runs the daemon for [`FAULT_SLOTS`] at a constant O_P against sim-device started with
+/// `device_args`, its shipped config changed by `edits`. Checks what holds whatever the fault:
+/// exit 0, one row per slot, O_P in every row, a V_P in exactly the `ok` rows, a plain-text log.
+/// A slot missed because the machine is busy is a row too (`skipped`), so the checks on the
+/// faults tolerate those; the counts still have to match the summary.
+fn fault_run(device_args: &[&str], edits: &[(&str, &str)]) -> FaultRun {
+    let _turn = real_time_turn();
+    let dir = tempfile::tempdir().unwrap();
+    let dev = SimDevice::start(device_args);
+    let cfg = dev.config(dir.path(), edits, CONSTANT);
+    let logs = dir.path().join("logs");
+    let out = run_cmd(&cfg, &logs, FAULT_SLOTS as f64 / RATE_HZ)
+        .output()
         .unwrap();
-    assert!(reconnects >= 1, "{summary}");
+    let summary = stdout(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let rows = read_log(&logs);
+    assert_grid(&rows, FAULT_SLOTS);
+    for (k, r) in rows[..FAULT_SLOTS].iter().enumerate() {
+        assert_eq!(r.op_pct, Some(40.0), "row {k}");
+        assert_eq!(
+            r.vp_pct.is_some(),
+            r.status == "ok",
+            "row {k}: {} with V_P {:?}",
+            r.status,
+            r.vp_pct
+        );
+    }
+    assert!(
+        !stderr.contains('\u{1b}'),
+        "colour codes in a log that is not a terminal:\n{stderr}"
+    );
+    FaultRun {
+        rows,
+        summary,
+        stderr,
+    }
+}
+
+/// True if every failed row is followed by an `ok` row within `within` slots (unless the run
+/// ends first).
+fn recovers(rows: &[Row], within: usize) -> bool {
+    (0..FAULT_SLOTS.saturating_sub(within))
+        .filter(|&k| rows[k].status != "ok")
+        .all(|k| rows[k + 1..=k + within].iter().any(|r| r.status == "ok"))
+}
+
+#[test]
+fn corrupted_crc_on_the_pty_gives_error_rows() {
+    let f = fault_run(&["--pty", "--corrupt-crc-every", "10"], &[]);
+    let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
+    // Every 10th reply is corrupted; a failed cycle and the one after it (link reopening) send
+    // fewer requests, so about one cycle in 12 fails.
+    assert!(n.error >= 8, "{}", f.summary);
+    assert!(n.ok >= FAULT_SLOTS / 2, "{}", f.summary);
+    // A bad reply drops the link (a late byte must not be taken for the next reply); it is
+    // reopened once per fault, except after one at the very end.
+    let r = reconnects(&f.summary) as usize;
+    assert!(
+        r + 1 >= n.error && r <= n.error + n.timeout,
+        "{}",
+        f.summary
+    );
+    assert!(recovers(&f.rows, 10), "{}", f.summary);
+    assert!(
+        f.stderr
+            .contains("valve transaction failed: error: CRC error in reply to FC 23"),
+        "{}",
+        f.stderr
+    );
+    assert!(
+        !f.stderr.contains("Failed to decode response frame"),
+        "tokio-modbus's per-frame warnings are off by default:\n{}",
+        f.stderr
+    );
+    assert_eq!(
+        f.stderr.matches("bus budget: ").count(),
+        1,
+        "the bus budget is logged once:\n{}",
+        f.stderr
+    );
+}
+
+#[test]
+fn dropped_replies_time_out_and_the_link_is_reopened() {
+    let f = fault_run(&["--tcp", "127.0.0.1:0", "--drop-every", "25"], &[]);
+    let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
+    assert!(n.timeout >= 4, "{}", f.summary);
+    assert_eq!(n.error, 0, "{}", f.summary);
+    let r = reconnects(&f.summary) as usize;
+    assert!(r + 1 >= n.timeout && r <= n.timeout, "{}", f.summary);
+    assert!(recovers(&f.rows, 10), "{}", f.summary);
+    for want in [
+        "valve transaction failed: timeout: no reply to FC 23 within 8 ms",
+        ": reconnected",
+        "valve transactions succeed again",
+    ] {
+        assert!(f.stderr.contains(want), "no `{want}` in\n{}", f.stderr);
+    }
+}
+
+#[test]
+fn replies_later_than_the_deadline_time_out() {
+    // 20 ms late against the 8 ms deadline: no cycle succeeds, and none waits past its deadline
+    // by much (a timed-out cycle ends at the deadline; the next one reconnects or waits).
+    let f = fault_run(&["--tcp", "127.0.0.1:0", "--delay-ms", "20"], &[]);
+    let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
+    assert_eq!((n.ok, n.error), (0, 0), "{}", f.summary);
+    assert!(n.timeout >= FAULT_SLOTS / 4, "{}", f.summary);
+    for r in f.rows.iter().filter(|r| r.status == "timeout") {
+        assert!(r.latency_us.unwrap() >= 8000.0, "{:?}", r.latency_us);
+    }
+    assert!(
+        f.summary
+            .contains("stop action: safe-hold O_P 40.00 %, V_P not read"),
+        "{}",
+        f.summary
+    );
+    assert!(
+        f.stderr
+            .contains("valve transaction failed: timeout: no reply to FC 23 within 8 ms"),
+        "{}",
+        f.stderr
+    );
+}
+
+#[test]
+fn replies_within_the_deadline_are_ok() {
+    // 2 ms late against a 9.5 ms deadline: the cycles succeed (a busy machine may still delay a
+    // few past the deadline), and each took at least the delay.
+    let f = fault_run(
+        &["--tcp", "127.0.0.1:0", "--delay-ms", "2"],
+        &[("timeout_ms = 8.0", "timeout_ms = 9.5")],
+    );
+    let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
+    assert!(n.ok >= FAULT_SLOTS * 9 / 10, "{}", f.summary);
+    assert_eq!(n.error, 0, "{}", f.summary);
+    for r in f.rows.iter().filter(|r| r.status == "ok") {
+        assert!(r.latency_us.unwrap() >= 2000.0, "{:?}", r.latency_us);
+    }
+}
+
+#[test]
+fn exception_replies_are_error_rows_and_keep_the_link() {
+    let f = fault_run(&["--tcp", "127.0.0.1:0", "--exception-every", "10"], &[]);
+    let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
+    assert!(n.error >= FAULT_SLOTS / 20, "{}", f.summary);
+    // One request per cycle, and an exception keeps the link: exactly the cycles of requests
+    // 10, 20, ... fail, up to the first cycle a busy machine disturbed (if any).
+    let mut request = 0;
+    for (k, r) in f.rows[..FAULT_SLOTS].iter().enumerate() {
+        if r.status != "ok" && r.status != "error" {
+            break;
+        }
+        request += 1;
+        let want = if request % 10 == 0 { "error" } else { "ok" };
+        assert_eq!(r.status, want, "row {k}\n{}", f.summary);
+    }
+    assert!(request >= 20, "disturbed at row {request}\n{}", f.summary);
+    // Only a timeout (a busy machine) drops the link, never an exception.
+    assert!(reconnects(&f.summary) <= n.timeout as u64, "{}", f.summary);
+    for k in 0..FAULT_SLOTS - 1 {
+        if f.rows[k].status == "error" {
+            assert_ne!(f.rows[k + 1].status, "disconnected", "row {}", k + 1);
+        }
+    }
+    assert!(
+        f.stderr.contains(
+            "valve transaction failed: error: device answered FC 23 with exception ServerDeviceFailure"
+        ),
+        "{}",
+        f.stderr
+    );
+}
+
+/// Runs the daemon on `cfg`, which must fail to start; returns its error message, after checking
+/// it is the one line on stderr (`RUST_LOG=warn`), without a panic or a debug dump, and that no
+/// log was created.
+fn startup_error(cfg: &Path) -> String {
+    let logs = cfg.with_file_name("logs");
+    let out = run_cmd(cfg, &logs, 1.0)
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "not one line:\n{stderr}");
+    for dump in [
+        "panicked",
+        "backtrace",
+        "RUST_BACKTRACE",
+        "Os {",
+        "Custom {",
+    ] {
+        assert!(!stderr.contains(dump), "{stderr}");
+    }
+    assert!(!logs.exists(), "a log was created before the valve opened");
+    stderr
+        .strip_prefix("valve-bridge: error: ")
+        .unwrap_or_else(|| panic!("{stderr}"))
+        .trim_end()
+        .to_string()
+}
+
+#[test]
+fn no_device_on_the_tcp_port_is_one_line_naming_the_address() {
+    let dir = tempfile::tempdir().unwrap();
+    // A port nobody listens on (bound, then released).
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let cfg = config(dir.path(), TCP_CONFIG.0, &[(TCP_CONFIG.1, &addr)], CONSTANT);
+    let e = startup_error(&cfg);
+    assert!(
+        e.starts_with(&format!(
+            "cannot connect to Modbus TCP {addr}: Connection refused"
+        )) && e.ends_with("(check [valve.modbus-tcp] address and that the device is on)"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_missing_serial_port_is_one_line_naming_the_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = dir.path().join("ttyUSB-missing");
+    let port = port.to_str().unwrap();
+    let cfg = config(dir.path(), RTU_CONFIG.0, &[(RTU_CONFIG.1, port)], CONSTANT);
+    let e = startup_error(&cfg);
+    assert_eq!(
+        e,
+        format!(
+            "cannot open serial port {port}: No such file or directory (check [valve.modbus-rtu] port)"
+        )
+    );
+}
+
+#[test]
+fn a_bad_register_map_is_one_line_naming_file_line_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            (
+                "address = 1, format = \"i16\"",
+                "address = 0, format = \"i16\"",
+            ),
+            "valve.registers.position.address: 0 overlaps setpoint (holding registers 0-0): \
+             give each value its own registers",
+        ),
+        (
+            ("format = \"i16\"", "format = \"i24\""),
+            "valve.registers.position.format: unknown variant `i24`, \
+             expected one of `u16`, `i16`, `u32`, `f32`",
+        ),
+        (
+            (
+                "format = \"i16\", scale = 0.1",
+                "format = \"i16\", scale = 0.0",
+            ),
+            "valve.registers.position.scale: 0 is not allowed: percent per raw unit, \
+             finite and not 0 (0.1 for per-mille)",
+        ),
+    ];
+    for (edit, want) in cases {
+        let cfg = config(dir.path(), TCP_CONFIG.0, &[edit], CONSTANT);
+        let line = std::fs::read_to_string(&cfg)
+            .unwrap()
+            .lines()
+            .position(|l| l.starts_with("position ="))
+            .unwrap()
+            + 1;
+        assert_eq!(
+            startup_error(&cfg),
+            format!("{}:{line}: {want}", cfg.display())
+        );
+    }
+}
+
+#[test]
+fn a_serial_line_too_slow_for_the_rate_is_refused_with_the_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(
+        dir.path(),
+        RTU_CONFIG.0,
+        &[("baud = 115200", "baud = 19200")],
+        CONSTANT,
+    );
+    // FC 23 with the status register: 15 + 9 characters of 11 bits at 19200 baud (13.75 ms),
+    // two 3.5-character silences (4.01 ms) and 1 ms turnaround, against a 10 ms period. The
+    // map already uses FC 23, so that is not offered as a fix.
+    assert_eq!(
+        startup_error(&cfg),
+        "bus budget: one cycle takes 18.8 ms on the wire at 19200 baud, 11 bits/char \
+         (FC 23 15+9 chars; 2 silences of 2.01 ms; 1 turnaround of 1.0 ms) = 188 % of the \
+         10.0 ms loop period; the link carries at most 53.3 Hz: refusing 100.0 Hz \
+         (raise [valve.modbus-rtu] baud, or lower [loop] rate_hz to 53 or less)"
+    );
 }

@@ -6,54 +6,24 @@
 //! cycle latency percentiles. The pymodbus figure comes from `benches/pymodbus_rate.py` and is
 //! skipped, with a message, when python3 or pymodbus is missing.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+#[path = "../tests/common/mod.rs"]
+mod common;
 
+use std::process::Command;
+use std::time::Instant;
+
+use common::{percentile, Sim};
 use valve_bridge::modbus::client::{Link, ModbusValve};
 use valve_bridge::modbus::link::TcpLink;
 use valve_bridge::modbus::map::RegisterMap;
-
-struct Device(Child);
-
-impl Drop for Device {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn start_device() -> (Device, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sim-device"))
-        .args(["--tcp", "127.0.0.1:0", "--model", "modelless"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("sim-device starts");
-    let stdout = child.stdout.take().expect("piped stdout");
-    let mut line = String::new();
-    BufReader::new(stdout)
-        .read_line(&mut line)
-        .expect("sim-device announces its port");
-    let addr = line
-        .trim()
-        .strip_prefix("tcp: ")
-        .expect("a `tcp: ADDR` line")
-        .to_string();
-    (Device(child), addr)
-}
-
-fn percentile(sorted: &[Duration], p: f64) -> f64 {
-    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
-    sorted[i].as_secs_f64() * 1e6
-}
 
 fn main() {
     let secs: f64 = std::env::args()
         .skip(1)
         .find_map(|a| a.parse().ok())
         .unwrap_or(3.0);
-    let (_device, addr) = start_device();
+    let device = Sim::start(&["--tcp", "127.0.0.1:0", "--model", "modelless"]);
+    let addr = device.tcp.clone().expect("a `tcp: ADDR` line");
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -83,11 +53,11 @@ fn main() {
             if rt.block_on(valve.transact(op)).is_err() {
                 faults += 1;
             }
-            lat.push(t0.elapsed());
+            lat.push(t0.elapsed().as_secs_f64() * 1e6);
             k += 1;
         }
         let el = start.elapsed().as_secs_f64();
-        lat.sort();
+        lat.sort_by(f64::total_cmp);
         println!(
             "valve-bridge client, {}: {:.0} cycles/s = {:.0} transactions/s; cycle p50 {:.0} us, p99 {:.0} us, max {:.0} us; {} faults",
             if fc23 { "FC 23 (1 transaction/cycle)" } else { "FC 16 + FC 3 (2 transactions/cycle)" },

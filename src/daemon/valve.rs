@@ -72,10 +72,8 @@ impl Backend {
                 Ok(Backend::Modbus(Box::new(valve)))
             }
             ValveKind::ModbusRtu => {
+                // The bus budget is logged by its own check, once.
                 let valve = modbus(cfg.rtu.clone().map(Link::Rtu))?.await?;
-                if let Some(b) = valve.budget() {
-                    tracing::info!("{}", b.describe());
-                }
                 Ok(Backend::Modbus(Box::new(valve)))
             }
             ValveKind::Emulated => {

@@ -157,11 +157,20 @@ impl Budget {
     /// margin is thin.
     pub fn check(self) -> Result<Budget, BudgetError> {
         match self.verdict() {
-            Verdict::TooSlow => Err(BudgetError(format!(
-                "{}: refusing {:.1} Hz (raise the baud rate, set fc23 = true, or lower the loop rate)",
-                self.describe(),
-                1.0 / self.period_s
-            ))),
+            Verdict::TooSlow => {
+                // FC 23 only helps a plan of more than one transaction.
+                let fc23 = if self.transactions.len() > 1 {
+                    ", set [valve.registers] fc23 = true"
+                } else {
+                    ""
+                };
+                Err(BudgetError(format!(
+                    "{}: refusing {:.1} Hz (raise [valve.modbus-rtu] baud{fc23}, or lower [loop] rate_hz to {:.0} or less)",
+                    self.describe(),
+                    1.0 / self.period_s,
+                    self.max_rate_hz().floor()
+                )))
+            }
             Verdict::Thin => {
                 tracing::warn!("thin bus margin: {}", self.describe());
                 Ok(self)
@@ -208,6 +217,10 @@ mod tests {
             err.contains("29.5 ms") && err.contains("refusing 100.0 Hz") && err.contains("33.9 Hz"),
             "{err}"
         );
+        assert!(
+            err.ends_with("(raise [valve.modbus-rtu] baud, set [valve.registers] fc23 = true, or lower [loop] rate_hz to 33 or less)"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -216,6 +229,12 @@ mod tests {
         let b = Budget::rtu(&link(19200), &fc23(), 0.01);
         assert!((b.cycle_s - 0.017_615).abs() < 1e-6, "{}", b.cycle_s);
         assert_eq!(b.verdict(), Verdict::TooSlow);
+        // Already one transaction: the fix is the baud rate or the loop rate, not fc23.
+        let err = b.clone().check().unwrap_err().to_string();
+        assert!(
+            err.ends_with("(raise [valve.modbus-rtu] baud, or lower [loop] rate_hz to 56 or less)"),
+            "{err}"
+        );
         // ... but carries 50 Hz with a thin margin (88 %).
         let b = Budget::rtu(&link(19200), &fc23(), 0.02);
         assert_eq!(b.verdict(), Verdict::Thin);

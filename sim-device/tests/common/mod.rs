@@ -1,5 +1,6 @@
-//! Starting and stopping the real sim-device binary for the integration tests.
-#![allow(dead_code)] // each test file uses a different part of this helper
+//! Starting and stopping the real sim-device binary for the integration tests and the benches
+//! (which include this file with `#[path]`).
+#![allow(dead_code)] // each test file and bench uses a different part of this helper
 
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, ChildStdout, Command, Stdio};
@@ -93,4 +94,12 @@ pub fn have(program: &str, probe: &[&str], install: &str) -> bool {
         println!("SKIPPED: `{program}` is not available ({install})");
     }
     ok
+}
+
+/// The value at quantile `q` (0-1) of ascending `sorted` values (nearest rank); 0 when empty.
+pub fn percentile(sorted: &[f64], q: f64) -> f64 {
+    match sorted.len() {
+        0 => 0.0,
+        n => sorted[((n - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize],
+    }
 }
