@@ -1,6 +1,5 @@
 //! `valve-bridge diagnose`: locate model mismatch, name the missing physics, prove the fix.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -34,7 +33,10 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let rec = recording::read(&args.recording, &args.read.options()?)?;
     let base = args.model.as_deref().map(ModelSpec::load).transpose()?;
-    let bar = progress_bar();
+    let bar = super::progress_bar(
+        1,
+        "diagnosing {bar:30} {pos}/{len} refit rounds of candidates",
+    );
     let report = |done: usize, total: usize| {
         if let Some(b) = &bar {
             b.set_length(total as u64);
@@ -63,19 +65,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_text(&d);
     }
     Ok(())
-}
-
-fn progress_bar() -> Option<indicatif::ProgressBar> {
-    std::io::stderr().is_terminal().then(|| {
-        let b = indicatif::ProgressBar::new(1);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "diagnosing {bar:30} {pos}/{len} refit rounds of candidates",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        b
-    })
 }
 
 fn write_out(

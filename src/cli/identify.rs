@@ -2,7 +2,6 @@
 //! print Table 1 (with held-out scores and AIC/BIC), Table 2 and the maintenance figures;
 //! `--out` writes the fitted model files, the JSON and a self-contained HTML report.
 
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -55,7 +54,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         windows: args.windows.map(|w| w.0),
         ..Options::default()
     };
-    let bar = progress_bar(opts.models.len());
+    let bar = super::progress_bar(
+        opts.models.len() as u64,
+        "fitting {bar:30} {pos}/{len} models",
+    );
     let tick = |done: usize, _total: usize| {
         if let Some(b) = &bar {
             b.set_position(done as u64);
@@ -78,17 +80,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_text(&rec, &id, elapsed);
     }
     Ok(())
-}
-
-fn progress_bar(len: usize) -> Option<indicatif::ProgressBar> {
-    std::io::stderr().is_terminal().then(|| {
-        let b = indicatif::ProgressBar::new(len as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template("fitting {bar:30} {pos}/{len} models")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        b
-    })
 }
 
 /// A number for JSON: NaN and infinities become null.

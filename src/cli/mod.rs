@@ -8,7 +8,21 @@ pub mod run;
 pub mod simulate;
 pub mod steps;
 
+use std::io::IsTerminal;
 use std::process::ExitCode;
+
+/// A progress bar of `len` units drawn with `template` (indicatif syntax), only when stderr is
+/// a terminal: piped output and logs stay clean.
+pub fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> {
+    std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new(len);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(template)
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    })
+}
 
 /// Prints an error and its causes on one line, `valve-bridge: error: ...`, and picks the exit code.
 pub fn report(result: anyhow::Result<()>) -> ExitCode {

@@ -359,7 +359,12 @@ fn candidates(
             // closed is refitted with it (it may be faster than the baseline's average).
             let mut v = vec![vec![
                 f(Knob::Slowdown, 0.0, 10.0, 1.0),
-                f(Knob::Slew, 0.5, FASTEST_PCT_PER_S, (1.5 * slew).min(FASTEST_PCT_PER_S)),
+                f(
+                    Knob::Slew,
+                    0.5,
+                    FASTEST_PCT_PER_S,
+                    (1.5 * slew).min(FASTEST_PCT_PER_S),
+                ),
             ]];
             let c = get(Knob::Crossing);
             if c > 0.0 {
