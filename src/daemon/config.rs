@@ -1178,6 +1178,23 @@ mod tests {
     }
 
     #[test]
+    fn shipped_hil_config_serves_loopback_with_metrics() {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/hil.toml"));
+        let c = Config::load(Some(path)).unwrap();
+        assert_eq!(c.source.kind, SourceKind::ModbusServer);
+        assert_eq!(c.valve.kind, ValveKind::Emulated);
+        let m = &c.source.modbus_server;
+        assert!(m.listen.0.ip().is_loopback());
+        // The map written out in the file is the default one.
+        assert_eq!(m.registers, ModbusServerConfig::default().registers);
+        assert_eq!(c.safety.on_stop, OnStop::GoTo);
+        assert_eq!(
+            c.metrics.map(|x| x.listen.0.to_string()).as_deref(),
+            Some("127.0.0.1:9100")
+        );
+    }
+
+    #[test]
     fn model_file_loads_any_model() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/models/stiction.toml");
         let c = Config::from_toml(
