@@ -71,7 +71,7 @@ pub enum DaemonError {
     #[error("the virtual clock (--as-fast-as-possible, [loop] clock = \"virtual\") needs a simulated valve, not {0}")]
     VirtualClock(String),
     /// The virtual clock was asked for a process controller.
-    #[error("the virtual clock (--as-fast-as-possible) cannot serve a process controller, which runs on the wall clock: drop it with [source] kind = \"modbus-server\"")]
+    #[error("the virtual clock (--as-fast-as-possible) cannot serve a process controller ([source] kind = \"modbus-server\"), which runs on the wall clock: leave the option out")]
     VirtualClockController,
     /// A listening socket cannot be opened.
     #[error(
@@ -207,8 +207,8 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let modbus = match source.served_bank() {
         Some(bank) => {
             let key = "[source.modbus-server] listen";
-            let listener = bind(key, config.source.modbus_server.listen.0)?;
-            endpoints.push(("modbus-server", local_addr(key, &listener)?));
+            let (listener, addr) = bind(key, config.source.modbus_server.listen.0)?;
+            endpoints.push(("modbus-server", addr));
             Some((listener, Arc::clone(bank)))
         }
         None => None,
@@ -216,8 +216,8 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let exporter = match (&config.metrics, &metrics) {
         (Some(cfg), Some(m)) => {
             let key = "[metrics] listen";
-            let listener = bind(key, cfg.listen.0)?;
-            endpoints.push(("metrics", local_addr(key, &listener)?));
+            let (listener, addr) = bind(key, cfg.listen.0)?;
+            endpoints.push(("metrics", addr));
             Some((listener, m.registry().clone()))
         }
         _ => None,
@@ -313,10 +313,18 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     })
 }
 
-/// A listening socket on `addr` (named by its config `key` in errors), ready for tokio.
-fn bind(key: &'static str, addr: SocketAddr) -> Result<std::net::TcpListener, DaemonError> {
-    let listener = std::net::TcpListener::bind(addr)
-        .and_then(|l| l.set_nonblocking(true).map(|()| l))
+/// A listening socket on `addr` (named by its config `key` in errors), ready for tokio, and the
+/// address it is bound to (the port chosen when the config said port 0).
+fn bind(
+    key: &'static str,
+    addr: SocketAddr,
+) -> Result<(std::net::TcpListener, SocketAddr), DaemonError> {
+    let (listener, bound) = std::net::TcpListener::bind(addr)
+        .and_then(|l| {
+            l.set_nonblocking(true)?;
+            let bound = l.local_addr()?;
+            Ok((l, bound))
+        })
         .map_err(|source| DaemonError::Listen { key, addr, source })?;
     if !addr.ip().is_loopback() {
         tracing::warn!(
@@ -325,16 +333,7 @@ fn bind(key: &'static str, addr: SocketAddr) -> Result<std::net::TcpListener, Da
              nor the metrics endpoint has any authentication"
         );
     }
-    Ok(listener)
-}
-
-/// The address a listener is bound to (the port chosen when the config said port 0).
-fn local_addr(key: &'static str, l: &std::net::TcpListener) -> Result<SocketAddr, DaemonError> {
-    l.local_addr().map_err(|source| DaemonError::Listen {
-        key,
-        addr: SocketAddr::from(([0, 0, 0, 0], 0)),
-        source,
-    })
+    Ok((listener, bound))
 }
 
 /// The network thread (`vb-net`): the process controller's Modbus server and the metrics
@@ -429,15 +428,14 @@ impl Running {
             .control
             .join()
             .map_err(|_| DaemonError::Panicked("loop"));
-        // The controller and the scraper keep being answered until the stop action is logged.
-        if let Some(net) = self.net {
-            net.stop()?;
-        }
+        // The controller and the scraper are answered until the stop action has been applied.
+        let net = self.net.map(Net::stop).transpose();
         // The loop thread has dropped its sender: the logger drains, flushes and closes.
         let log = self
             .logger
             .join()
             .map_err(|_| DaemonError::Panicked("logger"))??;
+        net?;
         let end = end??;
         Ok(Summary {
             stats: end.stats,
