@@ -223,16 +223,20 @@ elif mode == "exceptions":
         print(name, r.isError(), getattr(r, "exception_code", None), flush=True)
     print("set-point", regs()[0], flush=True)
 elif mode == "watchdog":
-    # Writes 50 % for 1 s, goes quiet for 1 s, then writes once more.
+    # Writes 50 % for 1 s, goes quiet for 1 s, then writes again until the loop has seen it.
     end = time.time() + 1.0
     while time.time() < end:
         assert not write(500).isError()
         time.sleep(0.05)
     time.sleep(1.0)
     print("quiet", regs(), flush=True)
-    assert not write(500).isError()
-    time.sleep(0.2)
-    print("resumed", regs(), flush=True)
+    for _ in range(20):
+        assert not write(500).isError()
+        time.sleep(0.03)
+        words = regs()
+        if words[2] & 4 == 0:
+            break
+    print("resumed", words, flush=True)
 c.close()
 "#;
 

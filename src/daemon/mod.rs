@@ -353,26 +353,14 @@ impl Net {
         let serve = async move {
             let modbus = async {
                 if let Some((listener, bank)) = modbus {
-                    let served = match tokio::net::TcpListener::from_std(listener) {
-                        Ok(l) => hil::serve(l, bank).await,
-                        Err(e) => Err(e),
-                    };
-                    if let Err(e) = served {
-                        tracing::error!(
-                            "the Modbus server for the process controller stopped: {e}"
-                        );
-                    }
+                    let serve = |l| hil::serve(l, bank);
+                    serve_logged("Modbus server for the process controller", listener, serve).await;
                 }
             };
             let metrics = async {
                 if let Some((listener, registry)) = exporter {
-                    let served = match tokio::net::TcpListener::from_std(listener) {
-                        Ok(l) => exporter::serve(l, registry).await,
-                        Err(e) => Err(e),
-                    };
-                    if let Err(e) = served {
-                        tracing::error!("the metrics endpoint stopped: {e}");
-                    }
+                    let serve = |l| exporter::serve(l, registry);
+                    serve_logged("metrics endpoint", listener, serve).await;
                 }
             };
             tokio::select! {
@@ -398,6 +386,21 @@ impl Net {
         self.handle
             .join()
             .map_err(|_| DaemonError::Panicked("network"))
+    }
+}
+
+/// Serves `listener` with `serve` (on the network thread's runtime) and logs why it stopped.
+async fn serve_logged<F, Fut>(what: &str, listener: std::net::TcpListener, serve: F)
+where
+    F: FnOnce(tokio::net::TcpListener) -> Fut,
+    Fut: std::future::Future<Output = std::io::Result<()>>,
+{
+    let served = match tokio::net::TcpListener::from_std(listener) {
+        Ok(l) => serve(l).await,
+        Err(e) => Err(e),
+    };
+    if let Err(e) = served {
+        tracing::error!("the {what} stopped: {e}");
     }
 }
 
