@@ -2,7 +2,8 @@
 //! endpoint, through the real binary and independent Modbus clients:
 //!
 //! - a pymodbus controller writes O_P steps and reads V_P back: the emulated valve follows, and
-//!   the log shows the written O_P;
+//!   the log shows the written O_P; the same with sim-device behind, over Modbus TCP (sim-device
+//!   is built by `cargo test --workspace`; with `-p valve-bridge` alone build it first);
 //! - mbpoll (libmodbus) writes the set-point and reads the V_P register;
 //! - a set-point outside `op_min_pct..op_max_pct` gets exception 03, an unknown address 02;
 //! - the watchdog fires when the controller goes quiet: `watchdog` rows with the safe O_P, the
@@ -33,7 +34,7 @@ struct Row {
 
 /// A running daemon, the addresses it announced, and its output.
 struct Daemon {
-    child: Child,
+    child: KillOnDrop,
     stdout: BufReader<ChildStdout>,
     stderr: Option<JoinHandle<String>>,
     modbus: Option<String>,
@@ -74,7 +75,7 @@ impl Daemon {
         });
         let mut daemon = Daemon {
             stdout: BufReader::new(child.stdout.take().unwrap()),
-            child,
+            child: KillOnDrop(child),
             stderr: Some(stderr),
             modbus: None,
             metrics: None,
@@ -84,7 +85,7 @@ impl Daemon {
         for _ in 0..announced {
             let mut line = String::new();
             if daemon.stdout.read_line(&mut line).unwrap() == 0 {
-                let _ = daemon.child.wait();
+                let _ = daemon.child.0.wait();
                 let err = daemon.stderr.take().unwrap().join().unwrap();
                 panic!("the daemon ended before announcing its endpoints: {err}");
             }
@@ -108,9 +109,9 @@ impl Daemon {
     /// SIGTERM, then the exit status must be 0; returns the output and the log rows.
     fn stop(mut self) -> Stopped {
         // SAFETY: kill(2) on our own child's pid with a standard signal.
-        let rc = unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
+        let rc = unsafe { libc::kill(self.child.0.id() as libc::pid_t, libc::SIGTERM) };
         assert_eq!(rc, 0);
-        let status = self.child.wait().unwrap();
+        let status = self.child.0.wait().unwrap();
         let mut stdout = String::new();
         self.stdout.read_to_string(&mut stdout).unwrap();
         let stderr = self.stderr.take().unwrap().join().unwrap();
@@ -133,10 +134,13 @@ impl Daemon {
     }
 }
 
-impl Drop for Daemon {
+/// A child process killed when dropped.
+struct KillOnDrop(Child);
+
+impl Drop for KillOnDrop {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }
 
@@ -295,6 +299,62 @@ fn pymodbus_controller_drives_the_emulated_valve_and_the_log_shows_its_o_p() {
             .all(|r| r.status == "ok"),
         "the controller was writing"
     );
+}
+
+#[test]
+fn pymodbus_controller_drives_sim_device_through_the_loop() {
+    if !have_pymodbus() {
+        return;
+    }
+    let sim = Path::new(BIN).with_file_name("sim-device");
+    assert!(
+        sim.exists(),
+        "{} not built: run `cargo test --workspace`",
+        sim.display()
+    );
+    let mut device = KillOnDrop(
+        Command::new(sim)
+            .args(["--tcp", "127.0.0.1:0", "--model", "modelless"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    BufReader::new(device.0.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let device_addr = line
+        .trim()
+        .strip_prefix("tcp: ")
+        .expect("tcp: ADDR")
+        .to_string();
+    let daemon = Daemon::start(
+        &hil_config(
+            2.0,
+            &format!(
+                "[valve]\nkind = \"modbus-tcp\"\n[valve.modbus-tcp]\naddress = \"{device_addr}\"\n"
+            ),
+        ),
+        1,
+    );
+    let text = controller(&daemon, "steps");
+    assert!(
+        text.contains("reached 300") && text.contains("reached 150"),
+        "{text}"
+    );
+    let out = daemon.stop();
+    drop(device);
+    assert!(out.stdout.contains("reconnects: 0"), "{}", out.stdout);
+    // The device follows at once (modelless): logged V_P equals the O_P of a few cycles before.
+    for step in [30.0, 15.0] {
+        assert!(
+            out.rows
+                .iter()
+                .any(|r| r.op_pct == Some(step) && r.vp_pct == Some(step)),
+            "{step}"
+        );
+    }
 }
 
 #[test]
