@@ -11,7 +11,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use crate::daemon::config::SourceConfig;
+use crate::daemon::config::{SafetyConfig, SourceConfig};
 use crate::daemon::source::Source;
 use crate::model::{ModelError, ModelSpec, Valve};
 use crate::recording::{Recording, RecordingError};
@@ -59,7 +59,7 @@ pub fn generate(
         Excitation::RandomSteps => {
             let mut cfg = SourceConfig::default();
             cfg.random_steps.seed = seed;
-            let mut source = Source::new(&cfg, dt);
+            let mut source = Source::new(&cfg, &SafetyConfig::default(), dt);
             let first = source.op_at(0.0).unwrap_or(50.0);
             valve.reset(first, first);
             for k in 0..n {

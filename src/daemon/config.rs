@@ -1,6 +1,7 @@
 //! The daemon's TOML configuration: types, defaults, range checks and the embedded default.
 //!
-//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]` and `[log]`, all optional.
+//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]` and `[metrics]`,
+//! all optional (no `[metrics]`: no Prometheus endpoint).
 //! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
 //! each kind live in their own sub-table (`[valve.emulated]`, `[source.sine]`, ...), so a file
 //! can keep settings for several kinds and switch with one line, and every key keeps its exact
@@ -10,13 +11,15 @@
 //!
 //! This module does not run anything; [`crate::daemon`] builds the loop from a [`Config`].
 
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use serde::Deserialize;
 
+use super::hil;
 use crate::modbus::link::{RtuLink, TcpLink};
-use crate::modbus::map::RegisterMap;
+use crate::modbus::map::{RegisterMap, StatusRegister, Table};
 use crate::model::{bundled, ModelError, ModelKind, ModelSpec};
 use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
 use crate::toml_file::{self, TomlError};
@@ -46,6 +49,8 @@ pub struct Config {
     /// The CSV log.
     #[serde(default)]
     pub log: LogConfig,
+    /// The Prometheus endpoint, if any.
+    pub metrics: Option<MetricsConfig>,
 }
 
 /// `[loop]`: rate and clock.
@@ -207,6 +212,9 @@ pub struct SourceConfig {
     pub replay: Option<ReplayConfig>,
     /// `[source.constant]`.
     pub constant: Option<ConstantConfig>,
+    /// `[source.modbus-server]`.
+    #[serde(rename = "modbus-server")]
+    pub modbus_server: ModbusServerConfig,
 }
 
 impl Default for SourceConfig {
@@ -222,6 +230,7 @@ impl Default for SourceConfig {
             prbs: PrbsConfig::default(),
             replay: None,
             constant: None,
+            modbus_server: ModbusServerConfig::default(),
         }
     }
 }
@@ -244,6 +253,8 @@ pub enum SourceKind {
     Replay,
     /// One fixed O_P.
     Constant,
+    /// Whatever a process controller writes into the daemon's Modbus TCP server (HIL).
+    ModbusServer,
 }
 
 impl SourceKind {
@@ -257,6 +268,7 @@ impl SourceKind {
             SourceKind::Prbs => "prbs",
             SourceKind::Replay => "replay",
             SourceKind::Constant => "constant",
+            SourceKind::ModbusServer => "modbus-server",
         }
     }
 }
@@ -395,6 +407,72 @@ pub struct ReplayConfig {
 pub struct ConstantConfig {
     /// The O_P, %.
     pub op_pct: f64,
+}
+
+/// `[source.modbus-server]`: the Modbus TCP server a process controller writes O_P into.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModbusServerConfig {
+    /// Address to serve on; loopback unless set otherwise here.
+    pub listen: ListenAddr,
+    /// No accepted set-point write for this long applies the `[safety]` action, s.
+    pub watchdog_s: f64,
+    /// O_P before the controller's first write, % (default: `[safety] go_to_pct` with
+    /// `on_stop = "go-to"`, else `[source] op_min_pct`).
+    pub initial_pct: Option<f64>,
+    /// `[source.modbus-server.registers]`: the map served (default: per-mille set-point in
+    /// holding 0, position in holding 1, status in holding 2).
+    pub registers: RegisterMap,
+}
+
+impl Default for ModbusServerConfig {
+    fn default() -> Self {
+        ModbusServerConfig {
+            listen: ListenAddr(SocketAddr::from(([127, 0, 0, 1], 5020))),
+            watchdog_s: 1.0,
+            initial_pct: None,
+            registers: RegisterMap {
+                status: Some(StatusRegister {
+                    table: Table::Holding,
+                    address: 2,
+                    setpoint_error_bit: 0,
+                }),
+                ..RegisterMap::default()
+            },
+        }
+    }
+}
+
+/// `[metrics]`: the Prometheus endpoint.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MetricsConfig {
+    /// Address of the HTTP endpoint (`GET /metrics`).
+    pub listen: ListenAddr,
+}
+
+impl Default for MetricsConfig {
+    fn default() -> Self {
+        MetricsConfig {
+            listen: ListenAddr(SocketAddr::from(([127, 0, 0, 1], 9100))),
+        }
+    }
+}
+
+/// An `IP:port` to listen on, from a string such as `"127.0.0.1:5020"` (names are not resolved).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ListenAddr(pub SocketAddr);
+
+impl<'de> Deserialize<'de> for ListenAddr {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse().map(ListenAddr).map_err(|_| {
+            serde::de::Error::custom(format!(
+                "`{text}` is not an IP address and port: write e.g. \"127.0.0.1:5020\" \
+                 (host names are not resolved; \"0.0.0.0:5020\" serves every interface)"
+            ))
+        })
+    }
 }
 
 /// `[safety]`.
@@ -800,6 +878,7 @@ impl Config {
                     "an opening in %",
                 )?;
             }
+            SourceKind::ModbusServer => self.check_modbus_server(text, path)?,
         }
 
         if self.safety.on_stop == OnStop::GoTo {
@@ -840,7 +919,76 @@ impl Config {
             1000.0,
             "a flush interval in ms",
         )?;
+        if let (Some(m), SourceKind::ModbusServer) = (&self.metrics, self.source.kind) {
+            let hil = self.source.modbus_server.listen.0;
+            if m.listen.0 == hil && hil.port() != 0 {
+                return Err(bad(
+                    "metrics",
+                    "listen",
+                    format!("{hil} is also [source.modbus-server] listen: give the endpoint its own port, e.g. \"127.0.0.1:9100\""),
+                ));
+            }
+        }
         Ok(self)
+    }
+
+    /// The checks of `[source.modbus-server]`, when it is the source.
+    fn check_modbus_server(&self, text: &str, path: &Path) -> Result<(), TomlError> {
+        let t = "source.modbus-server";
+        let bad = |table: &str, key: &str, message: String| {
+            toml_file::invalid(text, path, Some(table), key, message)
+        };
+        let m = &self.source.modbus_server;
+        if self.loop_.clock == ClockKind::Virtual {
+            return Err(bad(
+                "loop",
+                "clock",
+                "\"virtual\" cannot serve a process controller, which runs on the wall clock: \
+                 use clock = \"real\" with [source] kind = \"modbus-server\""
+                    .into(),
+            ));
+        }
+        if !(m.watchdog_s.is_finite() && m.watchdog_s > 0.0 && m.watchdog_s <= 3600.0) {
+            return Err(bad(
+                t,
+                "watchdog_s",
+                format!(
+                    "{} is not allowed: the time without a set-point write after which the \
+                     [safety] action applies, above 0 and at most 3600 s, e.g. 1.0",
+                    m.watchdog_s
+                ),
+            ));
+        }
+        if let Some(v) = m.initial_pct {
+            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
+                return Err(bad(
+                    t,
+                    "initial_pct",
+                    format!("{v} is out of range: the O_P before the first write, an opening in %, 0 to 100"),
+                ));
+            }
+        }
+        let section = "source.modbus-server.registers";
+        m.registers.check_in(text, path, section)?;
+        if let Some(st) = m.registers.status {
+            let bit = st.setpoint_error_bit;
+            if bit == hil::VALVE_FAULT_BIT || bit == hil::WATCHDOG_BIT {
+                return Err(TomlError::Invalid {
+                    path: path.to_path_buf(),
+                    line: toml_file::line_of(text, Some(section), "status")
+                        .or_else(|| toml_file::line_of(text, Some(section), ""))
+                        .unwrap_or(1),
+                    key: format!("{section}.status.setpoint_error_bit"),
+                    message: format!(
+                        "{bit} is taken: the daemon reports a valve fault in bit {} and the \
+                         watchdog in bit {} of the status register; use 0 or 3-15",
+                        hil::VALVE_FAULT_BIT,
+                        hil::WATCHDOG_BIT
+                    ),
+                });
+            }
+        }
+        Ok(())
     }
 }
 
@@ -970,6 +1118,80 @@ mod tests {
             "{e}"
         );
         assert!(!e.contains('\n'), "{e}");
+    }
+
+    #[test]
+    fn modbus_server_and_metrics_errors_name_their_key() {
+        let hil = "[source]\nkind = \"modbus-server\"\n";
+        let cases = [
+            (
+                format!("{hil}[source.modbus-server]\nlisten = \"localhost:5020\"\n"),
+                "c.toml:4: source.modbus-server.listen: `localhost:5020` is not an IP address and port",
+            ),
+            (
+                format!("{hil}[source.modbus-server]\nwatchdog_s = 0.0\n"),
+                "c.toml:4: source.modbus-server.watchdog_s: 0 is not allowed",
+            ),
+            (
+                format!("{hil}[source.modbus-server]\ninitial_pct = 120.0\n"),
+                "c.toml:4: source.modbus-server.initial_pct: 120 is out of range",
+            ),
+            (
+                format!("{hil}op_min_pct = 50.0\nop_max_pct = 50.0\n"),
+                "c.toml:4: source.op_max_pct: must be above op_min_pct",
+            ),
+            (
+                format!("{hil}[source.modbus-server.registers]\nstatus = {{ address = 2, setpoint_error_bit = 2 }}\n"),
+                "c.toml:4: source.modbus-server.registers.status.setpoint_error_bit: 2 is taken",
+            ),
+            (
+                format!("{hil}[source.modbus-server.registers]\nposition = {{ address = 0, format = \"i16\" }}\n"),
+                "c.toml:4: source.modbus-server.registers.position.address: 0 overlaps setpoint",
+            ),
+            (
+                format!("[loop]\nclock = \"virtual\"\n{hil}"),
+                "c.toml:2: loop.clock: \"virtual\" cannot serve a process controller",
+            ),
+            (
+                "[metrics]\nlisten = \"9100\"\n".to_string(),
+                "c.toml:2: metrics.listen: `9100` is not an IP address and port",
+            ),
+            (
+                format!("{hil}[metrics]\nlisten = \"127.0.0.1:5020\"\n"),
+                "c.toml:4: metrics.listen: 127.0.0.1:5020 is also [source.modbus-server] listen",
+            ),
+        ];
+        for (text, want) in cases {
+            let e = err(&text);
+            assert!(e.starts_with(want), "{text}: {e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
+        // Defaults: loopback 5020, 1 s watchdog, per-mille map with a status register; no metrics.
+        let c = Config::from_toml(hil, Path::new("c.toml")).unwrap();
+        let m = &c.source.modbus_server;
+        assert_eq!(m.listen.0.to_string(), "127.0.0.1:5020");
+        assert_eq!(m.watchdog_s, 1.0);
+        assert_eq!(m.registers.status.map(|s| s.address), Some(2));
+        assert!(c.metrics.is_none());
+        let c = Config::from_toml("[metrics]\n", Path::new("c.toml")).unwrap();
+        assert_eq!(c.metrics.unwrap().listen.0.to_string(), "127.0.0.1:9100");
+    }
+
+    #[test]
+    fn shipped_hil_config_serves_loopback_with_metrics() {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/hil.toml"));
+        let c = Config::load(Some(path)).unwrap();
+        assert_eq!(c.source.kind, SourceKind::ModbusServer);
+        assert_eq!(c.valve.kind, ValveKind::Emulated);
+        let m = &c.source.modbus_server;
+        assert!(m.listen.0.ip().is_loopback());
+        // The map written out in the file is the default one.
+        assert_eq!(m.registers, ModbusServerConfig::default().registers);
+        assert_eq!(c.safety.on_stop, OnStop::GoTo);
+        assert_eq!(
+            c.metrics.map(|x| x.listen.0.to_string()).as_deref(),
+            Some("127.0.0.1:9100")
+        );
     }
 
     #[test]

@@ -54,6 +54,9 @@ pub enum Status {
     Error,
     /// The link to the valve is down; no V_P.
     Disconnected,
+    /// O_P written and V_P read, but the O_P is the safe one: the process controller of the
+    /// `modbus-server` source has not written a set-point for `watchdog_s`.
+    Watchdog,
     /// The slot was missed because the previous cycle overran; nothing sent, no V_P.
     Skipped,
     /// The stop action `hold`: the last O_P sent once more (V_P empty if that failed).
@@ -64,11 +67,12 @@ pub enum Status {
 
 impl Status {
     /// Every status, in the order of the summary.
-    pub const ALL: [Status; 7] = [
+    pub const ALL: [Status; 8] = [
         Status::Ok,
         Status::Timeout,
         Status::Error,
         Status::Disconnected,
+        Status::Watchdog,
         Status::Skipped,
         Status::SafeHold,
         Status::SafeGoTo,
@@ -81,6 +85,7 @@ impl Status {
             Status::Timeout => "timeout",
             Status::Error => "error",
             Status::Disconnected => "disconnected",
+            Status::Watchdog => "watchdog",
             Status::Skipped => "skipped",
             Status::SafeHold => "safe-hold",
             Status::SafeGoTo => "safe-go-to",

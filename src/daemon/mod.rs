@@ -10,7 +10,11 @@
 //! Threads: the loop runs on its own OS thread (`vb-loop`) that sleeps to absolute deadlines
 //! ([`schedule`]) and runs each valve transaction on a current-thread tokio runtime it owns, so
 //! async backends need no other thread and no cross-thread hop. The logger writes on its own
-//! thread. The calling thread waits for signals (tokio), drives the progress display and joins.
+//! thread. The network thread (`vb-net`, only when there is something to serve) runs the
+//! process controller's Modbus server ([`hil`]) and the Prometheus endpoint ([`exporter`]) on a
+//! runtime of its own: the loop shares only a register bank and atomic metric handles with it and
+//! never waits on a socket. The calling thread waits for signals (tokio), drives the progress
+//! display and joins.
 //!
 //! Sample convention (as [`crate::model::Valve::simulate_into`]): in slot `k` the valve gets
 //! `op_k` and the V_P it returns is sample `k`. The emulated valve starts at rest at the first
@@ -19,12 +23,16 @@
 //! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis.
 
 pub mod config;
+pub mod exporter;
+pub mod hil;
 pub mod logger;
 pub mod schedule;
 pub mod source;
 pub mod stats;
 pub mod valve;
 
+use std::io::Write;
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
@@ -35,7 +43,8 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 pub use config::Config;
-use config::{ClockKind, OnStop};
+use config::{ClockKind, OnStop, SourceKind};
+use exporter::LoopMetrics;
 use logger::{LogReport, Logger, Sample, Status};
 use schedule::{Schedule, Slot};
 use source::Source;
@@ -43,6 +52,7 @@ pub use stats::Summary;
 use stats::{Live, Stats, StopReason};
 use valve::{Backend, BackendError, Fault};
 
+use crate::modbus::server::RegisterBank;
 use crate::toml_file::TomlError;
 
 /// Why the daemon could not start or finish.
@@ -60,6 +70,22 @@ pub enum DaemonError {
     /// The virtual clock was asked for a real valve.
     #[error("the virtual clock (--as-fast-as-possible, [loop] clock = \"virtual\") needs a simulated valve, not {0}")]
     VirtualClock(String),
+    /// The virtual clock was asked for a process controller.
+    #[error("the virtual clock (--as-fast-as-possible) cannot serve a process controller ([source] kind = \"modbus-server\"), which runs on the wall clock: leave the option out")]
+    VirtualClockController,
+    /// A listening socket cannot be opened.
+    #[error(
+        "cannot listen on {addr} ({key}): {source} (is the port taken? set another address there)"
+    )]
+    Listen {
+        key: &'static str,
+        addr: SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The Prometheus metrics cannot be registered (a bug).
+    #[error("cannot set up the metrics: {0}")]
+    Metrics(#[from] prometheus::Error),
     /// The log directory cannot be created.
     #[error(
         "cannot create log directory `{dir}`: {source} (set another with --log-dir or [log] dir)"
@@ -115,6 +141,8 @@ pub struct Running {
     rate_hz: f64,
     control: JoinHandle<Result<LoopEnd, DaemonError>>,
     logger: JoinHandle<Result<LogReport, DaemonError>>,
+    net: Option<Net>,
+    endpoints: Vec<(&'static str, SocketAddr)>,
 }
 
 /// What the loop thread hands back.
@@ -134,6 +162,7 @@ struct Loop {
     realtime_priority: u8,
     source: Source,
     backend: Backend,
+    metrics: Option<LoopMetrics>,
     safe_action: OnStop,
     go_to_pct: Option<f64>,
     max_slots: Option<u64>,
@@ -164,6 +193,35 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     if clock == ClockKind::Virtual && !config.valve.kind.is_simulated() {
         return Err(DaemonError::VirtualClock(config.valve.kind.tag().into()));
     }
+    if clock == ClockKind::Virtual && config.source.kind == SourceKind::ModbusServer {
+        return Err(DaemonError::VirtualClockController);
+    }
+    // Sockets are bound before the valve is opened, so a taken port stops the start first.
+    let source = Source::new(&config.source, &config.safety, period_s);
+    let metrics = config
+        .metrics
+        .as_ref()
+        .map(|_| LoopMetrics::new())
+        .transpose()?;
+    let mut endpoints = Vec::new();
+    let modbus = match source.served_bank() {
+        Some(bank) => {
+            let key = "[source.modbus-server] listen";
+            let (listener, addr) = bind(key, config.source.modbus_server.listen.0)?;
+            endpoints.push(("modbus-server", addr));
+            Some((listener, Arc::clone(bank)))
+        }
+        None => None,
+    };
+    let exporter = match (&config.metrics, &metrics) {
+        (Some(cfg), Some(m)) => {
+            let key = "[metrics] listen";
+            let (listener, addr) = bind(key, cfg.listen.0)?;
+            endpoints.push(("metrics", addr));
+            Some((listener, m.registry().clone()))
+        }
+        _ => None,
+    };
     // The backend is opened on the loop thread, inside the runtime that will drive its I/O; the
     // rest of the loop is handed over once it is open, so a valve that cannot be reached stops
     // the start before any log file is created.
@@ -175,7 +233,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .name("vb-loop".into())
         .spawn(move || {
             // On an error here `ready_tx` is dropped unsent and start() reads the error from the join.
-            let rt = loop_runtime()?;
+            let rt = current_thread_runtime("loop runtime")?;
             let backend = rt.block_on(Backend::open(&valve_cfg, period_s))?;
             ready_tx
                 .send(backend.describe())
@@ -196,7 +254,14 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
             _ => DaemonError::Panicked("loop"),
         });
     };
-    let source = Source::new(&config.source, period_s);
+    let net = if modbus.is_some() || exporter.is_some() {
+        Some(Net::start(modbus, exporter)?)
+    } else {
+        None
+    };
+    for (name, addr) in &endpoints {
+        tracing::info!(%addr, "serving {name}");
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let live = Arc::new(Live::default());
     let dir = opts
@@ -220,6 +285,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         realtime_priority: config.loop_.realtime_priority,
         source,
         backend,
+        metrics,
         safe_action: config.safety.on_stop,
         go_to_pct: config.safety.go_to_pct,
         max_slots: opts
@@ -242,7 +308,100 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         rate_hz,
         control,
         logger: logger.handle,
+        net,
+        endpoints,
     })
+}
+
+/// A listening socket on `addr` (named by its config `key` in errors), ready for tokio, and the
+/// address it is bound to (the port chosen when the config said port 0).
+fn bind(
+    key: &'static str,
+    addr: SocketAddr,
+) -> Result<(std::net::TcpListener, SocketAddr), DaemonError> {
+    let (listener, bound) = std::net::TcpListener::bind(addr)
+        .and_then(|l| {
+            l.set_nonblocking(true)?;
+            let bound = l.local_addr()?;
+            Ok((l, bound))
+        })
+        .map_err(|source| DaemonError::Listen { key, addr, source })?;
+    if !addr.ip().is_loopback() {
+        tracing::warn!(
+            %addr,
+            "{key} is not a loopback address: other machines can reach it, and neither Modbus \
+             nor the metrics endpoint has any authentication"
+        );
+    }
+    Ok((listener, bound))
+}
+
+/// The network thread (`vb-net`): the process controller's Modbus server and the metrics
+/// endpoint, on a current-thread runtime of their own. It ends when [`Net`] is stopped or dropped.
+struct Net {
+    stop: tokio::sync::oneshot::Sender<()>,
+    handle: JoinHandle<()>,
+}
+
+impl Net {
+    fn start(
+        modbus: Option<(std::net::TcpListener, Arc<RegisterBank>)>,
+        exporter: Option<(std::net::TcpListener, prometheus::Registry)>,
+    ) -> Result<Net, DaemonError> {
+        let rt = current_thread_runtime("network runtime")?;
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let serve = async move {
+            let modbus = async {
+                if let Some((listener, bank)) = modbus {
+                    let serve = |l| hil::serve(l, bank);
+                    serve_logged("Modbus server for the process controller", listener, serve).await;
+                }
+            };
+            let metrics = async {
+                if let Some((listener, registry)) = exporter {
+                    let serve = |l| exporter::serve(l, registry);
+                    serve_logged("metrics endpoint", listener, serve).await;
+                }
+            };
+            tokio::select! {
+                // Sent or dropped: either way the daemon is done.
+                _ = stopped => {}
+                _ = async { tokio::join!(modbus, metrics) } => {}
+            }
+        };
+        let handle = std::thread::Builder::new()
+            .name("vb-net".into())
+            .spawn(move || rt.block_on(serve))
+            .map_err(|source| DaemonError::Thread {
+                what: "network thread",
+                source,
+            })?;
+        Ok(Net { stop, handle })
+    }
+
+    /// Stops serving and waits for the thread.
+    fn stop(self) -> Result<(), DaemonError> {
+        // An error only means the thread has already ended.
+        let _ = self.stop.send(());
+        self.handle
+            .join()
+            .map_err(|_| DaemonError::Panicked("network"))
+    }
+}
+
+/// Serves `listener` with `serve` (on the network thread's runtime) and logs why it stopped.
+async fn serve_logged<F, Fut>(what: &str, listener: std::net::TcpListener, serve: F)
+where
+    F: FnOnce(tokio::net::TcpListener) -> Fut,
+    Fut: std::future::Future<Output = std::io::Result<()>>,
+{
+    let served = match tokio::net::TcpListener::from_std(listener) {
+        Ok(l) => serve(l).await,
+        Err(e) => Err(e),
+    };
+    if let Err(e) = served {
+        tracing::error!("the {what} stopped: {e}");
+    }
 }
 
 impl Running {
@@ -261,17 +420,25 @@ impl Running {
         &self.live
     }
 
+    /// What the daemon serves, by name (`modbus-server`, `metrics`), with the bound addresses.
+    pub fn endpoints(&self) -> &[(&'static str, SocketAddr)] {
+        &self.endpoints
+    }
+
     /// Waits for the loop and the logger to end and returns the summary.
     pub fn finish(self) -> Result<Summary, DaemonError> {
         let end = self
             .control
             .join()
             .map_err(|_| DaemonError::Panicked("loop"));
+        // The controller and the scraper are answered until the stop action has been applied.
+        let net = self.net.map(Net::stop).transpose();
         // The loop thread has dropped its sender: the logger drains, flushes and closes.
         let log = self
             .logger
             .join()
             .map_err(|_| DaemonError::Panicked("logger"))??;
+        net?;
         let end = end??;
         Ok(Summary {
             stats: end.stats,
@@ -299,6 +466,7 @@ pub fn run(config: Config, opts: RunOptions) -> Result<Summary, DaemonError> {
         let mut sigint = signal(SignalKind::interrupt()).map_err(thread_err("SIGINT handler"))?;
         let mut sigterm = signal(SignalKind::terminate()).map_err(thread_err("SIGTERM handler"))?;
         let running = start(config, opts)?;
+        announce(running.endpoints());
         let bar = progress_bar(progress);
         let mut tick = tokio::time::interval(Duration::from_millis(50));
         while !running.is_finished() {
@@ -318,6 +486,16 @@ pub fn run(config: Config, opts: RunOptions) -> Result<Summary, DaemonError> {
         Ok::<_, DaemonError>(running)
     })?;
     running.finish()
+}
+
+/// Prints one `name: ADDR` line per endpoint on stdout, at once (a client may be waiting for it).
+fn announce(endpoints: &[(&'static str, SocketAddr)]) {
+    let mut out = std::io::stdout().lock();
+    for (name, addr) in endpoints {
+        // A closed stdout only loses the announcement; the daemon runs on.
+        let _ = writeln!(out, "{name}: {addr}");
+    }
+    let _ = out.flush();
 }
 
 fn progress_bar(enabled: bool) -> ProgressBar {
@@ -408,7 +586,12 @@ impl Loop {
             let Some(op) = self.source.op_at(t_s) else {
                 break (StopReason::SourceEnded, k, lateness);
             };
-            let row = self.transact(&rt, op, (k, t_s), lateness, None);
+            let mut row = self.transact(&rt, op, (k, t_s), lateness, None);
+            // A failed transaction keeps its failure status; the O_P column shows the safe O_P.
+            if row.status == Status::Ok && self.source.watchdog_tripped() {
+                row.status = Status::Watchdog;
+            }
+            self.source.feedback(&row);
             self.emit(row, Some(lateness))?;
             if k.is_multiple_of(100) {
                 self.live.publish_p99(&self.stats);
@@ -433,6 +616,7 @@ impl Loop {
                     vp_pct = row.vp_pct,
                     "stop action applied"
                 );
+                self.source.feedback(&row);
                 self.emit(row, Some(lateness_end))?;
                 Some(row)
             }
@@ -493,6 +677,13 @@ impl Loop {
     fn emit(&mut self, row: Sample, lateness: Option<Duration>) -> Result<(), DaemonError> {
         self.stats.record(&row, lateness);
         self.live.publish(&row);
+        if let Some(m) = &self.metrics {
+            m.record(&row, lateness);
+            m.totals(
+                self.backend.reconnects().unwrap_or(0),
+                self.source.watchdog_trips(),
+            );
+        }
         // The logger only hangs up by panicking; its join reports that.
         self.tx
             .send(row)
@@ -500,15 +691,12 @@ impl Loop {
     }
 }
 
-/// The loop thread's current-thread runtime, which runs every valve transaction.
-fn loop_runtime() -> Result<tokio::runtime::Runtime, DaemonError> {
+/// A current-thread runtime: the loop thread's (every valve transaction) or the network thread's.
+fn current_thread_runtime(what: &'static str) -> Result<tokio::runtime::Runtime, DaemonError> {
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .map_err(|source| DaemonError::Thread {
-            what: "loop runtime",
-            source,
-        })
+        .map_err(|source| DaemonError::Thread { what, source })
 }
 
 /// A duration in µs with ns resolution (`0.021`, not `0.020999999999999998`).

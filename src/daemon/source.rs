@@ -1,11 +1,15 @@
-//! Sources of the wanted opening O_P: random steps, steps, ramp, sine, PRBS, replay, constant.
+//! Sources of the wanted opening O_P: random steps, steps, ramp, sine, PRBS, replay, constant,
+//! and a process controller writing over Modbus (`modbus-server`, see [`super::hil`]).
 //!
 //! A [`Source`] is asked `op_at(t_s)` once per cycle with non-decreasing loop times and answers
 //! the clamped O_P, or `None` when it has nothing more to give (only a replay ends). Random
 //! sources are seeded (ChaCha8) and depend on the time only, not on how often they are asked, so a
 //! skipped cycle does not change what later cycles get. Asking never allocates.
 //!
-//! Sources do not know about valves or timing; the clamp range comes from `[source]`.
+//! Generated sources do not know about valves or timing; the clamp range comes from `[source]`.
+//! The `modbus-server` source is the exception: its set-points were range-checked when written
+//! (its safe O_P, like the stop action's, is not clamped), and the loop hands it each cycle's row
+//! ([`Source::feedback`]) to publish V_P to the controller.
 
 use std::f64::consts::TAU;
 use std::sync::Arc;
@@ -13,7 +17,10 @@ use std::sync::Arc;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{SourceConfig, SourceKind};
+use super::config::{SafetyConfig, SourceConfig, SourceKind};
+use super::hil::Controller;
+use super::logger::Sample;
+use crate::modbus::server::RegisterBank;
 
 /// Slack when turning a time into a step or bit index, so `0.3 / 0.1` counts as 3, not 2.999...
 const INDEX_EPS: f64 = 1e-9;
@@ -64,13 +71,15 @@ enum Kind {
         period_s: f64,
     },
     Constant(f64),
+    Controller(Controller),
 }
 
 impl Source {
-    /// The source `[source]` describes, for a loop of period `period_s`.
+    /// The source `[source]` describes, for a loop of period `period_s` (`[safety]` gives the
+    /// safe O_P of the controller's watchdog).
     ///
     /// The config must have been checked by [`super::config::Config::load`] (ranges, tables).
-    pub fn new(cfg: &SourceConfig, period_s: f64) -> Source {
+    pub fn new(cfg: &SourceConfig, safety: &SafetyConfig, period_s: f64) -> Source {
         let kind = match cfg.kind {
             SourceKind::RandomSteps => {
                 let r = &cfg.random_steps;
@@ -127,6 +136,7 @@ impl Source {
             SourceKind::Constant => {
                 Kind::Constant(cfg.constant.as_ref().map_or(cfg.op_min_pct, |c| c.op_pct))
             }
+            SourceKind::ModbusServer => Kind::Controller(Controller::new(cfg, safety)),
         };
         Source {
             kind,
@@ -211,8 +221,37 @@ impl Source {
             // Held onto the loop grid at load time (`recording::resample_zoh`): slot k is entry k.
             Kind::Replay { op, period_s } => *op.get((t_s / *period_s).round() as usize)?,
             Kind::Constant(v) => *v,
+            Kind::Controller(c) => return Some(c.op_at(t_s)),
         };
         Some(raw.clamp(self.min_pct, self.max_pct))
+    }
+
+    /// The register bank a process controller writes into (`modbus-server` only).
+    pub fn served_bank(&self) -> Option<&Arc<RegisterBank>> {
+        match &self.kind {
+            Kind::Controller(c) => Some(c.bank()),
+            _ => None,
+        }
+    }
+
+    /// True while the controller's watchdog holds the safe O_P (`modbus-server` only).
+    pub fn watchdog_tripped(&self) -> bool {
+        matches!(&self.kind, Kind::Controller(c) if c.tripped())
+    }
+
+    /// How often the controller's watchdog has fired (0 for other sources).
+    pub fn watchdog_trips(&self) -> u64 {
+        match &self.kind {
+            Kind::Controller(c) => c.trips(),
+            _ => 0,
+        }
+    }
+
+    /// Hands a cycle's row to the source (the controller publishes its V_P and status).
+    pub fn feedback(&self, row: &Sample) {
+        if let Kind::Controller(c) = &self.kind {
+            c.feedback(row);
+        }
     }
 }
 
@@ -224,7 +263,7 @@ mod tests {
 
     fn source(toml: &str) -> Source {
         let cfg = Config::from_toml(toml, Path::new("t.toml")).unwrap();
-        Source::new(&cfg.source, cfg.loop_.period_s())
+        Source::new(&cfg.source, &cfg.safety, cfg.loop_.period_s())
     }
 
     fn series(s: &mut Source, n: usize) -> Vec<f64> {

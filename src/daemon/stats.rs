@@ -176,6 +176,7 @@ impl Summary {
     pub fn samples(&self) -> u64 {
         [
             Status::Ok,
+            Status::Watchdog,
             Status::Timeout,
             Status::Error,
             Status::Disconnected,
@@ -211,6 +212,13 @@ impl fmt::Display for Summary {
             s.count(Status::Error),
             s.count(Status::Disconnected)
         )?;
+        let held = s.count(Status::Watchdog);
+        if held > 0 {
+            writeln!(
+                f,
+                "watchdog: {held} cycles sent the safe O_P (no set-point from the controller)"
+            )?;
+        }
         writeln!(f, "missed cycles: {}", self.missed())?;
         if let Some(n) = self.reconnects {
             writeln!(f, "reconnects: {n}")?;

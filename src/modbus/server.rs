@@ -10,7 +10,10 @@
 //! function codes exception 01. [`BankService`] plugs the bank into tokio-modbus's servers.
 //!
 //! The bank does no I/O, owns no clock and runs no valve model: `sim-device` advances its valve
-//! and calls [`RegisterBank::set_position_pct`]; framing and fault injection live with the server.
+//! and calls [`RegisterBank::set_position_pct`], the daemon's `modbus-server` source reads the
+//! accepted set-points with [`RegisterBank::accepted`] and publishes V_P and its status bits with
+//! [`RegisterBank::report`]; framing and fault injection live with the server. Every method holds
+//! the bank's lock only for a few plain loads and stores, never across I/O.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
@@ -41,6 +44,7 @@ struct State {
     position_pct: f64,
     status: u16,
     last_write: Option<Instant>,
+    accepted: u64,
     rejected: u64,
 }
 
@@ -67,6 +71,7 @@ impl RegisterBank {
                 position_pct: 0.0,
                 status: 0,
                 last_write: None,
+                accepted: 0,
                 rejected: 0,
             }),
         }
@@ -88,9 +93,35 @@ impl RegisterBank {
         self.state().setpoint_pct
     }
 
+    /// The same bank with its set-point at `pct` before any write (what a read shows until then).
+    pub fn with_setpoint(mut self, pct: f64) -> Self {
+        match self.state.get_mut() {
+            Ok(st) => st.setpoint_pct = pct,
+            Err(poisoned) => poisoned.into_inner().setpoint_pct = pct,
+        }
+        self
+    }
+
+    /// The last accepted set-point, %, and how many set-point writes were accepted so far (read
+    /// together, so a new count always comes with its value).
+    pub fn accepted(&self) -> (f64, u64) {
+        let st = self.state();
+        (st.setpoint_pct, st.accepted)
+    }
+
     /// Sets the position the bank reports, %.
     pub fn set_position_pct(&self, pct: f64) {
         self.state().position_pct = pct;
+    }
+
+    /// Publishes a cycle's outcome: the position (None keeps the last one) and the status bits
+    /// under `mask` (the other bits, such as the set-point error bit, are left alone).
+    pub fn report(&self, position_pct: Option<f64>, mask: u16, bits: u16) {
+        let mut st = self.state();
+        if let Some(p) = position_pct {
+            st.position_pct = p;
+        }
+        st.status = (st.status & !mask) | (bits & mask);
     }
 
     /// The status word.
@@ -199,6 +230,7 @@ impl RegisterBank {
         match pct {
             Some(p) if p >= self.min_pct && p <= self.max_pct => {
                 st.setpoint_pct = p;
+                st.accepted += 1;
                 st.status &= !mask;
                 Ok(())
             }
@@ -278,6 +310,27 @@ mod tests {
         assert_eq!(write(&b, 50), Err(ExceptionCode::IllegalDataValue));
         assert_eq!(write(&b, 500), Ok(Response::WriteMultipleRegisters(0, 1)));
         assert_eq!(b.setpoint_pct(), 50.0);
+        assert_eq!(b.accepted(), (50.0, 1), "refused writes are not counted");
+        assert_eq!(b.rejected(), 2);
+    }
+
+    #[test]
+    fn report_sets_position_and_masked_status_bits_only() {
+        let b = RegisterBank::new(map(), 0.0, 100.0, OutOfRange::KeepAndFlag).with_setpoint(30.0);
+        assert_eq!(b.accepted(), (30.0, 0));
+        assert_eq!(write(&b, 1001), Ok(Response::WriteMultipleRegisters(0, 1)));
+        b.report(Some(12.3), 0b110, 0b111);
+        assert_eq!(
+            b.status(),
+            0b1110,
+            "error bit 3 kept, bit 0 outside the mask"
+        );
+        b.report(None, 0b110, 0b010);
+        assert_eq!(b.status(), 0b1010);
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(0, 3)),
+            Ok(Response::ReadHoldingRegisters(vec![300, 123, 0b1010]))
+        );
     }
 
     #[test]

@@ -1,0 +1,266 @@
+//! The `modbus-server` source: a process controller drives the loop over Modbus TCP (hardware in
+//! the loop).
+//!
+//! The daemon serves a [`RegisterBank`] with the map of `[source.modbus-server.registers]` on
+//! `listen` (loopback unless configured otherwise). The controller writes O_P into the set-point
+//! register and reads V_P from the position register and the loop's state from the status
+//! register, whatever valve is behind (emulated, or a positioner over Modbus). A set-point outside
+//! `[source] op_min_pct..op_max_pct` is refused with exception 03, an unmapped or read-only
+//! address with 02. The server answers any unit id.
+//!
+//! Each cycle the loop asks [`Controller::op_at`] for the last accepted set-point and hands the
+//! cycle's row to [`Controller::feedback`], which publishes V_P (the last one read is kept when a
+//! cycle read none) and the status bits:
+//! - bit [`VALVE_FAULT_BIT`] (1): the last cycle read no V_P (timeout, error, disconnected);
+//! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P.
+//!
+//! Until the first write the O_P is `initial_pct`. Watchdog: when no set-point write has been
+//! accepted for `watchdog_s` of loop time (counted from the start of the loop, so a controller
+//! that never writes trips it too), the `[safety]` action applies: `on_stop = "hold"` keeps the
+//! last O_P, `"go-to"` sends `go_to_pct`. The loop logs those cycles with the status `watchdog`,
+//! and a warning is logged once when the watchdog fires and once when writes resume; the next
+//! accepted write is followed at once. Refused writes do not feed the watchdog.
+//!
+//! The server runs on the daemon's network thread ([`serve`]); the loop only touches the bank,
+//! whose lock is held for a few loads and stores, so the loop never waits on the network.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use tokio::net::{TcpListener, TcpStream};
+
+use super::config::{OnStop, SafetyConfig, SourceConfig};
+use super::logger::Sample;
+use crate::modbus::server::{BankService, OutOfRange, RegisterBank};
+
+/// Status register bit set while the valve gives no V_P.
+pub const VALVE_FAULT_BIT: u8 = 1;
+/// Status register bit set while the watchdog holds the safe O_P.
+pub const WATCHDOG_BIT: u8 = 2;
+/// The status bits the daemon owns.
+const STATUS_MASK: u16 = (1 << VALVE_FAULT_BIT) | (1 << WATCHDOG_BIT);
+
+/// The loop's side of the `modbus-server` source: set-points in, V_P and status out, watchdog.
+#[derive(Debug)]
+pub struct Controller {
+    bank: Arc<RegisterBank>,
+    watchdog_s: f64,
+    /// The O_P the watchdog sends (`go-to`), or None to hold the last one.
+    safe_pct: Option<f64>,
+    op_pct: f64,
+    writes_seen: u64,
+    /// Loop time of the last accepted write (the start of the loop before the first).
+    last_write_t_s: f64,
+    tripped: bool,
+    trips: u64,
+}
+
+impl Controller {
+    /// The controller source `[source.modbus-server]` and `[safety]` describe (config checked).
+    pub fn new(source: &SourceConfig, safety: &SafetyConfig) -> Controller {
+        let cfg = &source.modbus_server;
+        let safe_pct = match safety.on_stop {
+            OnStop::Hold => None,
+            OnStop::GoTo => safety.go_to_pct,
+        };
+        let initial = cfg.initial_pct.or(safe_pct).unwrap_or(source.op_min_pct);
+        let bank = RegisterBank::new(
+            cfg.registers,
+            source.op_min_pct,
+            source.op_max_pct,
+            OutOfRange::Exception,
+        )
+        .with_setpoint(initial);
+        Controller {
+            bank: Arc::new(bank),
+            watchdog_s: cfg.watchdog_s,
+            safe_pct,
+            op_pct: initial,
+            writes_seen: 0,
+            last_write_t_s: 0.0,
+            tripped: false,
+            trips: 0,
+        }
+    }
+
+    /// The bank the server answers from.
+    pub fn bank(&self) -> &Arc<RegisterBank> {
+        &self.bank
+    }
+
+    /// The O_P for loop time `t_s`: the last accepted set-point, or the safe O_P while the
+    /// watchdog holds. Never waits and never allocates.
+    pub fn op_at(&mut self, t_s: f64) -> f64 {
+        let (setpoint, writes) = self.bank.accepted();
+        if writes != self.writes_seen {
+            self.writes_seen = writes;
+            self.last_write_t_s = t_s;
+            self.op_pct = setpoint;
+            if self.tripped {
+                self.tripped = false;
+                tracing::warn!(
+                    t_s,
+                    op_pct = setpoint,
+                    "watchdog: set-point writes resumed, following the process controller again"
+                );
+            }
+        } else if !self.tripped && t_s - self.last_write_t_s >= self.watchdog_s {
+            self.tripped = true;
+            self.trips += 1;
+            if let Some(safe) = self.safe_pct {
+                self.op_pct = safe;
+            }
+            tracing::warn!(
+                t_s,
+                op_pct = self.op_pct,
+                "watchdog: no set-point from the process controller for {} s, sending the safe O_P",
+                self.watchdog_s
+            );
+        }
+        self.op_pct
+    }
+
+    /// True while the watchdog holds the safe O_P.
+    pub fn tripped(&self) -> bool {
+        self.tripped
+    }
+
+    /// How often the watchdog has fired.
+    pub fn trips(&self) -> u64 {
+        self.trips
+    }
+
+    /// Publishes a cycle's V_P (kept if none was read) and status bits to the controller.
+    pub fn feedback(&self, row: &Sample) {
+        let bits = (u16::from(row.vp_pct.is_none()) << VALVE_FAULT_BIT)
+            | (u16::from(self.tripped) << WATCHDOG_BIT);
+        self.bank.report(row.vp_pct, STATUS_MASK, bits);
+    }
+}
+
+/// Serves `bank` over Modbus TCP on `listener` until the listener fails.
+pub async fn serve(listener: TcpListener, bank: Arc<RegisterBank>) -> std::io::Result<()> {
+    let server = tokio_modbus::server::tcp::Server::new(listener);
+    let on_connected = |stream: TcpStream, peer: SocketAddr| {
+        tracing::info!("process controller connected from {peer}");
+        // One register per request: latency matters more than throughput.
+        if let Err(e) = stream.set_nodelay(true) {
+            tracing::debug!("TCP_NODELAY on {peer}: {e}");
+        }
+        std::future::ready(Ok(Some((BankService(Arc::clone(&bank)), stream))))
+    };
+    server
+        .serve(&on_connected, |e| {
+            tracing::info!("process controller connection ended: {e}")
+        })
+        .await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::config::Config;
+    use crate::daemon::logger::Status;
+    use std::borrow::Cow;
+    use std::path::Path;
+    use tokio_modbus::{ExceptionCode, Request};
+
+    fn controller(toml: &str) -> Controller {
+        let cfg = Config::from_toml(
+            &format!(
+                "[source]\nkind = \"modbus-server\"\nop_min_pct = 10.0\nop_max_pct = 90.0\n{toml}"
+            ),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        Controller::new(&cfg.source, &cfg.safety)
+    }
+
+    fn write(c: &Controller, per_mille: u16) -> Result<(), ExceptionCode> {
+        c.bank()
+            .handle(&Request::WriteSingleRegister(0, per_mille))
+            .map(|_| ())
+    }
+
+    fn row(vp: Option<f64>) -> Sample {
+        Sample {
+            t_s: 0.0,
+            op_pct: Some(50.0),
+            vp_pct: vp,
+            status: Status::Ok,
+            lateness_us: None,
+            latency_us: None,
+        }
+    }
+
+    fn read(c: &Controller) -> Vec<u16> {
+        match c.bank().handle(&Request::ReadHoldingRegisters(0, 3)) {
+            Ok(tokio_modbus::Response::ReadHoldingRegisters(w)) => w,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn follows_writes_and_refuses_out_of_range() {
+        let mut c = controller("");
+        assert_eq!(c.op_at(0.0), 10.0, "op_min_pct before the first write");
+        assert_eq!(write(&c, 950), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(write(&c, 50), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(
+            c.bank()
+                .handle(&Request::WriteMultipleRegisters(7, Cow::Owned(vec![1]))),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(c.op_at(0.01), 10.0);
+        write(&c, 425).unwrap();
+        assert_eq!(c.op_at(0.02), 42.5);
+        c.feedback(&row(Some(40.1)));
+        assert_eq!(read(&c), vec![425, 401, 0]);
+        c.feedback(&row(None));
+        assert_eq!(read(&c), vec![425, 401, 1 << VALVE_FAULT_BIT], "V_P kept");
+    }
+
+    #[test]
+    fn watchdog_holds_then_follows_again() {
+        let mut c = controller("[source.modbus-server]\nwatchdog_s = 0.5\n");
+        write(&c, 300).unwrap();
+        assert_eq!(c.op_at(1.0), 30.0);
+        assert_eq!(c.op_at(1.49), 30.0);
+        assert!(!c.tripped());
+        assert_eq!(c.op_at(1.5), 30.0, "hold keeps the last O_P");
+        assert!(c.tripped());
+        c.feedback(&row(Some(29.0)));
+        assert_eq!(read(&c)[2], 1 << WATCHDOG_BIT);
+        assert_eq!(c.op_at(3.0), 30.0);
+        assert_eq!(c.trips(), 1, "fires once per silence");
+        write(&c, 600).unwrap();
+        assert_eq!(c.op_at(3.01), 60.0);
+        assert!(!c.tripped());
+        c.feedback(&row(Some(31.0)));
+        assert_eq!(read(&c)[2], 0);
+    }
+
+    #[test]
+    fn go_to_safety_sets_the_initial_and_watchdog_o_p() {
+        let safety = "[safety]\non_stop = \"go-to\"\ngo_to_pct = 5.0\n";
+        let mut c = controller(&format!(
+            "[source.modbus-server]\nwatchdog_s = 1.0\n{safety}"
+        ));
+        assert_eq!(c.op_at(0.0), 5.0, "go_to_pct before the first write");
+        assert_eq!(read(&c)[0], 50, "the set-point register shows it");
+        write(&c, 700).unwrap();
+        assert_eq!(c.op_at(0.5), 70.0);
+        assert_eq!(c.op_at(1.5), 5.0);
+        assert!(c.tripped());
+        let mut c = controller(&format!(
+            "[source.modbus-server]\ninitial_pct = 20.0\nwatchdog_s = 1.0\n{safety}"
+        ));
+        assert_eq!(c.op_at(0.0), 20.0);
+        assert_eq!(
+            c.op_at(1.0),
+            5.0,
+            "a controller that never writes trips it too"
+        );
+        assert_eq!(c.trips(), 1);
+    }
+}
