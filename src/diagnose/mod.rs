@@ -535,7 +535,7 @@ pub fn diagnose(
         return Err(DiagnoseError::TooShort(n));
     }
     let sigma = locate::noise_floor(vp);
-    let facts = evidence::measure(op, vp, dt);
+    let facts = evidence::measure(op, vp, dt, sigma);
     // Blocks of a twentieth of the recording (10-120 s) give ten held-out blocks.
     let block_len = (((n as f64 * dt / 20.0).clamp(10.0, 120.0) / dt) as usize).max(1);
     let scorer = Scorer {
