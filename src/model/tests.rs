@@ -505,7 +505,10 @@ fn open_slowdown_makes_the_valve_slower_when_open() {
         let mut v = Valve::new(&spec, DT).unwrap();
         v.reset(from, from);
         let out = run(&mut v, to, 1000);
-        out.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max) / DT
+        out.windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0, f64::max)
+            / DT
     };
     let slew = spec.pincart2.unwrap().dy_max_pct_per_s;
     let (near_closed, near_open) = (fastest(5.0, 35.0), fastest(65.0, 95.0));
