@@ -1,6 +1,7 @@
 //! `valve-bridge diagnose --json` on recordings whose hidden physics is known (`tests/data/cases`,
 //! with a truth file each): the effects named must be the truth's, nothing on the clean case,
-//! and the held-out error must drop whenever something is added.
+//! and the held-out error must drop whenever something is added, except for stick-slip judged
+//! by the slips of V_P (a limit cycle's phase is beyond the free-run error), which must say so.
 
 use std::path::Path;
 use std::process::Command;
@@ -35,7 +36,8 @@ fn diagnose(case: &str) -> (Value, Vec<String>) {
     (d, want)
 }
 
-fn check(case: &str) {
+/// Diagnoses `case`, checks the shape of the JSON and that the effects named are the truth's.
+fn named(case: &str) -> (Value, Vec<String>) {
     let (d, want) = diagnose(case);
     for key in [
         "baseline",
@@ -55,6 +57,11 @@ fn check(case: &str) {
         .collect();
     found.sort();
     assert_eq!(found, want, "{case}: {}", d["verdict"]);
+    (d, want)
+}
+
+fn check(case: &str) {
+    let (d, want) = named(case);
     let before = d["baseline"]["heldout_sse"].as_f64().unwrap();
     let after = d["final"]["heldout_sse"].as_f64().unwrap();
     if want.is_empty() {
@@ -96,4 +103,34 @@ fn air_supply_limit_is_slew_rate() {
 #[test]
 fn transport_delay_is_dead_time() {
     check("pub_deadtime_mixed");
+}
+
+#[test]
+fn opening_dependent_slowdown_is_state_dependent_delay() {
+    check("pub_sdd_rs");
+}
+
+#[test]
+fn hunting_valve_in_closed_loop_is_stiction_judged_by_its_slips() {
+    // A stick-slip limit cycle's phase is not set by O_P, so the free-run error cannot judge
+    // it: the slips of V_P did, and the finding and the verdict say so with their numbers.
+    let (d, _) = named("pub_stiction_normal_op");
+    let f = &d["findings"][0];
+    let evidence = f["evidence"].as_str().unwrap();
+    assert!(
+        evidence.contains("V_P slips by") && evidence.contains("signed-rank test p ="),
+        "{evidence}"
+    );
+    assert!(
+        d["verdict"]
+            .as_str()
+            .unwrap()
+            .contains("judged by the slips of V_P"),
+        "{}",
+        d["verdict"]
+    );
+    // The SSE is reported as it is, whichever way it went.
+    assert_eq!(f["heldout_sse_before"], d["baseline"]["heldout_sse"]);
+    assert_eq!(f["heldout_sse_after"], d["final"]["heldout_sse"]);
+    assert!(f["params"]["breakaway_pct"].as_f64().unwrap() > 0.1);
 }

@@ -3,7 +3,8 @@
 //! Each case is a closed level loop (gentle moves, many small reversals, no clean steps) or the
 //! paper's random steps through a healthy valve (FOPDT-like, 0.1 s dead time, 60 %/s stroke)
 //! with one small effect added, with sensor noise. The effect must be named, its size recovered,
-//! and the held-out error lowered; a healthy valve must get no finding.
+//! and the held-out error lowered; a healthy valve must get no finding, and a coarse sensor
+//! must not be taken for stiction. Stick-slip that hunts in the loop is found by its slips.
 
 use valve_bridge::diagnose::{self, composed, composed::Knob, Diagnosis};
 use valve_bridge::model::{bundled, ModelKind, ModelSpec};
@@ -112,4 +113,30 @@ fn slow_stroke_under_random_steps_is_a_slew_rate() {
     let d = run(&spec, Excitation::RandomSteps, 0.1, 5);
     assert_eq!(names(&d), ["slew_rate"], "{}", d.verdict);
     assert!((param(&d, "slew_pct_per_s") - 12.0).abs() < 1.0);
+}
+
+#[test]
+fn quantized_sensor_on_a_healthy_valve_is_not_stiction() {
+    // A smooth valve read on a 0.5 % lattice moves in sudden steps with rests between, like a
+    // sticking one, but one lattice step at a time: that is the sensor, not stick-slip.
+    let mut spec = healthy();
+    composed::set(&mut spec, Knob::Quantum, 0.5);
+    let d = run(&spec, LOOP, 0.0, 3);
+    assert_eq!(names(&d), ["quantization"], "{}", d.verdict);
+}
+
+#[test]
+fn hunting_by_stick_slip_in_closed_loop_is_found_by_its_slips() {
+    // Stick-slip inside the positioner loop: the valve hunts with a phase O_P does not set, so
+    // the free-run error cannot credit it; the slips of V_P do, with the breakaway's size.
+    let mut spec = healthy();
+    composed::set(&mut spec, Knob::Breakaway, 1.5);
+    let d = run(&spec, LOOP, 0.1, 3);
+    assert_eq!(names(&d), ["stiction"], "{}", d.verdict);
+    assert!((param(&d, "breakaway_pct") - 1.5).abs() < 0.2);
+    assert!(
+        d.verdict.contains("judged by the slips of V_P"),
+        "{}",
+        d.verdict
+    );
 }

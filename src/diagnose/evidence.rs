@@ -1,5 +1,6 @@
 //! Facts measured straight from a recording, without any model: step delays by direction,
-//! travel speeds, steady-state offsets and the sensor lattice.
+//! travel speeds, steady-state offsets, the sensor lattice and the slips of V_P (sudden moves
+//! while O_P is nearly still, the mark of stick-slip; see [`slips`]).
 //!
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
@@ -32,7 +33,7 @@ pub struct Hold {
 }
 
 /// Everything measured from the recording.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Facts {
     pub steps: Vec<StepResponse>,
     pub holds: Vec<Hold>,
@@ -43,18 +44,25 @@ pub struct Facts {
     pub lattice_pct: f64,
     /// Number of direction reversals of O_P.
     pub reversals: usize,
+    /// What counts as a slip in this recording, and the slips of the measured V_P.
+    pub slip_scale: SlipScale,
+    pub slips: Vec<Slip>,
 }
 
-/// Measures the facts of a recording sampled every `dt`.
-pub fn measure(op: &[f64], vp: &[f64], dt: f64) -> Facts {
+/// Measures the facts of a recording sampled every `dt` whose V_P has noise `sigma`.
+pub fn measure(op: &[f64], vp: &[f64], dt: f64, sigma: f64) -> Facts {
     let (open_speed, close_speed) = speeds(vp, dt);
+    let lattice_pct = lattice(vp);
+    let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     Facts {
         reversals: count_reversals(op),
         steps: step_responses(op, vp, dt),
         holds: holds(op, vp, dt),
         open_speed,
         close_speed,
-        lattice_pct: lattice(vp),
+        lattice_pct,
+        slips: slips(op, vp, &slip_scale),
+        slip_scale,
     }
 }
 
@@ -188,6 +196,107 @@ fn lattice(vp: &[f64]) -> f64 {
     }
 }
 
+/// A slip of V_P: a sudden move with V_P at rest just before and just after, while O_P was
+/// nearly still.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slip {
+    /// Sample at the middle of the move.
+    pub k: usize,
+    /// Signed size, %: the mean over the `span` samples after minus the mean over those before.
+    pub size_pct: f64,
+}
+
+/// What tells a slip from noise, a sensor step and a smooth move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlipScale {
+    /// Samples the move may take; the means before and after are over as many (>= 1).
+    pub span: usize,
+    /// Smallest slip, %.
+    pub threshold_pct: f64,
+    /// Samples before the move that O_P must have been nearly still for too (the valve's delay).
+    pub lookback: usize,
+}
+
+/// Longest move that still counts as a slip, s: a stem that breaks loose is at its new place
+/// within a tenth of a second, much faster than a positioner follows a command.
+const SLIP_S: f64 = 0.1;
+/// How long before a slip O_P must have been nearly still, s: covers a healthy positioner's
+/// dead time and response, so a valve catching up with a command is not a slip.
+const SLIP_LOOKBACK_S: f64 = 0.5;
+
+impl SlipScale {
+    /// The scale for a recording sampled every `dt` with V_P noise `sigma` and sensor lattice
+    /// `lattice` (0 = none): a slip stands five noise sigmas of the compared means above the
+    /// noise, is larger than one and a half lattice steps (a sensor step is not a slip), and
+    /// at least 0.1 %.
+    pub fn new(dt: f64, sigma: f64, lattice: f64) -> Self {
+        let span = ((SLIP_S / dt).round() as usize).max(1);
+        let noise = sigma * (2.0 / span as f64).sqrt();
+        SlipScale {
+            span,
+            threshold_pct: (5.0 * noise).max(1.5 * lattice).max(0.1),
+            lookback: (SLIP_LOOKBACK_S / dt).round() as usize,
+        }
+    }
+}
+
+/// Running sums of `x` with a leading 0: the sum of `x[a..b]` is `s[b] - s[a]`.
+fn running_sums(x: &[f64]) -> Vec<f64> {
+    let mut s = Vec::with_capacity(x.len() + 1);
+    let mut acc = 0.0;
+    s.push(acc);
+    for &v in x {
+        acc += v;
+        s.push(acc);
+    }
+    s
+}
+
+/// Mean of `x[k..k + h]` minus mean of `x[k - h..k]`, from the running sums `s` of `x`
+/// (needs h <= k <= len - h).
+fn step_at(s: &[f64], k: usize, h: usize) -> f64 {
+    ((s[k + h] - s[k]) - (s[k] - s[k - h])) / h as f64
+}
+
+/// The slips of `y` (measured or simulated V_P) driven by `op`.
+///
+/// With means over `span` samples, d(k) = mean(y[k..k+span]) - mean(y[k-span..k]) is a step
+/// detector: noise in it shrinks with the span, a jump of A completed within the span gives
+/// |d| close to A at its middle and little one span earlier or later, and a ramp (a valve
+/// following a moving command, or slewing) gives the same d at all three. A slip is a local
+/// peak of |d| above the threshold, with |d| a span before and after below half of it: V_P at
+/// rest on both sides (a spike of the sensor, which comes back within the span, is not). The
+/// command must not explain it: the same step detector on O_P stays below half the slip
+/// from `lookback` samples before the move to its middle (O_P noise averages out in the means
+/// as it does in the valve, a step or a fast move of O_P does not). O(n).
+pub fn slips(op: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
+    let h = scale.span;
+    let n = y.len().min(op.len());
+    let mut out = Vec::new();
+    if n < 4 * h + 1 {
+        return out;
+    }
+    let (sy, so) = (running_sums(&y[..n]), running_sums(&op[..n]));
+    let d = |k: usize| step_at(&sy, k, h);
+    let mut k = 2 * h;
+    while k + 2 * h <= n {
+        let a = d(k).abs();
+        if a < scale.threshold_pct
+            || d(k - h).abs() * 2.0 > a
+            || d(k + h).abs() * 2.0 > a
+            || (k - h + 1..k + h).any(|j| d(j).abs() > a)
+            || (k.saturating_sub(scale.lookback).max(h)..=k)
+                .any(|j| step_at(&so, j, h).abs() * 2.0 >= a)
+        {
+            k += 1;
+            continue;
+        }
+        out.push(Slip { k, size_pct: d(k) });
+        k += h;
+    }
+    out
+}
+
 /// Mean and standard deviation of a sample (0, 0 when empty).
 pub fn mean_sd(x: impl Iterator<Item = f64>) -> (f64, f64, usize) {
     let v: Vec<f64> = x.collect();
@@ -213,6 +322,87 @@ mod tests {
             .map(|k| 50.0 + 3.0 * (k as f64 * 0.01).sin())
             .collect();
         assert_eq!(lattice(&off), 0.0);
+    }
+
+    /// Deterministic noise of standard deviation `sd` (a sum of 12 uniforms).
+    fn noise(n: usize, sd: f64) -> Vec<f64> {
+        let mut state: u64 = 987654321;
+        (0..n)
+            .map(|_| {
+                let mut s = 0.0;
+                for _ in 0..12 {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    s += (state >> 11) as f64 / (1u64 << 53) as f64;
+                }
+                sd * (s - 6.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn slips_are_sudden_moves_the_command_does_not_explain() {
+        let (dt, n) = (0.01, 6000);
+        let e = noise(n, 0.1);
+        let scale = SlipScale::new(dt, 0.1, 0.0);
+        // O_P creeps up 0.1 %/s; V_P sticks and jumps 0.6 % in 50 ms every 2 s, alternately
+        // up and down (hunting), with sensor noise.
+        let op: Vec<f64> = (0..n).map(|k| 50.0 + 0.1 * k as f64 * dt).collect();
+        let level = |k: usize| {
+            let cycle = k / 200;
+            let within = (k % 200).min(5) as f64 / 5.0;
+            let (a, b) = if cycle.is_multiple_of(2) {
+                (0.0, 0.6)
+            } else {
+                (0.6, 0.0)
+            };
+            50.0 + a + (b - a) * within
+        };
+        let vp: Vec<f64> = (0..n).map(|k| level(k) + e[k]).collect();
+        let found = slips(&op, &vp, &scale);
+        // Every jump after the first (k = 200, 400, ... 5800), none more; the means over the
+        // span see a jump spread over 5 samples as a little smaller.
+        let ks: Vec<usize> = found.iter().map(|s| s.k).collect();
+        assert_eq!(found.len(), 29, "{ks:?}");
+        for (i, s) in found.iter().enumerate() {
+            assert!(
+                (s.k as i64 - (200 * (i + 1) + 2) as i64).abs() <= 3,
+                "{s:?}"
+            );
+            assert!((s.size_pct.abs() - 0.55).abs() < 0.15, "{s:?}");
+            assert_eq!(s.size_pct > 0.0, i % 2 == 1, "{s:?}");
+        }
+        // The same moves are no slips when O_P stepped 0.1 s before them.
+        let stepping: Vec<f64> = (0..n).map(|k| level(k + 10)).collect();
+        assert!(slips(&stepping, &vp, &scale).is_empty());
+    }
+
+    #[test]
+    fn smooth_moves_spikes_and_sensor_steps_are_not_slips() {
+        let (dt, n) = (0.01, 6000);
+        let e = noise(n, 0.1);
+        let op = vec![50.0; n];
+        let scale = SlipScale::new(dt, 0.1, 0.0);
+        // Slewing at 5 %/s for 2 s, then resting.
+        let slew: Vec<f64> = (0..n)
+            .map(|k| 50.0 + 5.0 * ((k as f64 - 2000.0).clamp(0.0, 200.0) * dt) + e[k])
+            .collect();
+        assert!(slips(&op, &slew, &scale).is_empty());
+        // One-sample spikes of 3 %.
+        let spiky: Vec<f64> = (0..n)
+            .map(|k| 50.0 + e[k] + if k % 500 == 250 { 3.0 } else { 0.0 })
+            .collect();
+        assert!(slips(&op, &spiky, &scale).is_empty());
+        // A smooth, slow V_P on a 0.5 % lattice steps by one lattice step at a time.
+        let on_lattice: Vec<f64> = (0..n)
+            .map(|k| ((50.0 + 2.0 * (k as f64 * dt * 0.5).sin()) / 0.5).round() * 0.5)
+            .collect();
+        let q = lattice(&on_lattice);
+        assert!((q - 0.5).abs() < 1e-9);
+        assert!(slips(&op, &on_lattice, &SlipScale::new(dt, 0.0, q)).is_empty());
+        // Without the lattice known, those steps would count: the lattice is what excludes them.
+        assert!(!slips(&op, &on_lattice, &SlipScale::new(dt, 0.0, 0.0)).is_empty());
     }
 
     #[test]
@@ -242,7 +432,7 @@ mod tests {
                 }
             })
             .collect();
-        let f = measure(&op, &vp, dt);
+        let f = measure(&op, &vp, dt, 0.0);
         assert_eq!(f.steps.len(), 2);
         assert!(!f.steps[0].reversal && f.steps[1].reversal);
         assert!((f.steps[0].delay_s - 0.3).abs() < 1e-9 && (f.steps[1].delay_s - 0.8).abs() < 1e-9);

@@ -190,7 +190,11 @@ impl PinCart {
         let d = e.signum();
         let rel = self.y - self.v;
         let pushing = d * rel >= self.half - 1e-12;
-        if pushing {
+        // Beyond the far side of a stuck cart (breakaway), the pin is the positioner's pressure
+        // loading the stem: it unloads at the pushing speed, back to the side, before it
+        // crosses the cart.
+        let unload = -d * rel - self.half;
+        if pushing || unload > 1e-12 {
             // A chamber that grows with opening fills and vents more slowly: the response and
             // the stroke speed fall alike (dy_min, the positioner's creep, does not).
             let slow = if slowdown == 0.0 {
@@ -206,7 +210,7 @@ impl PinCart {
                     close_max
                 };
             let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
-            d * step
+            d * if pushing { step } else { step.min(unload) }
         } else {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
             // its far side. A crossing time of 0 means no apparent backlash.

@@ -561,3 +561,29 @@ fn breakaway_makes_the_valve_hunt_around_a_steady_op() {
     calm.reset(50.0, 50.0);
     assert!((run(&mut calm, 52.0, 6000)[5999] - 52.0).abs() < 1e-9);
 }
+
+#[test]
+fn breakaway_without_a_cart_follows_a_reversed_command() {
+    // Pin-cart II without a cart (the FOPDT diagnosis starts from) and with stick-slip: a
+    // command that reverses while the pressure is loaded against the stuck stem must unload it
+    // and move the valve the other way, not leave it stuck.
+    let mut spec = ModelSpec {
+        effects: Effects {
+            breakaway_pct: 0.5,
+            ..Effects::default()
+        },
+        ..bundled(ModelKind::Pincart2)
+    };
+    if let Some(p) = spec.pincart2.as_mut() {
+        (p.backlash_pct, p.a_p, p.b_p, p.c_p) = (0.0, 0.0, 0.0, 0.0);
+    }
+    spec.dead_time_s = 0.0;
+    let mut v = Valve::new(&spec, DT).unwrap();
+    v.reset(50.0, 50.0);
+    // A small push up: the stem crawls, sticks, and the pressure loads against it.
+    let up = run(&mut v, 50.05, 100);
+    assert!(up[99] < 50.05, "{:?}", &up[90..]);
+    let down = run(&mut v, 45.0, 3000);
+    let last = down[2999];
+    assert!((last - 45.0).abs() < 1.0, "stuck at {last}");
+}
