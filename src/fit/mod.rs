@@ -363,8 +363,21 @@ pub fn identify(
                     opts.effort.refine_iters_per_param * d as u64,
                 );
                 evals += runs.iter().map(|r| r.evals).sum::<usize>();
-                runs.first()
-                    .map_or(fit_spec, |r| layout.spec(&layout.from_unit(&r.best.u)))
+                match runs.first() {
+                    // A simplex shrunk onto a ridge stops short; one restart with a fresh,
+                    // small simplex from its best point (the usual Nelder-Mead remedy) goes on.
+                    Some(r) => {
+                        let again = search::nelder_mead(
+                            &cost,
+                            &r.best.u,
+                            0.005,
+                            opts.effort.refine_iters_per_param * d as u64,
+                        );
+                        evals += again.evals;
+                        layout.spec(&layout.from_unit(&again.best.u))
+                    }
+                    None => fit_spec,
+                }
             } else {
                 fit_spec
             };
