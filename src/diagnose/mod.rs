@@ -46,6 +46,11 @@ pub const NOMINAL_MIN_SLEW_PCT_PER_S: f64 = 40.0;
 const ROUNDS: usize = 4;
 /// Edge of a refit's initial simplex, as a share of each knob's (possibly logarithmic) range.
 const REFIT_STEP: f64 = 0.2;
+/// An effect whose best refit removed less held-out error than this share of what remains
+/// after the round's winner is not tried again: to be kept next round it would have to remove
+/// twenty times as much (a tenth of the excess), and each round refits every candidate on the
+/// whole recording.
+const RETRY_SHARE: f64 = 0.005;
 
 /// The starting point, scored.
 #[derive(Debug, Clone, Serialize)]
@@ -149,6 +154,17 @@ impl Scorer<'_> {
     }
 
     fn errors(&self, spec: &ModelSpec) -> Errors {
+        self.errors_until(spec, self.op.len())
+    }
+
+    /// Fit error alone: the simulation stops at the end of the last fit block.
+    fn fit_error(&self, spec: &ModelSpec) -> f64 {
+        let last_fit = (self.n_blocks - 1) / 2 * 2;
+        self.errors_until(spec, (last_fit + 1) * self.block_len).fit
+    }
+
+    /// Errors of `spec` simulated over the first `end` samples.
+    fn errors_until(&self, spec: &ModelSpec, end: usize) -> Errors {
         let Ok(mut valve) = Valve::new(spec, self.dt) else {
             return Errors {
                 fit: f64::INFINITY,
@@ -156,24 +172,28 @@ impl Scorer<'_> {
             };
         };
         valve.reset(self.op[0], self.vp[0]);
-        self.errors_of(self.op.iter().map(|&u| valve.step(u)))
+        let op = &self.op[..end.min(self.op.len())];
+        self.errors_of(op.iter().map(|&u| valve.step(u)))
     }
 
     /// Fit and held-out error of a simulated V_P, sample by sample from the first.
-    fn errors_of(&self, sim: impl Iterator<Item = f64>) -> Errors {
-        let (mut fit, mut held) = (0.0, 0.0);
-        for (k, (y, &m)) in sim.zip(self.vp).enumerate() {
-            if k < self.skip {
-                continue;
-            }
-            let r = m - y;
-            if self.held(k) {
-                held += r * r;
-            } else {
-                fit += r * r;
+    fn errors_of(&self, mut sim: impl Iterator<Item = f64>) -> Errors {
+        // Block by block rather than testing each sample's block: this runs once per
+        // simulated sample of every refit.
+        let mut sums = [0.0, 0.0];
+        for (b, block) in self.vp.chunks(self.block_len).enumerate() {
+            let sum = &mut sums[b % 2];
+            // The block first: `zip` stops on it without drawing one more from `sim`.
+            for (i, (&m, y)) in block.iter().zip(sim.by_ref()).enumerate() {
+                if b * self.block_len + i >= self.skip {
+                    *sum += (m - y) * (m - y);
+                }
             }
         }
-        Errors { fit, held }
+        Errors {
+            fit: sums[0],
+            held: sums[1],
+        }
     }
 
     /// Per held-out block: the drop in squared error from `a` to `b`, and the sum of squared
@@ -211,7 +231,7 @@ impl Scorer<'_> {
 }
 
 /// A knob to fit with its box and starting value.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Free {
     knob: Knob,
     lo: f64,
@@ -256,7 +276,7 @@ fn refit(scorer: &Scorer, spec: &ModelSpec, free: &[Free], iters: u64) -> (Model
         }
         s
     };
-    let cost = |u: &[f64]| scorer.errors(&build(u)).fit;
+    let cost = |u: &[f64]| scorer.fit_error(&build(u));
     let local = fit::search::nelder_mead(&cost, &u0, REFIT_STEP, iters);
     let best = build(&local.best.u);
     let errors = scorer.errors(&best);
@@ -589,10 +609,12 @@ pub fn diagnose(
     let mut by_slips = false;
     let total = Effect::ALL.len() * ROUNDS;
     let mut done = 0;
-    for _round in 0..ROUNDS {
+    // Effects worth trying this round: all at first, then those that helped enough before.
+    let mut worth: Vec<Effect> = Effect::ALL.to_vec();
+    for round in 0..ROUNDS {
         let mut jobs: Vec<(Effect, Vec<Free>)> = Vec::new();
         for effect in Effect::ALL {
-            if findings.iter().any(|f| f.effect == effect) {
+            if findings.iter().any(|f| f.effect == effect) || !worth.contains(&effect) {
                 continue;
             }
             for variant in candidates(effect, &current, &facts, op, vp, td_max)
@@ -620,9 +642,13 @@ pub fn diagnose(
                         init: td,
                     });
                 }
-                jobs.push((effect, free));
+                // Variants that differ only in their own start share the spread starts.
+                if !jobs.contains(&(effect, free.clone())) {
+                    jobs.push((effect, free));
+                }
             }
         }
+        tracing::debug!(round, refits = jobs.len(), "trying effects");
         let trials: Vec<Trial> = jobs
             .par_iter()
             .map(|(effect, free)| {
@@ -714,6 +740,11 @@ pub fn diagnose(
             }
             break;
         };
+        worth = best
+            .iter()
+            .filter(|t| cur_errors.held - t.errors.held >= RETRY_SHARE * winner.errors.held)
+            .map(|t| t.effect)
+            .collect();
         let gain = cur_errors.held - winner.errors.held;
         for other in best
             .iter()

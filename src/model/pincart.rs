@@ -187,36 +187,38 @@ impl PinCart {
         if e == 0.0 {
             return 0.0;
         }
-        let d = e.signum();
+        // The direction of travel: `along(x)` is `x` signed like `e` (a sign flip, not a
+        // multiplication, which keeps this serial chain of the simulation short).
+        let opening = e > 0.0;
+        let along = |x: f64| if opening { x } else { -x };
         let rel = self.y - self.v;
-        let pushing = d * rel >= self.half - 1e-12;
+        let pushing = along(rel) >= self.half - 1e-12;
         // Beyond the far side of a stuck cart (breakaway), the pin is the positioner's pressure
         // loading the stem: it unloads at the pushing speed, back to the side, before it
         // crosses the cart.
-        let unload = -d * rel - self.half;
+        let unload = -along(rel) - self.half;
         if pushing || unload > 1e-12 {
             // A chamber that grows with opening fills and vents more slowly: the response and
             // the stroke speed fall alike (dy_min, the positioner's creep, does not).
-            let slow = if slowdown == 0.0 {
-                1.0
+            let max = if opening {
+                p.dy_max_pct_per_s
             } else {
-                1.0 / (1.0 + slowdown * self.v / 100.0)
+                close_max
             };
-            let speed = (slow * p.p_gain_per_s * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
-            let max = slow
-                * if d > 0.0 {
-                    p.dy_max_pct_per_s
-                } else {
-                    close_max
-                };
+            let (gain, max) = if slowdown == 0.0 {
+                (p.p_gain_per_s, max)
+            } else {
+                let slow = 1.0 / (1.0 + slowdown * self.v / 100.0);
+                (slow * p.p_gain_per_s, slow * max)
+            };
+            let speed = (gain * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
             let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
-            d * if pushing { step } else { step.min(unload) }
+            along(if pushing { step } else { step.min(unload) })
         } else {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
             // its far side. A crossing time of 0 means no apparent backlash.
             let t = p.crossing_time_s(self.v).max(self.dt);
-            let step = (2.0 * self.half * self.dt / t).min(self.half - d * rel);
-            d * step
+            along((2.0 * self.half * self.dt / t).min(self.half - along(rel)))
         }
     }
 
