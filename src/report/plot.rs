@@ -22,6 +22,15 @@ pub const BEFORE: RGBColor = RGBColor(214, 39, 40);
 pub const AFTER: RGBColor = RGBColor(31, 119, 180);
 pub const EXTRA: RGBColor = RGBColor(44, 160, 44);
 
+/// Draws the series labels in the one legend style every plot uses.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) {
+    let _ = chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw();
+}
+
 /// Indices to draw for `range` of a series: all, or each bucket's min and max.
 fn thin(y: &[f64], range: std::ops::Range<usize>) -> Vec<usize> {
     let n = range.len();
@@ -104,11 +113,7 @@ pub fn lines(
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
             }
         }
-        let _ = chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw();
+        legend(&mut chart);
         let _ = root.present();
     }
     svg
@@ -187,11 +192,7 @@ pub fn scatter_lines(
                     .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
             }
         }
-        let _ = chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw();
+        legend(&mut chart);
         let _ = root.present();
     }
     svg
@@ -283,11 +284,7 @@ pub fn curves(
             }
         }
         if !note.is_empty() {
-            let _ = chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw();
+            legend(&mut chart);
         }
         let _ = root.present();
     }
