@@ -146,6 +146,7 @@ impl PinCart {
     pub(crate) fn reset(&mut self, vp0: f64) {
         self.v = vp0;
         self.y = vp0;
+        self.stuck = false;
     }
 
     #[inline]
@@ -216,8 +217,9 @@ impl PinCart {
             along(if pushing { step } else { step.min(unload) })
         } else {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
-            // its far side. A crossing time of 0 means no apparent backlash.
-            let t = p.crossing_time_s(self.v).max(self.dt);
+            // its far side. A crossing time of 0 means no apparent backlash. The slower chamber
+            // of an opening-dependent slowdown also takes longer to cross the friction band.
+            let t = (p.crossing_time_s(self.v) * (1.0 + slowdown * self.v / 100.0)).max(self.dt);
             along((2.0 * self.half * self.dt / t).min(self.half - along(rel)))
         }
     }

@@ -517,6 +517,33 @@ fn open_slowdown_makes_the_valve_slower_when_open() {
 }
 
 #[test]
+fn open_slowdown_also_slows_the_crossing_of_the_cart() {
+    // The chamber that fills more slowly when open also takes longer to cross the friction
+    // band: the reversal delay grows by the same factor 1 + r V / 100.
+    let mut spec = ModelSpec {
+        effects: Effects {
+            open_slowdown: 2.0,
+            ..Effects::default()
+        },
+        dead_time_s: 0.0,
+        ..bundled(ModelKind::Pincart2)
+    };
+    if let Some(p) = spec.pincart2.as_mut() {
+        (p.a_p, p.b_p, p.c_p) = (0.0, 0.0, 0.3);
+    }
+    let reversal_delay = |at: f64| {
+        let mut v = Valve::new(&spec, DT).unwrap();
+        v.reset(at - 5.0, at - 5.0);
+        let settled = *run(&mut v, at, 1000).last().unwrap();
+        let out = run(&mut v, at - 5.0, 1000);
+        out.iter().position(|y| *y < settled - 1e-6).unwrap_or(1000) as f64 * DT
+    };
+    let (closed, open) = (reversal_delay(10.0), reversal_delay(90.0));
+    assert!((closed - 0.3 * 1.2).abs() < 0.03, "{closed} s near closed");
+    assert!((open - 0.3 * 2.8).abs() < 0.05, "{open} s near open");
+}
+
+#[test]
 fn slow_sampling_keeps_every_model_stable() {
     // At 1 Hz, P_k dt exceeds 1 for the bundled pin-cart gains: no model may overshoot a step.
     for kind in ModelKind::ALL {
