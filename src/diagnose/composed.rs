@@ -110,6 +110,9 @@ pub enum Knob {
     Slowdown,
     /// dy_max, %/s.
     Slew,
+    /// Opening slew rate at half travel, %/s: dy_max slowed by the opening-dependent slowdown
+    /// (set after [`Knob::Slowdown`]; the same number as [`Knob::Slew`] without a slowdown).
+    HalfOpenSlew,
     /// Closing slew rate, %/s.
     ClosingSlew,
     /// dy_min, %/s.
@@ -135,6 +138,12 @@ pub enum Knob {
 }
 
 impl Knob {
+    /// Whether two knobs set the same number of the spec (one must not be fitted with the other).
+    pub fn same_number(self, other: Knob) -> bool {
+        let slew = |k| matches!(k, Knob::Slew | Knob::HalfOpenSlew);
+        self == other || (slew(self) && slew(other))
+    }
+
     /// Parameter name and unit for reports.
     pub fn label(self) -> &'static str {
         match self {
@@ -144,6 +153,7 @@ impl Knob {
             Knob::CrossingSlope => "crossing_slope_s_per_pct",
             Knob::Slowdown => "open_slowdown",
             Knob::Slew => "slew_pct_per_s",
+            Knob::HalfOpenSlew => "half_open_slew_pct_per_s",
             Knob::ClosingSlew => "closing_slew_pct_per_s",
             Knob::MinSpeed => "min_speed_pct_per_s",
             Knob::Stickband => "stickband_pct",
@@ -177,6 +187,12 @@ fn pc2(spec: &ModelSpec) -> PinCart2Params {
     })
 }
 
+/// How many times slower than closed the opening-dependent slowdown makes the valve at half
+/// travel (its speed limit and its crossing of the cart alike).
+pub fn half_open(spec: &ModelSpec) -> f64 {
+    1.0 + spec.effects.open_slowdown / 2.0
+}
+
 /// Reads a knob's value from a composed spec.
 pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
     let p = pc2(spec);
@@ -188,6 +204,7 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
         Knob::CrossingSlope => p.b_p,
         Knob::Slowdown => e.open_slowdown,
         Knob::Slew => p.dy_max_pct_per_s,
+        Knob::HalfOpenSlew => p.dy_max_pct_per_s / half_open(spec),
         Knob::ClosingSlew => {
             if e.closing_slew_pct_per_s > 0.0 {
                 e.closing_slew_pct_per_s
@@ -217,6 +234,7 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
 /// Sets a knob on a composed spec (the caller keeps values inside their bounds).
 pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
     let mut p = pc2(spec);
+    let slow = half_open(spec);
     let e = &mut spec.effects;
     match knob {
         Knob::Gain => p.p_gain_per_s = v,
@@ -227,7 +245,8 @@ pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
         }
         Knob::CrossingSlope => p.b_p = v,
         Knob::Slowdown => e.open_slowdown = v,
-        Knob::Slew => {
+        Knob::Slew | Knob::HalfOpenSlew => {
+            let v = if knob == Knob::Slew { v } else { v * slow };
             p.dy_max_pct_per_s = v;
             p.dy_min_pct_per_s = p.dy_min_pct_per_s.min(v);
         }
@@ -340,10 +359,15 @@ mod tests {
             (Knob::Stickband, 1.5),
             (Knob::Deadband, 0.3),
             (Knob::CalOffset, -1.0),
+            (Knob::Slowdown, 2.0),
+            (Knob::HalfOpenSlew, 30.0),
         ] {
             set(&mut spec, knob, v);
             assert_eq!(get(&spec, knob), v, "{knob:?}");
         }
+        // Twice as slow at half travel as closed: the same speed limit, seen from closed.
+        assert_eq!(get(&spec, Knob::Slew), 60.0);
+        assert!(Knob::Slew.same_number(Knob::HalfOpenSlew));
         spec.validate().unwrap();
     }
 }

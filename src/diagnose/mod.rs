@@ -20,7 +20,15 @@
 //!    missing, or which experiment would separate two effects the data cannot tell apart.
 //!
 //! The split alternates blocks (fit, held out, fit, ...) so both halves cover every operating
-//! region; the simulation still runs through all samples, only the scoring is split.
+//! region. Judging simulates the whole recording and scores the held-out blocks; refits
+//! simulate only the fit blocks, each from the measured position a few seconds before it.
+//!
+//! Time goes into refits, so they are spent where they matter: every start of a candidate
+//! gets a short search and only the best start a long one (successive halving), an effect that
+//! helped next to nothing is not tried again, and after each kept effect everything kept so
+//! far is refitted together, so a later effect can take back what an earlier one was stretched
+//! to cover. Effects stay apart: an opening-dependent slowdown may not bring the stroke speed
+//! at half travel below a healthy one until `slew_rate` has been found on its own.
 
 pub mod composed;
 pub mod evidence;
@@ -51,6 +59,14 @@ const REFIT_STEP: f64 = 0.2;
 /// twenty times as much (a tenth of the excess), and each round refits every candidate on the
 /// whole recording.
 const RETRY_SHARE: f64 = 0.005;
+/// Simulated time before each fit block when refits simulate the fit blocks alone, s: longer
+/// than the longest dead time a diagnosis fits (3 s).
+const WARM_UP_S: f64 = 4.0;
+/// Simplex iterations every start of a candidate gets, and then the best start.
+const SURVEY_ITERS: u64 = 40;
+const REFINE_ITERS: u64 = 120;
+/// Simplex iterations of the joint refit of all kept effects after each round.
+const POLISH_ITERS: u64 = 300;
 
 /// The starting point, scored.
 #[derive(Debug, Clone, Serialize)]
@@ -153,18 +169,38 @@ impl Scorer<'_> {
         k >= self.skip && (k / self.block_len) % 2 == 1
     }
 
-    fn errors(&self, spec: &ModelSpec) -> Errors {
-        self.errors_until(spec, self.op.len())
-    }
-
-    /// Fit error alone: the simulation stops at the end of the last fit block.
+    /// Fit error alone, what refits minimise: each fit block is simulated on its own, from
+    /// rest at the measured V_P [`WARM_UP_S`] before the block, so the held-out blocks between
+    /// them are never simulated (half the work). The warm-up fills the dead-time line and lets
+    /// the start from rest die out; hysteresis that outlives it (a pin left off-centre) costs
+    /// the fit a little, never the judgement, which simulates the whole recording.
     fn fit_error(&self, spec: &ModelSpec) -> f64 {
-        let last_fit = (self.n_blocks - 1) / 2 * 2;
-        self.errors_until(spec, (last_fit + 1) * self.block_len).fit
+        let Ok(mut valve) = Valve::new(spec, self.dt) else {
+            return f64::INFINITY;
+        };
+        let warm = (WARM_UP_S / self.dt) as usize;
+        let mut sum = 0.0;
+        for b in (0..self.n_blocks).step_by(2) {
+            let start = b * self.block_len;
+            let end = (start + self.block_len).min(self.op.len());
+            let from = start.saturating_sub(warm);
+            valve.reset(self.op[from], self.vp[from]);
+            for k in from..start {
+                valve.step(self.op[k]);
+            }
+            let first = start.max(self.skip);
+            for k in start..end {
+                let y = valve.step(self.op[k]);
+                if k >= first {
+                    sum += (self.vp[k] - y) * (self.vp[k] - y);
+                }
+            }
+        }
+        sum
     }
 
-    /// Errors of `spec` simulated over the first `end` samples.
-    fn errors_until(&self, spec: &ModelSpec, end: usize) -> Errors {
+    /// Fit and held-out error of `spec` simulated over the whole recording.
+    fn errors(&self, spec: &ModelSpec) -> Errors {
         let Ok(mut valve) = Valve::new(spec, self.dt) else {
             return Errors {
                 fit: f64::INFINITY,
@@ -172,22 +208,15 @@ impl Scorer<'_> {
             };
         };
         valve.reset(self.op[0], self.vp[0]);
-        let op = &self.op[..end.min(self.op.len())];
-        self.errors_of(op.iter().map(|&u| valve.step(u)))
+        self.errors_of(self.op.iter().map(|&u| valve.step(u)))
     }
 
     /// Fit and held-out error of a simulated V_P, sample by sample from the first.
-    fn errors_of(&self, mut sim: impl Iterator<Item = f64>) -> Errors {
-        // Block by block rather than testing each sample's block: this runs once per
-        // simulated sample of every refit.
+    fn errors_of(&self, sim: impl Iterator<Item = f64>) -> Errors {
         let mut sums = [0.0, 0.0];
-        for (b, block) in self.vp.chunks(self.block_len).enumerate() {
-            let sum = &mut sums[b % 2];
-            // The block first: `zip` stops on it without drawing one more from `sim`.
-            for (i, (&m, y)) in block.iter().zip(sim.by_ref()).enumerate() {
-                if b * self.block_len + i >= self.skip {
-                    *sum += (m - y) * (m - y);
-                }
+        for (k, (&m, y)) in self.vp.iter().zip(sim).enumerate() {
+            if k >= self.skip {
+                sums[(k / self.block_len) % 2] += (m - y) * (m - y);
             }
         }
         Errors {
@@ -244,7 +273,13 @@ struct Free {
 /// Knobs whose box spans more than a factor of 20 on the positive axis (gains, times, speeds)
 /// are searched on a log scale, so the simplex moves in proportions rather than in steps that
 /// are coarse for small values.
-fn refit(scorer: &Scorer, spec: &ModelSpec, free: &[Free], iters: u64) -> (ModelSpec, Errors) {
+fn refit(
+    scorer: &Scorer,
+    spec: &ModelSpec,
+    free: &[Free],
+    step: f64,
+    iters: u64,
+) -> (ModelSpec, Errors) {
     // Each knob maps to a unit interval of the search cube, linearly or on a log scale.
     let log: Vec<bool> = free
         .iter()
@@ -277,10 +312,38 @@ fn refit(scorer: &Scorer, spec: &ModelSpec, free: &[Free], iters: u64) -> (Model
         s
     };
     let cost = |u: &[f64]| scorer.fit_error(&build(u));
-    let local = fit::search::nelder_mead(&cost, &u0, REFIT_STEP, iters);
+    let local = fit::search::nelder_mead(&cost, &u0, step, iters);
     let best = build(&local.best.u);
     let errors = scorer.errors(&best);
     (best, errors)
+}
+
+/// Refits a candidate from several starts by successive halving: every start gets a short
+/// search, and only the best one is searched further, from where it ended with a smaller
+/// simplex. Most starts of a multi-modal candidate are plainly worse after a few dozen
+/// iterations, and refits are where diagnosis spends its time.
+fn refit_from(scorer: &Scorer, spec: &ModelSpec, starts: &[Vec<Free>]) -> (ModelSpec, Errors) {
+    let surveyed = starts
+        .iter()
+        .map(|free| (free, refit(scorer, spec, free, REFIT_STEP, SURVEY_ITERS)))
+        .min_by(|a, b| a.1 .1.fit.total_cmp(&b.1 .1.fit));
+    let Some((free, (best, errors))) = surveyed else {
+        return (spec.clone(), scorer.errors(spec));
+    };
+    let from_best: Vec<Free> = free
+        .iter()
+        .map(|f| Free {
+            init: composed::get(&best, f.knob),
+            ..*f
+        })
+        .collect();
+    let (refined, refined_errors) =
+        refit(scorer, &best, &from_best, REFIT_STEP / 2.0, REFINE_ITERS);
+    if refined_errors.fit <= errors.fit {
+        (refined, refined_errors)
+    } else {
+        (best, errors)
+    }
 }
 
 /// The nominal FOPDT baseline: unity gain, dead time <= 0.2 s, stroke speed >= 40 %/s.
@@ -340,7 +403,7 @@ fn fit_baseline(scorer: &Scorer, facts: &Facts) -> ModelSpec {
     ];
     starts
         .par_iter()
-        .map(|f| refit(scorer, &start, f, 150))
+        .map(|f| refit(scorer, &start, f, REFIT_STEP, 150))
         .min_by(|a, b| a.1.fit.total_cmp(&b.1.fit))
         .map(|(s, _)| s)
         .unwrap_or(start)
@@ -367,6 +430,7 @@ fn candidates(
     let get = |k| composed::get(spec, k);
     let f = |knob, lo: f64, hi: f64, init: f64| Free { knob, lo, hi, init };
     let slew = get(Knob::Slew);
+    let half_open_slew = get(Knob::HalfOpenSlew);
     let speed = facts.open_speed.max(facts.close_speed).max(0.5);
     match effect {
         Effect::DeadTime if td_max < 3.0 => vec![vec![f(
@@ -384,17 +448,26 @@ fn candidates(
         Effect::StateDependentDelay
             if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>
         {
-            // The slowdown lowers the stroke speed with opening too, so the speed limit near
-            // closed is refitted with it (it may be faster than the baseline's average).
-            let mut v = vec![vec![
-                f(Knob::Slowdown, 0.0, 10.0, 1.0),
+            // The slowdown lowers the stroke speed with opening too, so the speed limit is
+            // refitted with it (it may be faster near closed than the baseline's average).
+            // Until a speed limit has been found, it stays a healthy one at half travel: a
+            // valve slower than that is `slew_rate`, judged on its own.
+            let speed = if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
+                f(
+                    Knob::HalfOpenSlew,
+                    NOMINAL_MIN_SLEW_PCT_PER_S,
+                    FASTEST_PCT_PER_S,
+                    half_open_slew.min(FASTEST_PCT_PER_S),
+                )
+            } else {
                 f(
                     Knob::Slew,
                     0.5,
                     FASTEST_PCT_PER_S,
                     (1.5 * slew).min(FASTEST_PCT_PER_S),
-                ),
-            ]];
+                )
+            };
+            let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), speed]];
             let c = get(Knob::Crossing);
             if c > 0.0 {
                 v.push(vec![
@@ -405,7 +478,8 @@ fn candidates(
             v
         }
         Effect::SlewRate
-            if slew >= NOMINAL_MIN_SLEW_PCT_PER_S && spec.effects.closing_slew_pct_per_s == 0.0 =>
+            if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S
+                && spec.effects.closing_slew_pct_per_s == 0.0 =>
         {
             vec![vec![f(
                 Knob::Slew,
@@ -596,14 +670,17 @@ pub fn diagnose(
     let sim_before = scorer.simulate(&base_spec);
     let residual: Vec<f64> = vp.iter().zip(&sim_before).map(|(m, s)| m - s).collect();
     let mismatch_windows = locate::windows(t, op, vp, &residual, sigma, dt);
-    // Residual correlation length: BIC counts independent samples, not raw samples.
-    let corr_len = correlation_length(&residual);
+    // Residual correlation length: BIC counts independent samples, not raw samples. It is
+    // measured again after each kept effect, whose residual is closer to white.
+    let mut corr_len = correlation_length(&residual);
     let n_fit = scorer.n_fit();
     let n_held_noise = (n - scorer.skip - n_fit) as f64 * sigma * sigma;
 
     let mut current = composed::compose(&base_spec, dt);
     let mut cur_errors = scorer.errors(&current);
     let mut findings: Vec<Finding> = Vec::new();
+    // The knobs the kept effects freed, with their boxes.
+    let mut freed: Vec<Free> = Vec::new();
     let mut notes = Vec::new();
     // Set when stiction was kept by the slips of V_P rather than by the free-run error.
     let mut by_slips = false;
@@ -612,47 +689,63 @@ pub fn diagnose(
     // Effects worth trying this round: all at first, then those that helped enough before.
     let mut worth: Vec<Effect> = Effect::ALL.to_vec();
     for round in 0..ROUNDS {
-        let mut jobs: Vec<(Effect, Vec<Free>)> = Vec::new();
+        // Per candidate, its starts: variants that differ only in their own start share the
+        // spread starts.
+        let mut jobs: Vec<(Effect, Vec<Vec<Free>>)> = Vec::new();
         for effect in Effect::ALL {
             if findings.iter().any(|f| f.effect == effect) || !worth.contains(&effect) {
                 continue;
             }
-            for variant in candidates(effect, &current, &facts, op, vp, td_max)
-                .into_iter()
-                .flat_map(spread_starts)
-            {
-                let mut free = variant;
-                free.push(Free {
-                    knob: Knob::Gain,
-                    lo: 0.05,
-                    hi: 1.0 / dt,
-                    init: composed::get(&current, Knob::Gain),
-                });
-                let td = composed::get(&current, Knob::DeadTime);
-                let hi = if effect == Effect::DeadTime {
-                    3.0
-                } else {
-                    td_max.max(td)
-                };
-                if !free.iter().any(|f| f.knob == Knob::DeadTime) {
+            for variant in candidates(effect, &current, &facts, op, vp, td_max) {
+                for mut free in spread_starts(variant) {
                     free.push(Free {
-                        knob: Knob::DeadTime,
-                        lo: 0.0,
-                        hi,
-                        init: td,
+                        knob: Knob::Gain,
+                        lo: 0.05,
+                        hi: 1.0 / dt,
+                        init: composed::get(&current, Knob::Gain),
                     });
-                }
-                // Variants that differ only in their own start share the spread starts.
-                if !jobs.contains(&(effect, free.clone())) {
-                    jobs.push((effect, free));
+                    let td = composed::get(&current, Knob::DeadTime);
+                    let hi = if effect == Effect::DeadTime {
+                        3.0
+                    } else {
+                        td_max.max(td)
+                    };
+                    if !free.iter().any(|f| f.knob == Knob::DeadTime) {
+                        free.push(Free {
+                            knob: Knob::DeadTime,
+                            lo: 0.0,
+                            hi,
+                            init: td,
+                        });
+                    }
+                    let same_box = |starts: &Vec<Vec<Free>>| {
+                        starts[0].len() == free.len()
+                            && starts[0]
+                                .iter()
+                                .zip(&free)
+                                .all(|(a, b)| a.knob == b.knob && a.lo == b.lo && a.hi == b.hi)
+                    };
+                    match jobs
+                        .iter_mut()
+                        .find(|(e, starts)| *e == effect && same_box(starts))
+                    {
+                        Some((_, starts)) if starts.contains(&free) => {}
+                        Some((_, starts)) => starts.push(free),
+                        None => jobs.push((effect, vec![free])),
+                    }
                 }
             }
         }
-        tracing::debug!(round, refits = jobs.len(), "trying effects");
+        tracing::debug!(
+            round,
+            candidates = jobs.len(),
+            starts = jobs.iter().map(|j| j.1.len()).sum::<usize>(),
+            "trying effects"
+        );
         let trials: Vec<Trial> = jobs
             .par_iter()
-            .map(|(effect, free)| {
-                let (spec, errors) = refit(&scorer, &current, free, 120);
+            .map(|(effect, starts)| {
+                let (spec, errors) = refit_from(&scorer, &current, starts);
                 judge(
                     &scorer,
                     &current,
@@ -660,7 +753,7 @@ pub fn diagnose(
                     *effect,
                     spec,
                     errors,
-                    free.clone(),
+                    starts[0].clone(),
                     &cur_errors,
                     n_held_noise,
                     n_fit,
@@ -774,8 +867,32 @@ pub fn diagnose(
             heldout_sse_after: winner.errors.held,
             delta_bic: winner.delta_bic,
         });
+        // Every knob freed so far is refitted together, from where the rounds left it: an
+        // effect found later may explain what an earlier one was stretched to cover.
+        for f in &winner.free {
+            match freed.iter_mut().find(|g| g.knob.same_number(f.knob)) {
+                Some(g) => *g = *f,
+                None => freed.push(*f),
+            }
+        }
         current = winner.spec.clone();
         cur_errors = scorer.errors(&current);
+        if round > 0 {
+            let (polished, errors) = refit(&scorer, &current, &freed, REFIT_STEP, POLISH_ITERS);
+            tracing::debug!(
+                held_before = cur_errors.held,
+                held_after = errors.held,
+                "polish"
+            );
+            if errors.fit < cur_errors.fit && errors.held <= cur_errors.held {
+                current = polished;
+                cur_errors = errors;
+            }
+        }
+        let sim = scorer.simulate(&current);
+        let residual: Vec<f64> = vp.iter().zip(&sim).map(|(m, s)| m - s).collect();
+        corr_len = correlation_length(&residual);
+        tracing::debug!(corr_len, "residual after the round");
     }
     if findings.is_empty() && facts.reversals < 10 {
         notes.push(format!(
@@ -928,13 +1045,14 @@ fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool {
     let g = |k| composed::get(spec, k);
     match effect {
         Effect::DeadTime => g(Knob::DeadTime) > NOMINAL_DEAD_TIME_S + 0.02,
-        Effect::Backlash => g(Knob::Crossing) >= 0.03,
+        Effect::Backlash => g(Knob::Crossing) * composed::half_open(spec) >= 0.03,
         Effect::StateDependentDelay => {
             g(Knob::Slowdown) >= 0.3 || g(Knob::CrossingSlope).abs() * 100.0 >= 0.1
         }
         Effect::SlewRate => {
             let top = facts.open_speed.max(facts.close_speed);
-            g(Knob::Slew) < NOMINAL_MIN_SLEW_PCT_PER_S && top >= 0.7 * g(Knob::Slew)
+            let half = g(Knob::HalfOpenSlew);
+            half < NOMINAL_MIN_SLEW_PCT_PER_S && top >= 0.7 * half
         }
         Effect::Asymmetry => {
             let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
