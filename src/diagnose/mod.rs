@@ -1168,7 +1168,8 @@ fn share_in(windows: &[Window], kinds: &[Context], what: &str) -> String {
     let total: f64 = windows.iter().map(|w| w.excess_sse).sum();
     let hits: Vec<&Window> = windows.iter().filter(|w| kinds.contains(&w.kind)).collect();
     let part: f64 = hits.iter().map(|w| w.excess_sse).sum();
-    if total <= 0.0 || hits.is_empty() {
+    // Under half a percent is not where the error lies: say nothing rather than "0 %".
+    if total <= 0.0 || hits.is_empty() || part < 0.005 * total {
         return String::new();
     }
     format!(
@@ -1221,11 +1222,22 @@ fn explain(
             g(Knob::DeadTime),
             composed::get(before, Knob::DeadTime)
         ),
-        Effect::Backlash => format!(
-            "{rev}{steps_text}; V_P stays flat for about {:.2} s more after a reversal: lost motion (backlash) crossed in {:.2} s",
-            g(Knob::Crossing),
-            g(Knob::Crossing)
-        ),
+        Effect::Backlash => {
+            // With an opening-dependent slowdown the crossing is slower when open too.
+            let at_half = g(Knob::Crossing) * composed::half_open(&trial.spec);
+            let range = if g(Knob::Slowdown) > 0.0 {
+                format!(
+                    " at half travel ({:.2} s closed, {:.2} s open)",
+                    g(Knob::Crossing),
+                    g(Knob::Crossing) * (1.0 + g(Knob::Slowdown))
+                )
+            } else {
+                String::new()
+            };
+            format!(
+                "{rev}{steps_text}; V_P stays flat for about {at_half:.2} s more after a reversal{range}: lost motion (backlash)"
+            )
+        }
         Effect::StateDependentDelay => {
             let by_opening = facts.steps.iter().filter(|s| s.reversal).fold((0.0, 0usize, 0.0, 0usize), |acc, s| {
                 if s.from_pct < 50.0 { (acc.0 + s.delay_s, acc.1 + 1, acc.2, acc.3) } else { (acc.0, acc.1, acc.2 + s.delay_s, acc.3 + 1) }
