@@ -476,17 +476,21 @@ fn effects_round_trip_and_stay_off_by_default() {
     assert!(!bundled(ModelKind::Pincart2).to_toml().contains("effects"));
 }
 
-#[test]
-fn open_slowdown_makes_the_valve_slower_when_open() {
-    let effects = Effects {
-        open_slowdown: 2.0,
-        ..Effects::default()
-    };
-    let spec = ModelSpec {
-        effects,
+/// The bundled pin-cart II without dead time, three times slower fully open than closed.
+fn slowed_when_open() -> ModelSpec {
+    ModelSpec {
+        effects: Effects {
+            open_slowdown: 2.0,
+            ..Effects::default()
+        },
         dead_time_s: 0.0,
         ..bundled(ModelKind::Pincart2)
-    };
+    }
+}
+
+#[test]
+fn open_slowdown_makes_the_valve_slower_when_open() {
+    let spec = slowed_when_open();
     let t90 = |from: f64, to: f64| {
         let mut v = Valve::new(&spec, DT).unwrap();
         v.reset(from, from);
@@ -520,14 +524,7 @@ fn open_slowdown_makes_the_valve_slower_when_open() {
 fn open_slowdown_also_slows_the_crossing_of_the_cart() {
     // The chamber that fills more slowly when open also takes longer to cross the friction
     // band: the reversal delay grows by the same factor 1 + r V / 100.
-    let mut spec = ModelSpec {
-        effects: Effects {
-            open_slowdown: 2.0,
-            ..Effects::default()
-        },
-        dead_time_s: 0.0,
-        ..bundled(ModelKind::Pincart2)
-    };
+    let mut spec = slowed_when_open();
     if let Some(p) = spec.pincart2.as_mut() {
         (p.a_p, p.b_p, p.c_p) = (0.0, 0.0, 0.3);
     }
