@@ -61,7 +61,7 @@ const REFIT_STEP: f64 = 0.2;
 const RETRY_SHARE: f64 = 0.005;
 /// Simulated time before each fit block when refits simulate the fit blocks alone, s: longer
 /// than the longest dead time a diagnosis fits (3 s).
-const WARM_UP_S: f64 = 4.0;
+const WARM_UP_S: f64 = 10.0;
 /// Simplex iterations every start of a candidate gets, and then the best start.
 const SURVEY_ITERS: u64 = 40;
 const REFINE_ITERS: u64 = 120;
