@@ -564,7 +564,9 @@ impl Valve {
     }
 
     /// Advances one sample with wanted opening `op` (%) and returns the valve position V_P (%).
-    #[inline]
+    // Always inlined: fits call it once per simulated sample, and inside their loops the
+    // compiler can keep the valve's state in registers.
+    #[inline(always)]
     pub fn step(&mut self, op: f64) -> f64 {
         let u = self.effects.input(self.delay.push(op));
         let v = match &mut self.core {
