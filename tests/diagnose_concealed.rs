@@ -140,3 +140,36 @@ fn hunting_by_stick_slip_in_closed_loop_is_found_by_its_slips() {
         d.verdict
     );
 }
+
+#[test]
+fn a_slow_stroke_and_a_deadband_are_both_found() {
+    // Two effects at once: the slow stroke dominates the large steps, the deadband only shows
+    // in where the valve settles, so it is found second.
+    let mut spec = healthy();
+    composed::set(&mut spec, Knob::Slew, 15.0);
+    composed::set(&mut spec, Knob::Deadband, 0.8);
+    let d = run(&spec, Excitation::RandomSteps, 0.1, 21);
+    let mut found = names(&d);
+    found.sort();
+    assert_eq!(found, ["deadband", "slew_rate"], "{}", d.verdict);
+    assert!((param(&d, "slew_pct_per_s") - 15.0).abs() < 1.0);
+    assert!((param(&d, "deadband_pct") - 0.8).abs() < 0.1);
+    let last = d.findings.last().map_or(f64::NAN, |f| f.heldout_sse_after);
+    assert!(last < 0.1 * d.baseline.heldout_sse, "{}", d.verdict);
+}
+
+#[test]
+fn slow_venting_behind_a_long_signal_line_is_asymmetry_and_dead_time() {
+    let mut spec = healthy();
+    spec.dead_time_s = 0.6;
+    composed::set(&mut spec, Knob::Slew, 30.0);
+    composed::set(&mut spec, Knob::ClosingSlew, 12.0);
+    let d = run(&spec, Excitation::RandomSteps, 0.1, 22);
+    let mut found = names(&d);
+    found.sort();
+    assert_eq!(found, ["asymmetry", "dead_time"], "{}", d.verdict);
+    // The joint refit after the second finding recovers both sizes.
+    let fin = &d.final_model.spec;
+    assert!((fin.dead_time_s - 0.6).abs() < 0.05, "{}", fin.dead_time_s);
+    assert!((composed::get(fin, Knob::ClosingSlew) - 12.0).abs() < 1.0);
+}

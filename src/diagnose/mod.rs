@@ -65,8 +65,6 @@ const WARM_UP_S: f64 = 10.0;
 /// Simplex iterations every start of a candidate gets, and then the best start.
 const SURVEY_ITERS: u64 = 40;
 const REFINE_ITERS: u64 = 120;
-/// Simplex iterations of the joint refit of all kept effects after each round.
-const POLISH_ITERS: u64 = 300;
 
 /// The starting point, scored.
 #[derive(Debug, Clone, Serialize)]
@@ -324,7 +322,7 @@ fn refit(
 /// iterations, and refits are where diagnosis spends its time.
 fn refit_from(scorer: &Scorer, spec: &ModelSpec, starts: &[Vec<Free>]) -> (ModelSpec, Errors) {
     let surveyed = starts
-        .iter()
+        .par_iter()
         .map(|free| (free, refit(scorer, spec, free, REFIT_STEP, SURVEY_ITERS)))
         .min_by(|a, b| a.1 .1.fit.total_cmp(&b.1 .1.fit));
     let Some((free, (best, errors))) = surveyed else {
@@ -867,8 +865,8 @@ pub fn diagnose(
             heldout_sse_after: winner.errors.held,
             delta_bic: winner.delta_bic,
         });
-        // Every knob freed so far is refitted together, from where the rounds left it: an
-        // effect found later may explain what an earlier one was stretched to cover.
+        // Every knob freed so far is refitted together, from where the rounds left it (an
+        // effect found later may explain what an earlier one was stretched to cover) ...
         for f in &winner.free {
             match freed.iter_mut().find(|g| g.knob.same_number(f.knob)) {
                 Some(g) => *g = *f,
@@ -878,7 +876,18 @@ pub fn diagnose(
         current = winner.spec.clone();
         cur_errors = scorer.errors(&current);
         if round > 0 {
-            let (polished, errors) = refit(&scorer, &current, &freed, REFIT_STEP, POLISH_ITERS);
+            let from_here: Vec<Free> = freed
+                .iter()
+                .map(|f| Free {
+                    init: composed::get(&current, f.knob),
+                    ..*f
+                })
+                .collect();
+            // ... and afresh from the starts the rounds began with: effects fitted one at a
+            // time can leave the joint fit in a valley it only finds its way out of from outside.
+            let mut starts = spread_starts(freed.clone());
+            starts.push(from_here);
+            let (polished, errors) = refit_from(&scorer, &current, &starts);
             tracing::debug!(
                 held_before = cur_errors.held,
                 held_after = errors.held,
@@ -1063,7 +1072,11 @@ fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool {
                 && oa.min(ob) >= 0.7 * a.min(b)
         }
         Effect::MinSpeed => g(Knob::MinSpeed) >= 0.02,
-        Effect::Stiction => g(Knob::Stickband) >= 0.1 || g(Knob::Breakaway) >= 0.1,
+        // Stick-slip needs the slip: a stickband without a jump is a deadband on the input.
+        Effect::Stiction => {
+            (g(Knob::Stickband) >= 0.1 && g(Knob::Stickband) * g(Knob::JumpFraction) >= 0.1)
+                || g(Knob::Breakaway) >= 0.1
+        }
         Effect::Deadband => g(Knob::Deadband) >= 0.05,
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
         Effect::Quantization => g(Knob::Quantum) > 0.0,
