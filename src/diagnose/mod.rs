@@ -328,20 +328,28 @@ fn refit_from(scorer: &Scorer, spec: &ModelSpec, starts: &[Vec<Free>]) -> (Model
     let Some((free, (best, errors))) = surveyed else {
         return (spec.clone(), scorer.errors(spec));
     };
-    let from_best: Vec<Free> = free
-        .iter()
-        .map(|f| Free {
-            init: composed::get(&best, f.knob),
-            ..*f
-        })
-        .collect();
-    let (refined, refined_errors) =
-        refit(scorer, &best, &from_best, REFIT_STEP / 2.0, REFINE_ITERS);
+    let (refined, refined_errors) = refit(
+        scorer,
+        &best,
+        &starting_at(free, &best),
+        REFIT_STEP / 2.0,
+        REFINE_ITERS,
+    );
     if refined_errors.fit <= errors.fit {
         (refined, refined_errors)
     } else {
         (best, errors)
     }
+}
+
+/// The knobs of `free`, each starting at its value in `spec`.
+fn starting_at(free: &[Free], spec: &ModelSpec) -> Vec<Free> {
+    free.iter()
+        .map(|f| Free {
+            init: composed::get(spec, f.knob),
+            ..*f
+        })
+        .collect()
 }
 
 /// The nominal FOPDT baseline: unity gain, dead time <= 0.2 s, stroke speed >= 40 %/s.
@@ -876,13 +884,7 @@ pub fn diagnose(
         current = winner.spec.clone();
         cur_errors = scorer.errors(&current);
         if round > 0 {
-            let from_here: Vec<Free> = freed
-                .iter()
-                .map(|f| Free {
-                    init: composed::get(&current, f.knob),
-                    ..*f
-                })
-                .collect();
+            let from_here = starting_at(&freed, &current);
             // ... and afresh from the starts the rounds began with: effects fitted one at a
             // time can leave the joint fit in a valley it only finds its way out of from outside.
             let mut starts = spread_starts(freed.clone());
