@@ -458,7 +458,7 @@ fn candidates(
             // refitted with it (it may be faster near closed than the baseline's average).
             // Until a speed limit has been found, it stays a healthy one at half travel: a
             // valve slower than that is `slew_rate`, judged on its own.
-            let speed = if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
+            let limit = if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
                 f(
                     Knob::HalfOpenSlew,
                     NOMINAL_MIN_SLEW_PCT_PER_S,
@@ -473,7 +473,7 @@ fn candidates(
                     (1.5 * slew).min(FASTEST_PCT_PER_S),
                 )
             };
-            let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), speed]];
+            let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), limit]];
             let c = get(Knob::Crossing);
             if c > 0.0 {
                 v.push(vec![
