@@ -309,7 +309,7 @@ pub fn mean_sd(x: impl Iterator<Item = f64>) -> (f64, f64, usize) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -324,21 +324,13 @@ mod tests {
         assert_eq!(lattice(&off), 0.0);
     }
 
-    /// Deterministic noise of standard deviation `sd` (a sum of 12 uniforms).
-    fn noise(n: usize, sd: f64) -> Vec<f64> {
-        let mut state: u64 = 987654321;
-        (0..n)
-            .map(|_| {
-                let mut s = 0.0;
-                for _ in 0..12 {
-                    state = state
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    s += (state >> 11) as f64 / (1u64 << 53) as f64;
-                }
-                sd * (s - 6.0)
-            })
-            .collect()
+    /// Deterministic Gaussian noise of standard deviation `sd` (seeded, so tests repeat).
+    pub(crate) fn noise(n: usize, sd: f64) -> Vec<f64> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(987654321);
+        let normal = Normal::new(0.0, sd).unwrap();
+        (0..n).map(|_| normal.sample(&mut rng)).collect()
     }
 
     #[test]

@@ -186,20 +186,12 @@ mod tests {
 
     #[test]
     fn noise_floor_recovers_white_noise_and_ignores_steps() {
-        // Deterministic pseudo-noise with sigma 0.1 on top of a step.
-        let mut state: u64 = 12345;
-        let mut gauss = || {
-            let mut s = 0.0;
-            for _ in 0..12 {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                s += (state >> 11) as f64 / (1u64 << 53) as f64;
-            }
-            s - 6.0
-        };
-        let vp: Vec<f64> = (0..20000)
-            .map(|k| if k < 10000 { 30.0 } else { 60.0 } + 0.1 * gauss())
+        // Deterministic noise with sigma 0.1 on top of a step.
+        let noise = crate::diagnose::evidence::tests::noise(20000, 0.1);
+        let vp: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .map(|(k, e)| if k < 10000 { 30.0 } else { 60.0 } + e)
             .collect();
         let s = noise_floor(&vp);
         assert!((s - 0.1).abs() < 0.01, "{s}");
