@@ -33,14 +33,7 @@ fn main() -> anyhow::Result<()> {
     let mut last = None;
     for _ in 0..5 {
         let t0 = std::time::Instant::now();
-        let id = fit::identify(
-            &rec.t,
-            &rec.op,
-            &rec.vp,
-            rec.sample_period,
-            &opts,
-            &|_, _| {},
-        )?;
+        let id = fit::identify(&rec.view(), &opts, &|_, _| {})?;
         times.push(t0.elapsed().as_secs_f64());
         last = Some(id);
     }

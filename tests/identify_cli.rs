@@ -80,21 +80,14 @@ fn every_case_recording_is_identified_and_every_model_beats_modelless() {
             ],
             "{name}"
         );
-        let (sse, held) = (&rows[0]["sse"], &rows[0]["heldout_sse"]);
+        let (sse, held) = (&rows[0]["sse"], &rows[0]["heldout"]["sse"]);
         let (sse, held) = (sse.as_f64().unwrap(), held.as_f64().unwrap());
         for r in rows.iter().skip(1) {
-            for key in [
-                "mae",
-                "mae_filtered",
-                "r2",
-                "rel_sse",
-                "heldout_sse",
-                "params",
-            ] {
+            for key in ["mae", "mae_filtered", "r2", "rel_sse", "heldout", "params"] {
                 assert!(!r[key].is_null(), "{name}: {key} missing in {r}");
             }
             assert!(r["sse"].as_f64().unwrap() < sse, "{name}: {r}");
-            assert!(r["heldout_sse"].as_f64().unwrap() < held, "{name}: {r}");
+            assert!(r["heldout"]["sse"].as_f64().unwrap() < held, "{name}: {r}");
         }
         assert_eq!(rows[5]["params"].as_object().unwrap().len(), 7, "{name}");
     }
@@ -111,7 +104,7 @@ fn backlash_case_prefers_pincart2_on_held_out_data() {
             .unwrap()
             .iter()
             .find(|r| r["model"] == m)
-            .unwrap()["heldout_sse"]
+            .unwrap()["heldout"]["sse"]
             .as_f64()
             .unwrap()
     };

@@ -19,15 +19,7 @@ fn table1_ordering_of_the_paper() {
     }
     let rec = synth::generate(&truth, Excitation::RandomSteps, 1200.0, 0.01, 0.3, 11).unwrap();
     let started = std::time::Instant::now();
-    let id = fit::identify(
-        &rec.t,
-        &rec.op,
-        &rec.vp,
-        rec.sample_period,
-        &Options::default(),
-        &|_, _| {},
-    )
-    .unwrap();
+    let id = fit::identify(&rec.view(), &Options::default(), &|_, _| {}).unwrap();
     let elapsed = started.elapsed().as_secs_f64();
     let row = |k: ModelKind| id.rows.iter().find(|r| r.kind == k).unwrap();
     for r in &id.rows {

@@ -8,6 +8,7 @@ use valve_bridge::diagnose::{self, composed};
 use valve_bridge::metrics;
 use valve_bridge::model::{bundled, ModelKind, ModelSpec};
 use valve_bridge::recording;
+use valve_bridge::report::diagnose as report;
 use valve_bridge::synth::{self, Excitation};
 
 /// Arguments of `valve-bridge demo`.
@@ -69,20 +70,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.effect,
         args.out.display()
     );
-    let d = diagnose::diagnose(&rec.t, &rec.op, &rec.vp, dt, None, &|_, _| {})?;
+    let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})?;
     let base = metrics::scores(&rec.vp, &d.sim_before, &rec.op, dt);
     println!("2. A fitted FOPDT looks fine by eye (whole recording):");
     println!("   {}", metrics::table1_header());
     println!("   {}", metrics::table1_row("FOPDT", &base));
     println!("3. valve-bridge diagnose {}:", args.out.display());
     if d.findings.is_empty() {
-        println!("   found nothing: {}", d.verdict);
+        println!("   found nothing: {}", report::verdict(&d.outcome));
     }
     for f in &d.findings {
         println!(
             "   found {}: {}\n   held-out SSE {:.2} -> {:.2} %²",
             f.effect.name(),
-            f.evidence,
+            report::evidence(f),
             f.heldout_sse_before,
             f.heldout_sse_after
         );
@@ -91,7 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "4. {} {}",
         if hit { "Right:" } else { "Missed:" },
-        d.verdict
+        report::verdict(&d.outcome)
     );
     Ok(())
 }

@@ -4,10 +4,11 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
 use valve_bridge::fit::steps::{self, StepOptions};
 use valve_bridge::recording;
+use valve_bridge::report::identify;
 
-use super::identify::{fmt_param, print_steps_summary};
 use super::input::RecordingArgs;
 
 /// Arguments of `valve-bridge steps`.
@@ -36,28 +37,9 @@ pub struct Args {
 
 /// Runs the analysis and prints it.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(args.fraction > 0.0 && args.fraction < 1.0) {
-        anyhow::bail!(
-            "--fraction {}: must be between 0 and 1 (e.g. 0.1 for a tenth of the step)",
-            args.fraction
-        );
-    }
-    if !(args.min_size > 0.0 && args.min_hold > 0.0) {
-        anyhow::bail!("--min-size and --min-hold must be positive");
-    }
+    let opts = StepOptions::new(args.min_size, args.fraction, args.min_hold)?;
     let rec = recording::read(&args.recording, &args.read.options()?)?;
-    if rec.vp.is_empty() {
-        anyhow::bail!(
-            "{} has no measured V_P column: step delays need it (map it with --columns vp=NAME)",
-            rec.source
-        );
-    }
-    let opts = StepOptions {
-        min_size_pct: args.min_size,
-        fraction: args.fraction,
-        min_hold_s: args.min_hold,
-    };
-    let a = steps::analyse(&rec.op, &rec.vp, rec.sample_period, &opts);
+    let a = steps::analyse_recording(&rec.view(), &opts).with_context(|| rec.source.clone())?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&a)?);
         return Ok(());
@@ -69,26 +51,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rec.sample_period,
         a.noise_pct
     );
-    print_steps_summary(&a);
+    print!("{}", identify::steps_summary(&a));
     if args.list {
-        println!(
-            "\n{:>10} {:>9} {:>9} {:>10} {:>9}",
-            "t (s)", "from %", "step %", "direction", "delay s"
-        );
-        for s in &a.steps {
-            println!(
-                "{:>10.2} {:>9.2} {:>+9.2} {:>10} {:>9}",
-                rec.t[0] + s.t_s,
-                s.from_pct,
-                s.size_pct,
-                match s.reversal {
-                    Some(true) => "reversal",
-                    Some(false) => "same",
-                    None => "first",
-                },
-                s.delay_s.map_or("-".into(), fmt_param)
-            );
-        }
+        print!("\n{}", identify::steps_list(&a, rec.t[0]));
     }
     Ok(())
 }

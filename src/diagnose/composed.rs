@@ -74,24 +74,20 @@ impl Effect {
             Effect::DeadTime | Effect::MinSpeed => &[],
         }
     }
+}
 
-    /// What experiment separates this effect from its look-alikes.
-    pub fn experiment(self) -> &'static str {
-        match self {
-            Effect::Backlash | Effect::Deadband | Effect::StateDependentDelay => {
-                "random steps with many reversals over the whole travel (`[source] kind = \"random-steps\"`)"
-            }
-            Effect::Quantization | Effect::Stiction => {
-                "a slow ramp (`[source] kind = \"ramp\"`): stiction moves in jumps larger than the sensor step"
-            }
-            Effect::SlewRate | Effect::Asymmetry => {
-                "large steps in both directions (`[source] kind = \"steps\"` from 20 to 90 % and back)"
-            }
-            Effect::Calibration | Effect::Saturation => {
-                "steps held to steady state across the whole travel, up to 0 and 100 % (`[source] kind = \"steps\"`)"
-            }
-            Effect::DeadTime | Effect::MinSpeed => "small steps (<= 1 %) held for several seconds",
-        }
+impl std::str::FromStr for Effect {
+    type Err = String;
+
+    /// An effect by its vocabulary name (`backlash`, `dead_time`, ...).
+    fn from_str(s: &str) -> Result<Self, String> {
+        Effect::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| {
+                let all: Vec<&str> = Effect::ALL.iter().map(|e| e.name()).collect();
+                format!("unknown effect `{s}`: expected one of {}", all.join(", "))
+            })
     }
 }
 
@@ -144,7 +140,25 @@ impl Knob {
         self == other || (slew(self) && slew(other))
     }
 
-    /// Parameter name and unit for reports.
+    /// The unit of the knob's value as printed.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Knob::Gain => "1/s",
+            Knob::DeadTime | Knob::Crossing => "s",
+            Knob::CrossingSlope => "s/%",
+            Knob::Slowdown | Knob::JumpFraction | Knob::CalGain => "",
+            Knob::Slew | Knob::HalfOpenSlew | Knob::ClosingSlew | Knob::MinSpeed => "%/s",
+            Knob::Stickband
+            | Knob::Breakaway
+            | Knob::Deadband
+            | Knob::TravelMin
+            | Knob::TravelMax
+            | Knob::Quantum
+            | Knob::CalOffset => "%",
+        }
+    }
+
+    /// Parameter name (with its unit) for reports and JSON.
     pub fn label(self) -> &'static str {
         match self {
             Knob::Gain => "p_gain_per_s",

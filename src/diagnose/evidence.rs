@@ -1,435 +1,392 @@
-//! Facts measured straight from a recording, without any model: step delays by direction,
-//! travel speeds, steady-state offsets, the sensor lattice and the slips of V_P (sudden moves
-//! while O_P is nearly still, the mark of stick-slip; see [`slips`]).
+//! Evidence for a finding, as numbers a person can check against the plots: where the model's
+//! excess error lay, what the step delays, speeds and holds of the recording show, and what
+//! the fit says, per effect.
 //!
-//! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
-//! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
+//! Everything here is typed and serialised into `--json` (`facts` of a finding, `outcome`,
+//! `notes`); the sentences a person reads are rendered from it in `report::diagnose`.
+//!
+//! Not here: deciding anything (that is [`super::judge`]) or wording it.
 
-use crate::fit::steps::{self, StepOptions};
+use serde::Serialize;
 
-/// One step of O_P and how V_P answered it.
-#[derive(Debug, Clone, Copy)]
-pub struct StepResponse {
-    pub t_s: f64,
-    /// V_P when the step came, %.
-    pub from_pct: f64,
-    pub size_pct: f64,
-    /// True when the step goes against the valve's previous movement.
-    pub reversal: bool,
-    /// Time until V_P moved a tenth of the step (at least four noise sigmas), s.
-    pub delay_s: f64,
+use super::composed::{self, Effect, Knob};
+use super::facts::Facts;
+use super::locate::{Context, Window};
+use super::stickslip;
+use crate::fit::steps::Population;
+use crate::metrics::stats;
+use crate::model::ModelSpec;
+
+/// The share of the model's excess error that lies in windows of some kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Share {
+    /// Share of the excess error of all windows, 0-1.
+    pub share: f64,
+    /// Number of windows.
+    pub windows: usize,
 }
 
-/// A hold of O_P long enough for the valve to settle.
-#[derive(Debug, Clone, Copy)]
-pub struct Hold {
-    pub op_pct: f64,
-    /// Mean V_P over the last second of the hold, %.
-    pub vp_pct: f64,
-    /// +1 when the valve came from below (opening), -1 from above.
-    pub approach: f64,
-    /// Largest jump of V_P inside the settled part of the hold, %.
-    pub max_jump_pct: f64,
-}
-
-/// Everything measured from the recording.
-#[derive(Debug, Clone)]
-pub struct Facts {
-    pub steps: Vec<StepResponse>,
-    pub holds: Vec<Hold>,
-    /// 99.5th percentile of the opening and closing speed of V_P, %/s.
-    pub open_speed: f64,
-    pub close_speed: f64,
-    /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
-    pub lattice_pct: f64,
-    /// Number of direction reversals of O_P.
-    pub reversals: usize,
-    /// What counts as a slip in this recording, and the slips of the measured V_P.
-    pub slip_scale: SlipScale,
-    pub slips: Vec<Slip>,
-}
-
-/// Measures the facts of a recording sampled every `dt` whose V_P has noise `sigma`.
-pub fn measure(op: &[f64], vp: &[f64], dt: f64, sigma: f64) -> Facts {
-    let (open_speed, close_speed) = speeds(vp, dt);
-    let lattice_pct = lattice(vp);
-    let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
-    Facts {
-        reversals: count_reversals(op),
-        steps: step_responses(op, vp, dt),
-        holds: holds(op, vp, dt),
-        open_speed,
-        close_speed,
-        lattice_pct,
-        slips: slips(op, vp, &slip_scale),
-        slip_scale,
+impl Share {
+    fn of(windows: &[Window], kinds: &[Context]) -> Self {
+        let total: f64 = windows.iter().map(|w| w.excess_sse).sum();
+        let hits: Vec<&Window> = windows.iter().filter(|w| kinds.contains(&w.kind)).collect();
+        let part: f64 = hits.iter().map(|w| w.excess_sse).sum();
+        Share {
+            share: if total > 0.0 { part / total } else { 0.0 },
+            windows: hits.len(),
+        }
     }
 }
 
-fn count_reversals(op: &[f64]) -> usize {
-    let mut last = 0.0;
-    let mut n = 0;
-    for w in op.windows(2) {
-        let d = w[1] - w[0];
-        if d.abs() > 0.02 {
-            let s = d.signum();
-            if last != 0.0 && s != last {
-                n += 1;
+/// Where the excess error of the model before the finding lay, by what the valve was doing.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Located {
+    pub after_reversals: Share,
+    pub during_moves: Share,
+    pub at_rest: Share,
+    pub near_limits: Share,
+}
+
+/// The step delays of the recording, split by direction.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Delays {
+    /// Steps against the previous movement.
+    pub reversal: Population,
+    /// Steps in the same direction as the previous movement.
+    pub same_direction: Population,
+    /// Direction reversals of O_P in the whole recording.
+    pub reversals_of_op: usize,
+}
+
+/// Stick-slip as the fit has it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum StickSlipModel {
+    /// Inside the positioner loop: sticks when slow, breaks away this far beyond, overshoots.
+    Breakaway { breakaway_pct: f64, gain_per_s: f64 },
+    /// Choudhury's on the valve's input.
+    Input {
+        stickband_pct: f64,
+        jump_pct: f64,
+        gain_per_s: f64,
+    },
+}
+
+impl StickSlipModel {
+    fn of(spec: &ModelSpec) -> Self {
+        let g = |k| composed::get(spec, k);
+        if g(Knob::Breakaway) > 0.0 {
+            StickSlipModel::Breakaway {
+                breakaway_pct: g(Knob::Breakaway),
+                gain_per_s: g(Knob::Gain),
             }
-            last = s;
-        }
-    }
-    n
-}
-
-/// The step delays of the step analysis (`fit::steps`), for steps of at least 0.3 % held for
-/// a second that V_P answered.
-fn step_responses(op: &[f64], vp: &[f64], dt: f64) -> Vec<StepResponse> {
-    let opts = StepOptions {
-        min_size_pct: 0.3,
-        fraction: 0.1,
-        min_hold_s: 1.0,
-    };
-    steps::analyse(op, vp, dt, &opts)
-        .steps
-        .into_iter()
-        .filter_map(|s| {
-            s.delay_s.map(|delay_s| StepResponse {
-                t_s: s.t_s,
-                from_pct: s.from_pct,
-                size_pct: s.size_pct,
-                reversal: s.reversal == Some(true),
-                delay_s,
-            })
-        })
-        .collect()
-}
-
-/// Stretches of constant O_P of at least 3 s, with the settled V_P of their last second.
-fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
-    let n = op.len();
-    let min_hold = (3.0 / dt) as usize;
-    let settle = (1.0 / dt) as usize;
-    let mut holds = Vec::new();
-    let mut a = 0;
-    for b in 1..=n {
-        if b < n && (op[b] - op[b - 1]).abs() <= 1e-9 {
-            continue;
-        }
-        if b - a >= min_hold && a > 0 {
-            let tail = &vp[b - settle..b];
-            let mean = tail.iter().sum::<f64>() / tail.len() as f64;
-            let max_jump = vp[a + settle..b]
-                .windows(2)
-                .map(|w| (w[1] - w[0]).abs())
-                .fold(0.0, f64::max);
-            holds.push(Hold {
-                op_pct: op[a],
-                vp_pct: mean,
-                approach: (op[a] - op[a - 1]).signum(),
-                max_jump_pct: max_jump,
-            });
-        }
-        a = b;
-    }
-    holds
-}
-
-fn speeds(vp: &[f64], dt: f64) -> (f64, f64) {
-    let h = ((0.1 / dt).round() as usize).max(1);
-    let mut up: Vec<f64> = Vec::new();
-    let mut down: Vec<f64> = Vec::new();
-    for k in (h..vp.len()).step_by(h) {
-        let s = (vp[k] - vp[k - h]) / (h as f64 * dt);
-        if s > 0.0 {
-            up.push(s);
         } else {
-            down.push(-s);
+            StickSlipModel::Input {
+                stickband_pct: g(Knob::Stickband),
+                jump_pct: g(Knob::Stickband) * g(Knob::JumpFraction),
+                gain_per_s: g(Knob::Gain),
+            }
         }
     }
-    (percentile(&mut up, 0.995), percentile(&mut down, 0.995))
 }
 
-/// The `q` quantile of `x` (0 for an empty slice).
-pub fn percentile(x: &mut [f64], q: f64) -> f64 {
-    if x.is_empty() {
-        return 0.0;
-    }
-    let k = ((x.len() - 1) as f64 * q).round() as usize;
-    let (_, v, _) = x.select_nth_unstable_by(k, f64::total_cmp);
-    *v
-}
-
-/// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
-///
-/// The smallest nonzero change of V_P that occurs at least three times is the candidate
-/// spacing; V_P is on a lattice when at least 95 % of its values sit within 2 % of a spacing of a
-/// multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
-fn lattice(vp: &[f64]) -> f64 {
-    let mut diffs: Vec<f64> = vp
-        .windows(2)
-        .map(|w| (w[1] - w[0]).abs())
-        .filter(|d| *d > 1e-9)
-        .collect();
-    if diffs.len() < 20 {
-        return 0.0;
-    }
-    diffs.sort_by(f64::total_cmp);
-    let q = diffs
-        .windows(3)
-        .find(|w| w[2] - w[0] <= 1e-6 * w[0].max(1e-9) + 1e-9)
-        .map_or(0.0, |w| w[1]);
-    if q < 0.01 {
-        return 0.0;
-    }
-    let near = vp
-        .iter()
-        .filter(|&&v| {
-            let f = v / q - (v / q).round();
-            f.abs() < 0.02
-        })
-        .count();
-    if near as f64 >= 0.95 * vp.len() as f64 {
-        q
-    } else {
-        0.0
-    }
-}
-
-/// A slip of V_P: a sudden move with V_P at rest just before and just after, while O_P was
-/// nearly still.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Slip {
-    /// Sample at the middle of the move.
-    pub k: usize,
-    /// Signed size, %: the mean over the `span` samples after minus the mean over those before.
+/// Stick-slip judged by the slips of V_P ([`super::stickslip`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Slips {
+    /// Measured slips: count, mean and spread of their sizes, %.
+    pub count: usize,
     pub size_pct: f64,
-}
-
-/// What tells a slip from noise, a sensor step and a smooth move.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SlipScale {
-    /// Samples the move may take; the means before and after are over as many (>= 1).
-    pub span: usize,
-    /// Smallest slip, %.
+    pub size_sd_pct: f64,
+    /// Smallest move that counts as a slip, %, and how fast it must be done, s.
     pub threshold_pct: f64,
-    /// Samples before the move that O_P must have been nearly still for too (the valve's delay).
-    pub lookback: usize,
+    pub within_s: f64,
+    /// Median time between slips, s.
+    pub median_interval_s: f64,
+    /// Successive slips that reverse (hunting), of how many pairs.
+    pub reversing: usize,
+    pub successive: usize,
+    /// Slips of the model before, and of the stick-slip model, whole recording.
+    pub slips_before: usize,
+    pub slips_after: usize,
+    pub size_after_pct: f64,
+    pub model: StickSlipModel,
+    /// Held-out pieces where the model's slip histogram is closer to the measured one, of
+    /// how many that differ.
+    pub pieces_closer: usize,
+    pub pieces_compared: usize,
+    /// One-sided signed-rank p-value of that.
+    pub p_value: f64,
+    /// Summed histogram distance, in slips, before and after.
+    pub distance_before: f64,
+    pub distance_after: f64,
 }
 
-/// Longest move that still counts as a slip, s: a stem that breaks loose is at its new place
-/// within a tenth of a second, much faster than a positioner follows a command.
-const SLIP_S: f64 = 0.1;
-/// How long before a slip O_P must have been nearly still, s: covers a healthy positioner's
-/// dead time and response, so a valve catching up with a command is not a slip.
-const SLIP_LOOKBACK_S: f64 = 0.5;
+/// What the data and the fit say, per effect.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Detail {
+    DeadTime {
+        dead_time_s: f64,
+        was_s: f64,
+    },
+    Backlash {
+        /// Extra time V_P stays flat after a reversal, at half travel, s.
+        crossing_half_open_s: f64,
+        /// Closed and fully open, when it depends on the opening.
+        crossing_closed_s: Option<f64>,
+        crossing_open_s: Option<f64>,
+    },
+    StateDependentDelay {
+        /// Mean reversal delay below and above 50 % opening, s.
+        reversal_below_half_s: Option<f64>,
+        reversal_above_half_s: Option<f64>,
+        /// How many times slower fully open than closed (the slowdown variant).
+        open_vs_closed: Option<f64>,
+        /// Cart-crossing time closed and open (the pin-cart II polynomial variant), s.
+        crossing_closed_s: Option<f64>,
+        crossing_open_s: Option<f64>,
+    },
+    SlewRate {
+        /// 99.5th percentile of V_P's opening and closing speed, %/s.
+        open_speed: f64,
+        close_speed: f64,
+        slew_pct_per_s: f64,
+    },
+    Asymmetry {
+        open_speed: f64,
+        close_speed: f64,
+        fitted_open_pct_per_s: f64,
+        fitted_close_pct_per_s: f64,
+    },
+    MinSpeed {
+        min_speed_pct_per_s: f64,
+    },
+    Stiction {
+        /// Holds of O_P where the settled V_P jumped by more than five noise sigmas, of all.
+        holds_with_jumps: usize,
+        holds: usize,
+        model: StickSlipModel,
+    },
+    Slips(Slips),
+    Deadband {
+        /// Mean settled V_P - O_P after opening and after closing, %, and hold counts.
+        offset_after_opening_pct: f64,
+        holds_opening: usize,
+        offset_after_closing_pct: f64,
+        holds_closing: usize,
+        deadband_pct: f64,
+    },
+    Saturation {
+        travel_min_pct: f64,
+        travel_max_pct: f64,
+    },
+    Quantization {
+        lattice_pct: f64,
+    },
+    Calibration {
+        /// Mean settled V_P - O_P over all holds, %.
+        mean_offset_pct: f64,
+        holds: usize,
+        gain: f64,
+        offset_pct: f64,
+    },
+}
 
-impl SlipScale {
-    /// The scale for a recording sampled every `dt` with V_P noise `sigma` and sensor lattice
-    /// `lattice` (0 = none): a slip stands five noise sigmas of the compared means above the
-    /// noise, is larger than one and a half lattice steps (a sensor step is not a slip), and
-    /// at least 0.1 %.
-    pub fn new(dt: f64, sigma: f64, lattice: f64) -> Self {
-        let span = ((SLIP_S / dt).round() as usize).max(1);
-        let noise = sigma * (2.0 / span as f64).sqrt();
-        SlipScale {
-            span,
-            threshold_pct: (5.0 * noise).max(1.5 * lattice).max(0.1),
-            lookback: (SLIP_LOOKBACK_S / dt).round() as usize,
+/// The evidence for one finding.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Evidence {
+    pub located: Located,
+    pub delays: Delays,
+    pub detail: Detail,
+}
+
+impl Evidence {
+    /// The evidence for `effect` as fitted in `spec`, added to `before`.
+    pub(crate) fn of(
+        effect: Effect,
+        spec: &ModelSpec,
+        before: &ModelSpec,
+        facts: &Facts,
+        windows: &[Window],
+        sigma: f64,
+    ) -> Self {
+        Evidence {
+            located: located(windows),
+            delays: delays(facts),
+            detail: detail(effect, spec, before, facts, sigma),
         }
     }
-}
 
-/// Running sums of `x` with a leading 0: the sum of `x[a..b]` is `s[b] - s[a]`.
-fn running_sums(x: &[f64]) -> Vec<f64> {
-    let mut s = Vec::with_capacity(x.len() + 1);
-    let mut acc = 0.0;
-    s.push(acc);
-    for &v in x {
-        acc += v;
-        s.push(acc);
-    }
-    s
-}
-
-/// Mean of `x[k..k + h]` minus mean of `x[k - h..k]`, from the running sums `s` of `x`
-/// (needs h <= k <= len - h).
-fn step_at(s: &[f64], k: usize, h: usize) -> f64 {
-    ((s[k + h] - s[k]) - (s[k] - s[k - h])) / h as f64
-}
-
-/// The slips of `y` (measured or simulated V_P) driven by `op`.
-///
-/// With means over `span` samples, d(k) = mean(y[k..k+span]) - mean(y[k-span..k]) is a step
-/// detector: noise in it shrinks with the span, a jump of A completed within the span gives
-/// |d| close to A at its middle and little one span earlier or later, and a ramp (a valve
-/// following a moving command, or slewing) gives the same d at all three. A slip is a local
-/// peak of |d| above the threshold, with |d| a span before and after below half of it: V_P at
-/// rest on both sides (a spike of the sensor, which comes back within the span, is not). The
-/// command must not explain it: the same step detector on O_P stays below half the slip
-/// from `lookback` samples before the move to its middle (O_P noise averages out in the means
-/// as it does in the valve, a step or a fast move of O_P does not). O(n).
-pub fn slips(op: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
-    let h = scale.span;
-    let n = y.len().min(op.len());
-    let mut out = Vec::new();
-    if n < 4 * h + 1 {
-        return out;
-    }
-    let (sy, so) = (running_sums(&y[..n]), running_sums(&op[..n]));
-    let d = |k: usize| step_at(&sy, k, h);
-    let mut k = 2 * h;
-    while k + 2 * h <= n {
-        let a = d(k).abs();
-        if a < scale.threshold_pct
-            || d(k - h).abs() * 2.0 > a
-            || d(k + h).abs() * 2.0 > a
-            || (k - h + 1..k + h).any(|j| d(j).abs() > a)
-            || (k.saturating_sub(scale.lookback).max(h)..=k)
-                .any(|j| step_at(&so, j, h).abs() * 2.0 >= a)
-        {
-            k += 1;
-            continue;
-        }
-        out.push(Slip { k, size_pct: d(k) });
-        k += h;
-    }
-    out
-}
-
-/// Mean and standard deviation of a sample (0, 0 when empty).
-pub fn mean_sd(x: impl Iterator<Item = f64>) -> (f64, f64, usize) {
-    let v: Vec<f64> = x.collect();
-    if v.is_empty() {
-        return (0.0, 0.0, 0);
-    }
-    let m = v.iter().sum::<f64>() / v.len() as f64;
-    let s = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64).sqrt();
-    (m, s, v.len())
-}
-
-#[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-
-    #[test]
-    fn lattice_is_found_only_on_a_lattice() {
-        let on: Vec<f64> = (0..2000)
-            .map(|k| ((50.0 + 3.0 * (k as f64 * 0.01).sin()) / 0.1).round() * 0.1)
+    /// The evidence for stick-slip judged by its slips.
+    pub(crate) fn of_slips(
+        c: &stickslip::Candidate,
+        facts: &Facts,
+        windows: &[Window],
+        dt: f64,
+    ) -> Self {
+        let s = &facts.slips;
+        let (size_pct, size_sd_pct, count) = stats::mean_sd(s.iter().map(|x| x.size_pct.abs()));
+        let gaps: Vec<f64> = s
+            .windows(2)
+            .map(|w| (w[1].k - w[0].k) as f64 * dt)
             .collect();
-        assert!((lattice(&on) - 0.1).abs() < 1e-9);
-        let off: Vec<f64> = (0..2000)
-            .map(|k| 50.0 + 3.0 * (k as f64 * 0.01).sin())
-            .collect();
-        assert_eq!(lattice(&off), 0.0);
-    }
-
-    /// Deterministic Gaussian noise of standard deviation `sd` (seeded, so tests repeat).
-    pub(crate) fn noise(n: usize, sd: f64) -> Vec<f64> {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(987654321);
-        let normal = Normal::new(0.0, sd).unwrap();
-        (0..n).map(|_| normal.sample(&mut rng)).collect()
-    }
-
-    #[test]
-    fn slips_are_sudden_moves_the_command_does_not_explain() {
-        let (dt, n) = (0.01, 6000);
-        let e = noise(n, 0.1);
-        let scale = SlipScale::new(dt, 0.1, 0.0);
-        // O_P creeps up 0.1 %/s; V_P sticks and jumps 0.6 % in 50 ms every 2 s, alternately
-        // up and down (hunting), with sensor noise.
-        let op: Vec<f64> = (0..n).map(|k| 50.0 + 0.1 * k as f64 * dt).collect();
-        let level = |k: usize| {
-            let cycle = k / 200;
-            let within = (k % 200).min(5) as f64 / 5.0;
-            let (a, b) = if cycle.is_multiple_of(2) {
-                (0.0, 0.6)
-            } else {
-                (0.6, 0.0)
-            };
-            50.0 + a + (b - a) * within
+        let (size_after_pct, _, slips_after) =
+            stats::mean_sd(c.slips_after.iter().map(|x| x.size_pct.abs()));
+        let slips = Slips {
+            count,
+            size_pct,
+            size_sd_pct,
+            threshold_pct: facts.slip_scale.threshold_pct,
+            within_s: facts.slip_scale.span as f64 * dt,
+            median_interval_s: stats::median(&gaps).unwrap_or(0.0),
+            reversing: s
+                .windows(2)
+                .filter(|w| w[0].size_pct * w[1].size_pct < 0.0)
+                .count(),
+            successive: count.saturating_sub(1),
+            slips_before: c.slips_before.len(),
+            slips_after,
+            size_after_pct,
+            model: StickSlipModel::of(&c.spec),
+            pieces_closer: c.held.better,
+            pieces_compared: c.held.better + c.held.worse,
+            p_value: c.held.p_value,
+            distance_before: c.held.distance_before,
+            distance_after: c.held.distance_after,
         };
-        let vp: Vec<f64> = (0..n).map(|k| level(k) + e[k]).collect();
-        let found = slips(&op, &vp, &scale);
-        // Every jump after the first (k = 200, 400, ... 5800), none more; the means over the
-        // span see a jump spread over 5 samples as a little smaller.
-        let ks: Vec<usize> = found.iter().map(|s| s.k).collect();
-        assert_eq!(found.len(), 29, "{ks:?}");
-        for (i, s) in found.iter().enumerate() {
-            assert!(
-                (s.k as i64 - (200 * (i + 1) + 2) as i64).abs() <= 3,
-                "{s:?}"
-            );
-            assert!((s.size_pct.abs() - 0.55).abs() < 0.15, "{s:?}");
-            assert_eq!(s.size_pct > 0.0, i % 2 == 1, "{s:?}");
+        Evidence {
+            located: located(windows),
+            delays: delays(facts),
+            detail: Detail::Slips(slips),
         }
-        // The same moves are no slips when O_P stepped 0.1 s before them.
-        let stepping: Vec<f64> = (0..n).map(|k| level(k + 10)).collect();
-        assert!(slips(&stepping, &vp, &scale).is_empty());
     }
+}
 
-    #[test]
-    fn smooth_moves_spikes_and_sensor_steps_are_not_slips() {
-        let (dt, n) = (0.01, 6000);
-        let e = noise(n, 0.1);
-        let op = vec![50.0; n];
-        let scale = SlipScale::new(dt, 0.1, 0.0);
-        // Slewing at 5 %/s for 2 s, then resting.
-        let slew: Vec<f64> = (0..n)
-            .map(|k| 50.0 + 5.0 * ((k as f64 - 2000.0).clamp(0.0, 200.0) * dt) + e[k])
-            .collect();
-        assert!(slips(&op, &slew, &scale).is_empty());
-        // One-sample spikes of 3 %.
-        let spiky: Vec<f64> = (0..n)
-            .map(|k| 50.0 + e[k] + if k % 500 == 250 { 3.0 } else { 0.0 })
-            .collect();
-        assert!(slips(&op, &spiky, &scale).is_empty());
-        // A smooth, slow V_P on a 0.5 % lattice steps by one lattice step at a time.
-        let on_lattice: Vec<f64> = (0..n)
-            .map(|k| ((50.0 + 2.0 * (k as f64 * dt * 0.5).sin()) / 0.5).round() * 0.5)
-            .collect();
-        let q = lattice(&on_lattice);
-        assert!((q - 0.5).abs() < 1e-9);
-        assert!(slips(&op, &on_lattice, &SlipScale::new(dt, 0.0, q)).is_empty());
-        // Without the lattice known, those steps would count: the lattice is what excludes them.
-        assert!(!slips(&op, &on_lattice, &SlipScale::new(dt, 0.0, 0.0)).is_empty());
+fn located(windows: &[Window]) -> Located {
+    Located {
+        after_reversals: Share::of(windows, &[Context::Reversal]),
+        during_moves: Share::of(windows, &[Context::LargeStep, Context::Move]),
+        at_rest: Share::of(windows, &[Context::Rest]),
+        near_limits: Share::of(windows, &[Context::NearLimit]),
     }
+}
 
-    #[test]
-    fn step_delays_and_reversals_are_measured() {
-        let dt = 0.01;
-        // O_P: 40 -> 50 at 5 s, -> 45 at 15 s. V_P follows 0.3 s late, 0.8 s late after the reversal.
-        let n = 2500;
-        let op: Vec<f64> = (0..n)
-            .map(|k| {
-                if k < 500 {
-                    40.0
-                } else if k < 1500 {
-                    50.0
-                } else {
-                    45.0
-                }
-            })
+fn delays(facts: &Facts) -> Delays {
+    let of = |rev: bool| {
+        let d: Vec<f64> = facts
+            .steps
+            .iter()
+            .filter(|s| s.reversal == rev)
+            .map(|s| s.delay_s)
             .collect();
-        let vp: Vec<f64> = (0..n)
-            .map(|k| {
-                if k < 530 {
-                    40.0
-                } else if k < 1580 {
-                    50.0
-                } else {
-                    45.0
-                }
-            })
-            .collect();
-        let f = measure(&op, &vp, dt, 0.0);
-        assert_eq!(f.steps.len(), 2);
-        assert!(!f.steps[0].reversal && f.steps[1].reversal);
-        assert!((f.steps[0].delay_s - 0.3).abs() < 1e-9 && (f.steps[1].delay_s - 0.8).abs() < 1e-9);
-        assert_eq!(f.reversals, 1);
-        assert_eq!(f.holds.len(), 2);
-        assert_eq!(f.holds[1].approach, -1.0);
+        Population::of(&d)
+    };
+    Delays {
+        reversal: of(true),
+        same_direction: of(false),
+        reversals_of_op: facts.reversals,
+    }
+}
+
+/// Mean settled V_P - O_P over the holds `approach` selects, and their count.
+fn hold_offset(facts: &Facts, approach: impl Fn(f64) -> bool) -> (f64, usize) {
+    let (m, _, n) = stats::mean_sd(
+        facts
+            .holds
+            .iter()
+            .filter(|h| approach(h.approach))
+            .map(|h| h.vp_pct - h.op_pct),
+    );
+    (m, n)
+}
+
+fn detail(
+    effect: Effect,
+    spec: &ModelSpec,
+    before: &ModelSpec,
+    facts: &Facts,
+    sigma: f64,
+) -> Detail {
+    let g = |k| composed::get(spec, k);
+    let slowed = g(Knob::Slowdown) > 0.0;
+    match effect {
+        Effect::DeadTime => Detail::DeadTime {
+            dead_time_s: g(Knob::DeadTime),
+            was_s: composed::get(before, Knob::DeadTime),
+        },
+        Effect::Backlash => Detail::Backlash {
+            crossing_half_open_s: g(Knob::Crossing) * composed::half_open(spec),
+            crossing_closed_s: slowed.then(|| g(Knob::Crossing)),
+            crossing_open_s: slowed.then(|| g(Knob::Crossing) * (1.0 + g(Knob::Slowdown))),
+        },
+        Effect::StateDependentDelay => {
+            let mean = |below: bool| {
+                let d: Vec<f64> = facts
+                    .steps
+                    .iter()
+                    .filter(|s| s.reversal && (s.from_pct < 50.0) == below)
+                    .map(|s| s.delay_s)
+                    .collect();
+                (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
+            };
+            Detail::StateDependentDelay {
+                reversal_below_half_s: mean(true),
+                reversal_above_half_s: mean(false),
+                open_vs_closed: slowed.then(|| 1.0 + g(Knob::Slowdown)),
+                crossing_closed_s: (!slowed).then(|| g(Knob::Crossing)),
+                crossing_open_s: (!slowed)
+                    .then(|| g(Knob::Crossing) + 100.0 * g(Knob::CrossingSlope)),
+            }
+        }
+        Effect::SlewRate => Detail::SlewRate {
+            open_speed: facts.open_speed,
+            close_speed: facts.close_speed,
+            slew_pct_per_s: g(Knob::Slew),
+        },
+        Effect::Asymmetry => Detail::Asymmetry {
+            open_speed: facts.open_speed,
+            close_speed: facts.close_speed,
+            fitted_open_pct_per_s: g(Knob::Slew),
+            fitted_close_pct_per_s: g(Knob::ClosingSlew),
+        },
+        Effect::MinSpeed => Detail::MinSpeed {
+            min_speed_pct_per_s: g(Knob::MinSpeed),
+        },
+        Effect::Stiction => Detail::Stiction {
+            holds_with_jumps: facts
+                .holds
+                .iter()
+                .filter(|h| h.max_jump_pct > 5.0 * sigma.max(0.01))
+                .count(),
+            holds: facts.holds.len(),
+            model: StickSlipModel::of(spec),
+        },
+        Effect::Deadband => {
+            let (up, nu) = hold_offset(facts, |a| a > 0.0);
+            let (down, nd) = hold_offset(facts, |a| a < 0.0);
+            Detail::Deadband {
+                offset_after_opening_pct: up,
+                holds_opening: nu,
+                offset_after_closing_pct: down,
+                holds_closing: nd,
+                deadband_pct: g(Knob::Deadband),
+            }
+        }
+        Effect::Saturation => Detail::Saturation {
+            travel_min_pct: spec.travel.min_pct,
+            travel_max_pct: spec.travel.max_pct,
+        },
+        Effect::Quantization => Detail::Quantization {
+            lattice_pct: g(Knob::Quantum),
+        },
+        Effect::Calibration => {
+            let (mean_offset_pct, holds) = hold_offset(facts, |_| true);
+            Detail::Calibration {
+                mean_offset_pct,
+                holds,
+                gain: g(Knob::CalGain),
+                offset_pct: g(Knob::CalOffset),
+            }
+        }
     }
 }

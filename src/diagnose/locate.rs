@@ -1,13 +1,16 @@
 //! Locate: where in time a simulation departs from the recording by more than the noise.
 //!
 //! The noise floor is the measurement noise of V_P, estimated robustly from its second
-//! differences (a smooth movement has almost none, white noise of sigma has sigma * sqrt(6)),
-//! so steps and jumps do not inflate it. A mismatch window is a stretch where the residual's
-//! mean square over one second stays above four times the noise variance; each window is tied
-//! to what O_P and V_P were doing there. This module measures; it does not decide what is
-//! missing (that is [`super::explain`]).
+//! differences ([`stats::noise_sd`]: a smooth movement has almost none), so steps and jumps do
+//! not inflate it. A mismatch window is a stretch where the residual's mean square over one
+//! second stays above four times the noise variance; each window is tied to what O_P and V_P
+//! were doing there. This module measures; it does not decide what is missing (that is
+//! [`super::judge`]).
 
 use serde::Serialize;
+
+use crate::metrics::stats::{self, Differences};
+use crate::recording::RecordingView;
 
 /// One stretch of recording where the model misses by more than the noise.
 #[derive(Debug, Clone, Serialize)]
@@ -16,15 +19,15 @@ pub struct Window {
     pub end_s: f64,
     /// Sum over the window of (residual² - noise variance), %².
     pub excess_sse: f64,
-    /// What O_P and V_P were doing: e.g. "after a reversal of O_P at 63 % opening".
-    pub context: String,
-    /// The kind of context, for tallies.
-    #[serde(skip)]
+    /// What O_P and V_P were doing there.
     pub kind: Context,
+    /// Mean V_P over the window, %.
+    pub opening_pct: f64,
 }
 
 /// What the valve was doing in a window.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Context {
     /// O_P reversed its direction shortly before or inside the window.
     Reversal,
@@ -38,42 +41,15 @@ pub enum Context {
     NearLimit,
 }
 
-impl Context {
-    pub fn describe(self) -> &'static str {
-        match self {
-            Context::Reversal => "after a direction reversal of O_P",
-            Context::LargeStep => "during a large step",
-            Context::Move => "while O_P moves on in the same direction",
-            Context::Rest => "at rest (O_P steady)",
-            Context::NearLimit => "near a travel limit",
-        }
-    }
-}
-
-/// Measurement noise (standard deviation, %) of V_P from its second differences.
+/// Measurement noise (standard deviation, %) of V_P, from its second differences.
 pub fn noise_floor(vp: &[f64]) -> f64 {
-    if vp.len() < 5 {
-        return 0.0;
-    }
-    let mut d2: Vec<f64> = vp
-        .windows(3)
-        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
-        .collect();
-    let mid = d2.len() / 2;
-    let (_, median, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
-    // MAD of a zero-mean Gaussian is 0.6745 sigma; the second difference has variance 6 sigma².
-    *median / 0.6745 / 6f64.sqrt()
+    stats::noise_sd(vp, Differences::Second)
 }
 
-/// Finds the mismatch windows of `residual` (measured - simulated) given the noise `sigma`.
-pub fn windows(
-    t: &[f64],
-    op: &[f64],
-    vp: &[f64],
-    residual: &[f64],
-    sigma: f64,
-    dt: f64,
-) -> Vec<Window> {
+/// Finds the mismatch windows of `residual` (measured - simulated) in `rec` given the noise
+/// `sigma`.
+pub fn windows(rec: &RecordingView, residual: &[f64], sigma: f64) -> Vec<Window> {
+    let dt = rec.dt;
     let n = residual.len();
     let w = ((1.0 / dt).round() as usize).clamp(1, n.max(1));
     let var = sigma * sigma;
@@ -93,42 +69,32 @@ pub fn windows(
             last_hot = i + w;
         } else if let Some(s) = start {
             if i > last_hot + gap {
-                out.push(make(t, op, vp, residual, var, s, last_hot.min(n), dt));
+                out.push(make(rec, residual, var, s..last_hot.min(n)));
                 start = None;
             }
         }
         acc += residual[i + w] * residual[i + w] - residual[i] * residual[i];
     }
     if let Some(s) = start {
-        out.push(make(t, op, vp, residual, var, s, last_hot.min(n), dt));
+        out.push(make(rec, residual, var, s..last_hot.min(n)));
     }
     out
 }
 
-#[allow(clippy::too_many_arguments)]
-fn make(
-    t: &[f64],
-    op: &[f64],
-    vp: &[f64],
-    r: &[f64],
-    var: f64,
-    a: usize,
-    b: usize,
-    dt: f64,
-) -> Window {
-    // Trim to the samples that are themselves above the threshold of their window.
+/// The window of samples `range` of the residual `r`, trimmed to the samples that are
+/// themselves above the threshold, with its context.
+fn make(rec: &RecordingView, r: &[f64], var: f64, range: std::ops::Range<usize>) -> Window {
+    let (a, b) = (range.start, range.end);
     let hot = |k: &usize| r[*k] * r[*k] > 4.0 * var;
     let a = (a..b).find(hot).unwrap_or(a);
     let b = (a..b).rev().find(hot).map_or(b, |k| k + 1);
     let excess_sse = r[a..b].iter().map(|x| x * x - var).sum::<f64>().max(0.0);
-    let kind = classify(op, vp, a, b, dt);
-    let level = vp[a..b].iter().sum::<f64>() / (b - a).max(1) as f64;
     Window {
-        start_s: t[a],
-        end_s: t[b.saturating_sub(1)],
+        start_s: rec.t[a],
+        end_s: rec.t[b.saturating_sub(1)],
         excess_sse,
-        context: format!("{} at {:.0} % opening", kind.describe(), level),
-        kind,
+        kind: classify(rec.op, rec.vp, a, b, rec.dt),
+        opening_pct: rec.vp[a..b].iter().sum::<f64>() / (b - a).max(1) as f64,
     }
 }
 
@@ -185,19 +151,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn noise_floor_recovers_white_noise_and_ignores_steps() {
-        // Deterministic noise with sigma 0.1 on top of a step.
-        let noise = crate::diagnose::evidence::tests::noise(20000, 0.1);
-        let vp: Vec<f64> = noise
-            .iter()
-            .enumerate()
-            .map(|(k, e)| if k < 10000 { 30.0 } else { 60.0 } + e)
-            .collect();
-        let s = noise_floor(&vp);
-        assert!((s - 0.1).abs() < 0.01, "{s}");
-    }
-
-    #[test]
     fn windows_find_the_bad_stretch_and_its_context() {
         let dt = 0.01;
         let n = 6000;
@@ -218,7 +171,13 @@ mod tests {
         let r: Vec<f64> = (0..n)
             .map(|k| if (3000..3100).contains(&k) { 1.0 } else { 0.0 })
             .collect();
-        let w = windows(&t, &op, &vp, &r, 0.05, dt);
+        let rec = RecordingView {
+            t: &t,
+            op: &op,
+            vp: &vp,
+            dt,
+        };
+        let w = windows(&rec, &r, 0.05);
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(w[0].start_s > 28.5 && w[0].end_s < 31.5, "{w:?}");
         assert_eq!(w[0].kind, Context::Reversal);
@@ -232,6 +191,12 @@ mod tests {
         let r: Vec<f64> = (0..1000)
             .map(|k| 0.05 * ((k * 7919 % 13) as f64 / 6.0 - 1.0))
             .collect();
-        assert!(windows(&t, &x, &x, &r, 0.05, 0.01).is_empty());
+        let rec = RecordingView {
+            t: &t,
+            op: &x,
+            vp: &x,
+            dt: 0.01,
+        };
+        assert!(windows(&rec, &r, 0.05).is_empty());
     }
 }

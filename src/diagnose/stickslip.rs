@@ -9,7 +9,7 @@
 //! cycle's phase, so when no effect lowers it, stick-slip is judged by a statistic that does not
 //! depend on the phase:
 //!
-//! - **Slips** ([`evidence::slips`]): moves of V_P completed within 0.1 s with V_P at rest just
+//! - **Slips** ([`facts::slips`]): moves of V_P completed within 0.1 s with V_P at rest just
 //!   before and after, while O_P's means over the same span moved less than half as much
 //!   anywhere in the half second before; at least five noise sigmas of the compared means,
 //!   one and a half sensor steps (a V_P on a lattice steps by one) and 0.1 %. A smooth valve
@@ -40,8 +40,9 @@
 use rayon::prelude::*;
 
 use super::composed::{self, Knob};
-use super::evidence::{self, Facts, Slip};
-use super::Scorer;
+use super::facts::{self, Facts, Slip};
+use super::scorer::Scorer;
+use crate::metrics::stats;
 use crate::model::ModelSpec;
 
 /// Slip-size bins: octaves from the slip threshold, the last one open-ended.
@@ -157,7 +158,7 @@ fn signed_rank_p(x: &[f64]) -> f64 {
 /// How a candidate's slips compare with the measured ones on the held-out half, next to the
 /// current model's.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Match {
+pub(crate) struct Match {
     /// Pieces where the model's slips are closer to the measured ones than the current
     /// model's, and where they are farther.
     pub better: usize,
@@ -214,7 +215,7 @@ impl Match {
 }
 
 /// A stick-slip candidate and how its slips compare with the measured ones.
-pub(super) struct Candidate {
+pub(crate) struct Candidate {
     pub spec: ModelSpec,
     /// The knobs the fit set.
     pub knobs: Vec<Knob>,
@@ -253,7 +254,7 @@ fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
         .filter(|s| s.k >= scorer.skip && scorer.held(s.k) == held)
         .map(|s| s.size_pct.abs())
         .collect();
-    (sizes.len(), evidence::percentile(&mut sizes, 0.5))
+    (sizes.len(), stats::quantile(&mut sizes, 0.5))
 }
 
 /// The stick-slip variants to try on top of a model with positioner gain `gain`, seeded from
@@ -285,15 +286,15 @@ fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
 ///
 /// The grid point whose slips are closest to the measured ones on the fit blocks wins (the
 /// free-run error only breaks ties: it cannot judge a limit cycle).
-pub(super) fn fit(scorer: &Scorer, current: &ModelSpec, facts: &Facts) -> Option<Candidate> {
+pub(crate) fn fit(scorer: &Scorer, current: &ModelSpec, facts: &Facts) -> Option<Candidate> {
     let threshold = facts.slip_scale.threshold_pct;
     let pieces = Pieces::new(scorer);
     let measured = histograms(&facts.slips, threshold, &pieces);
     let run = |spec: &ModelSpec| {
         let y = scorer.simulate(spec);
-        let slips = evidence::slips(scorer.op, &y, &facts.slip_scale);
+        let slips = facts::slips(scorer.op, &y, &facts.slip_scale);
         let d = distances(&measured, &histograms(&slips, threshold, &pieces));
-        (slips, d, scorer.errors_of(y.into_iter()).fit)
+        (slips, d, scorer.errors_of(&y).fit)
     };
     let (slips_before, before, _) = run(current);
     if total(&before, &pieces, false) < MIN_MISSED || total(&before, &pieces, true) < MIN_MISSED {
@@ -355,18 +356,12 @@ mod tests {
 
     #[test]
     fn histogram_distance_counts_slips_of_the_wrong_size_or_number() {
-        let op = vec![50.0; 4000];
-        let vp = op.clone();
-        let scorer = Scorer {
-            op: &op,
-            vp: &vp,
-            dt: 0.01,
+        let pieces = Pieces {
             block_len: 1000,
+            per_block: 1,
+            count: 4,
             skip: 0,
-            n_blocks: 4,
         };
-        let pieces = Pieces::new(&scorer);
-        assert_eq!((pieces.per_block, pieces.count), (1, 4));
         let slip = |k, size_pct| Slip { k, size_pct };
         // Threshold 0.2: 0.4 sits on the second bin, 0.3 between the first two.
         let a = histograms(&[slip(100, 0.4), slip(1500, -0.4)], 0.2, &pieces);

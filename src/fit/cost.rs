@@ -7,6 +7,12 @@
 //! never allocates beyond building the [`Valve`] (its small delay line): the squared errors
 //! are summed while stepping, so no buffer is needed at all.
 //!
+//! A problem can also be **restarted**: each run of consecutive scored samples (a fit block) is
+//! simulated on its own, from rest at the measured V_P a warm-up before it, so the samples
+//! between runs (held-out blocks) are never simulated. Diagnosis refits that way (half the
+//! work, and the held-out blocks stay unseen); the warm-up fills the dead-time line and lets the
+//! start from rest die out.
+//!
 //! Not here: choosing the mask ([`super::windows`]) or minimising ([`super::search`]).
 
 use crate::model::{ModelSpec, Valve};
@@ -18,8 +24,11 @@ pub struct Problem {
     vp: Vec<f64>,
     mask: Vec<bool>,
     dt: f64,
-    /// One past the last masked sample: the simulation stops there.
-    end: usize,
+    /// Where each simulation starts (from rest at the measured V_P) and ends: one run from the
+    /// first sample to one past the last masked sample, or one per masked run when restarted.
+    runs: Vec<(usize, usize)>,
+    /// Samples simulated before each masked run when restarted (`None`: one run from the start).
+    warm_up: Option<usize>,
     n_scored: usize,
 }
 
@@ -39,9 +48,22 @@ impl Problem {
             vp: vp.to_vec(),
             mask: mask.to_vec(),
             dt,
-            end,
+            runs: vec![(0, end)],
+            warm_up: None,
             n_scored: mask.iter().filter(|&&m| m).count(),
         }
+    }
+
+    /// A problem scoring the samples where `mask` is true, each run of them simulated on its
+    /// own from rest at the measured V_P `warm_up` samples before the run (or from the first
+    /// sample).
+    pub fn restarted(op: &[f64], vp: &[f64], mask: &[bool], dt: f64, warm_up: usize) -> Self {
+        let mut p = Problem::new(op, vp, mask, dt);
+        p.runs = masked_runs(mask)
+            .map(|(a, b)| (a.saturating_sub(warm_up), b))
+            .collect();
+        p.warm_up = Some(warm_up);
+        p
     }
 
     /// The same problem on every `m`-th sample (sample period `m * dt`): a cheap stand-in for
@@ -53,7 +75,11 @@ impl Problem {
         let pick = |x: &[f64]| x.iter().step_by(m).copied().collect::<Vec<f64>>();
         // A decimated sample is scored when any sample it stands for is.
         let mask: Vec<bool> = self.mask.chunks(m).map(|c| c.iter().any(|&b| b)).collect();
-        Problem::new(&pick(&self.op), &pick(&self.vp), &mask, self.dt * m as f64)
+        let (op, vp, dt) = (pick(&self.op), pick(&self.vp), self.dt * m as f64);
+        match self.warm_up {
+            None => Problem::new(&op, &vp, &mask, dt),
+            Some(w) => Problem::restarted(&op, &vp, &mask, dt, w / m),
+        }
     }
 
     /// Sample period, s.
@@ -75,21 +101,23 @@ impl Problem {
         self.sse_of(&mut valve)
     }
 
-    /// Like [`Problem::sse`] for a valve already built (it is reset first).
+    /// Like [`Problem::sse`] for a valve already built (it is reset at the start of each run).
     pub fn sse_of(&self, valve: &mut Valve) -> f64 {
-        let (Some(&op0), Some(&vp0)) = (self.op.first(), self.vp.first()) else {
-            return 0.0;
-        };
-        valve.reset(op0, vp0);
         let mut sum = 0.0;
-        for ((&u, &m), &keep) in self.op[..self.end]
-            .iter()
-            .zip(&self.vp[..self.end])
-            .zip(&self.mask[..self.end])
-        {
-            let r = m - valve.step(u);
-            if keep {
-                sum += r * r;
+        for &(from, end) in &self.runs {
+            if from >= end {
+                continue;
+            }
+            valve.reset(self.op[from], self.vp[from]);
+            for ((&u, &m), &keep) in self.op[from..end]
+                .iter()
+                .zip(&self.vp[from..end])
+                .zip(&self.mask[from..end])
+            {
+                let r = m - valve.step(u);
+                if keep {
+                    sum += r * r;
+                }
             }
         }
         if sum.is_finite() {
@@ -98,6 +126,20 @@ impl Problem {
             f64::INFINITY
         }
     }
+}
+
+/// The maximal runs `a..b` of true values in `mask`.
+fn masked_runs(mask: &[bool]) -> impl Iterator<Item = (usize, usize)> + '_ {
+    let mut k = 0;
+    std::iter::from_fn(move || {
+        let a = k + mask.get(k..)?.iter().position(|&m| m)?;
+        let b = mask[a..]
+            .iter()
+            .position(|&m| !m)
+            .map_or(mask.len(), |l| a + l);
+        k = b;
+        Some((a, b))
+    })
 }
 
 /// The free-run V_P of `spec` over `op` from rest at (`op[0]`, `vp0`); O_P itself when the
@@ -135,5 +177,32 @@ mod tests {
         let d = p.decimated(10);
         assert_eq!(d.n_scored(), 300);
         assert!((d.dt() - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_restarted_problem_simulates_each_block_from_the_measurement_before_it() {
+        // A pure delay has no state beyond its delay line, which the warm-up refills: the
+        // true model costs nothing.
+        let spec = bundled(ModelKind::Delayed);
+        let op: Vec<f64> = (0..6000)
+            .map(|k| 30.0 + 10.0 * ((k / 400) % 4) as f64)
+            .collect();
+        let vp = simulate(&spec, &op, 30.0, 0.01);
+        let blocks: Vec<bool> = (0..op.len()).map(|k| (k / 1000) % 2 == 0).collect();
+        let p = Problem::restarted(&op, &vp, &blocks, 0.01, 300);
+        assert_eq!(p.runs, vec![(0, 1000), (1700, 3000), (3700, 5000)]);
+        assert_eq!(p.sse(&spec), 0.0);
+        // Another model's error is what a whole simulation gives on those blocks, up to the
+        // restarts: close, but not equal.
+        let other = bundled(ModelKind::Pincart2);
+        let whole = Problem::new(&op, &vp, &blocks, 0.01).sse(&other);
+        let restarted = p.sse(&other);
+        assert!(
+            restarted > 0.5 * whole && restarted < 1.5 * whole,
+            "{restarted} {whole}"
+        );
+        assert_eq!(p.decimated(10).runs, vec![(0, 100), (170, 300), (370, 500)]);
+        let runs: Vec<_> = masked_runs(&[false, true, true, false, true]).collect();
+        assert_eq!(runs, vec![(1, 3), (4, 5)]);
     }
 }

@@ -35,6 +35,7 @@ use serde::Serialize;
 
 use crate::metrics::{self, Scores};
 use crate::model::{ModelKind, ModelSpec};
+use crate::recording::RecordingView;
 use cost::Problem;
 use params::{Layout, Limits};
 use seeds::Physical;
@@ -47,8 +48,11 @@ pub enum FitError {
     /// A `--windows` list that cannot be read.
     #[error("--windows {text}: {detail}")]
     Windows { text: String, detail: String },
+    /// Step-analysis options that make no sense.
+    #[error("step analysis: {0}")]
+    StepOptions(String),
     /// No measured V_P to fit to.
-    #[error("the recording has no measured V_P column: identification fits models to measurements (map it with --columns vp=NAME)")]
+    #[error("the recording has no measured V_P column: identification and step delays need it (map it with --columns vp=NAME)")]
     NoPosition,
     /// Too little data in the windows.
     #[error(
@@ -129,26 +133,44 @@ impl Default for Options {
     }
 }
 
+impl Options {
+    /// The default options for `models`, after the two references Table 1 always lists
+    /// (modelless and delayed modelless); each model once.
+    pub fn for_models(models: &[ModelKind]) -> Self {
+        let mut all = vec![ModelKind::Modelless, ModelKind::Delayed];
+        for m in models {
+            if !all.contains(m) {
+                all.push(*m);
+            }
+        }
+        Options {
+            models: all,
+            ..Options::default()
+        }
+    }
+}
+
 /// One fitted model: its Table 1 and Table 2 rows and more.
 #[derive(Debug, Clone, Serialize)]
 pub struct ModelFit {
     /// Which model.
+    #[serde(rename = "model")]
     pub kind: ModelKind,
-    /// The fitted model (refined on all scored samples).
-    #[serde(skip)]
+    /// The fitted model (refined on all scored samples); its Table 2 parameters in `--json`.
+    #[serde(rename = "params", serialize_with = "params::serialize_table2")]
     pub spec: ModelSpec,
     /// Number of free parameters (Table 2's count).
     pub n_params: usize,
     /// Table 1 metrics over all scored samples.
-    #[serde(skip)]
+    #[serde(flatten)]
     pub scores: Scores,
     /// Table 1 metrics of the fit-blocks model on the held-out blocks only.
-    #[serde(skip)]
     pub heldout: Scores,
     /// AIC and BIC over all scored samples.
     pub aic: f64,
     pub bic: f64,
     /// Simulations spent on this model.
+    #[serde(rename = "simulations")]
     pub evals: usize,
     /// Free-run V_P of the fitted model over the whole recording.
     #[serde(skip)]
@@ -164,8 +186,8 @@ impl ModelFit {
     }
 }
 
-/// Everything identification found.
-#[derive(Debug, Clone)]
+/// Everything identification found, in the shape of `--json`.
+#[derive(Debug, Clone, Serialize)]
 pub struct Identification {
     /// Number of samples in the recording.
     pub n_samples: usize,
@@ -187,8 +209,12 @@ pub struct Identification {
     /// The physical estimates the search started from.
     pub physical: Physical,
     /// Scored and held-out masks over the recording.
+    #[serde(skip)]
     pub scored_mask: Vec<bool>,
+    #[serde(skip)]
     pub heldout_mask: Vec<bool>,
+    /// Time the identification took, s.
+    pub elapsed_s: f64,
 }
 
 /// Fewest samples identification accepts in the windows.
@@ -271,59 +297,63 @@ pub fn fit_vector(
     (found, evals)
 }
 
-/// Identifies `opts.models` on a recording (`t`, `op`, `vp` sampled every `dt` s).
-/// `progress(done, total)` is called as models finish (from worker threads).
+/// What every model's fit shares: the recording, the masks and problems, the bounds and the
+/// physical estimates.
+struct Shared<'a> {
+    rec: &'a RecordingView<'a>,
+    opts: &'a Options,
+    scored: &'a [bool],
+    held_mask: &'a [bool],
+    limits: Limits,
+    physical: &'a Physical,
+    /// The fit blocks at full rate and decimated, and all scored samples.
+    fit: Problem,
+    coarse: Problem,
+    all: Problem,
+}
+
+/// Identifies `opts.models` on a recording. `progress(done, total)` is called as models finish
+/// (from worker threads).
 pub fn identify(
-    t: &[f64],
-    op: &[f64],
-    vp: &[f64],
-    dt: f64,
+    rec: &RecordingView,
     opts: &Options,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Identification, FitError> {
+    let started = std::time::Instant::now();
+    let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
     if vp.len() != op.len() || vp.is_empty() {
         return Err(FitError::NoPosition);
     }
-    let n = op.len();
     let (wins, auto) = match &opts.windows {
         Some(w) => (w.clone(), false),
-        None => (windows::unsaturated(t, vp, dt, 0.0, 100.0), true),
+        None => (windows::unsaturated(rec.t, vp, dt, 0.0, 100.0), true),
     };
-    let scored = windows::mask(t, &wins);
+    let scored = windows::mask(rec.t, &wins);
     let n_scored = scored.iter().filter(|&&m| m).count();
     if n_scored < MIN_SCORED {
-        return Err(FitError::TooFew {
-            scored: n_scored,
-            need: MIN_SCORED,
-            where_: if auto {
-                "outside saturation".into()
-            } else {
-                "in the windows given".into()
-            },
-            fix: if auto {
-                "the valve sits on a stop almost all the time; choose windows with --windows START-END".into()
-            } else {
-                format!(
-                    "the recording spans {:.2}-{:.2} s; choose windows inside it",
-                    t.first().copied().unwrap_or(0.0),
-                    t.last().copied().unwrap_or(0.0)
-                )
-            },
-        });
+        return Err(too_few(rec, n_scored, auto));
     }
     let (fit_mask, held_mask) = opts.split.masks(&scored);
     let steps = steps::analyse(op, vp, dt, &opts.steps);
     let physical = seeds::estimate(op, vp, dt, &steps);
-    let limits = Limits::for_recording(
-        dt,
-        physical
-            .dead_time_s
-            .max(physical.same_delay_s.unwrap_or(0.0)),
-    );
     let fit = Problem::new(op, vp, &fit_mask, dt);
-    let all = Problem::new(op, vp, &scored, dt);
     let m = ((opts.effort.coarse_period_s / dt).round() as usize).max(1);
-    let coarse = fit.decimated(m);
+    let shared = Shared {
+        rec,
+        opts,
+        scored: &scored,
+        held_mask: &held_mask,
+        limits: Limits::for_recording(
+            dt,
+            physical
+                .dead_time_s
+                .max(physical.same_delay_s.unwrap_or(0.0)),
+        ),
+        physical: &physical,
+        coarse: fit.decimated(m),
+        fit,
+        all: Problem::new(op, vp, &scored, dt),
+    };
     let done = AtomicUsize::new(0);
     let total = opts.models.len();
     let rows: Vec<ModelFit> = opts
@@ -331,76 +361,13 @@ pub fn identify(
         .par_iter()
         .enumerate()
         .map(|(i, &kind)| {
-            let layout = Layout::new(kind, limits);
-            let seeds = seeds::starts(&layout, &physical);
-            let (found, mut evals) = fit_vector(
-                &layout,
-                &fit,
-                &coarse,
-                &seeds,
-                &opts.effort,
-                0x5eed + i as u64,
-            );
-            let x_fit = found[0].clone();
-            let fit_spec = layout.spec(&x_fit);
-            let d = layout.len();
-            // Held-out: the fit-blocks model, scored where it was not fitted.
-            let sim_fit = cost::simulate(&fit_spec, op, vp[0], dt);
-            let heldout = metrics::scores_masked(vp, &sim_fit, op, dt, &held_mask);
-            // Final: refine the candidates, and the physical seeds, on all scored samples (the
-            // model file and Table 1); the best wins.
-            let spec = if d > 0 && opts.effort.refine_iters_per_param > 0 {
-                let cost = |u: &[f64]| all.sse(&layout.spec(&layout.from_unit(u)));
-                let starts: Vec<Vec<f64>> = found
-                    .iter()
-                    .chain(&seeds)
-                    .map(|x| layout.to_unit(x))
-                    .collect();
-                let runs = search::polish(
-                    &cost,
-                    &starts,
-                    0.02,
-                    opts.effort.refine_iters_per_param * d as u64,
-                );
-                evals += runs.iter().map(|r| r.evals).sum::<usize>();
-                match runs.first() {
-                    // A simplex shrunk onto a ridge stops short; one restart with a fresh,
-                    // small simplex from its best point (the usual Nelder-Mead remedy) goes on.
-                    Some(r) => {
-                        let again = search::nelder_mead(
-                            &cost,
-                            &r.best.u,
-                            0.005,
-                            opts.effort.refine_iters_per_param * d as u64,
-                        );
-                        evals += again.evals;
-                        layout.spec(&layout.from_unit(&again.best.u))
-                    }
-                    None => fit_spec,
-                }
-            } else {
-                fit_spec
-            };
-            let sim = cost::simulate(&spec, op, vp[0], dt);
-            let scores = metrics::scores_masked(vp, &sim, op, dt, &scored);
-            let row = ModelFit {
-                kind,
-                n_params: d,
-                aic: metrics::aic(scores.sse, scores.n, d),
-                bic: metrics::bic(scores.sse, scores.n, d),
-                figures: figures::measure(&spec, dt),
-                spec,
-                scores,
-                heldout,
-                evals,
-                sim,
-            };
+            let row = fit_model(&shared, kind, 0x5eed + i as u64);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
             row
         })
         .collect();
     Ok(Identification {
-        n_samples: n,
+        n_samples: op.len(),
         sample_period_s: dt,
         windows: wins,
         windows_auto: auto,
@@ -412,5 +379,86 @@ pub fn identify(
         physical,
         scored_mask: scored,
         heldout_mask: held_mask,
+        elapsed_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The error for too few samples to score, with what to do about it.
+fn too_few(rec: &RecordingView, scored: usize, auto: bool) -> FitError {
+    FitError::TooFew {
+        scored,
+        need: MIN_SCORED,
+        where_: if auto {
+            "outside saturation".into()
+        } else {
+            "in the windows given".into()
+        },
+        fix: if auto {
+            "the valve sits on a stop almost all the time; choose windows with --windows START-END"
+                .into()
+        } else {
+            format!(
+                "the recording spans {:.2}-{:.2} s; choose windows inside it",
+                rec.t.first().copied().unwrap_or(0.0),
+                rec.t.last().copied().unwrap_or(0.0)
+            )
+        },
+    }
+}
+
+/// Fits one model: the search on the fit blocks, its held-out score, then the refinement on all
+/// scored samples for the Table 1 row and the model file.
+fn fit_model(sh: &Shared, kind: ModelKind, seed: u64) -> ModelFit {
+    let (op, vp, dt) = (sh.rec.op, sh.rec.vp, sh.rec.dt);
+    let layout = Layout::new(kind, sh.limits);
+    let seeds = seeds::starts(&layout, sh.physical);
+    let (found, evals) = fit_vector(&layout, &sh.fit, &sh.coarse, &seeds, &sh.opts.effort, seed);
+    let fit_spec = layout.spec(&found[0]);
+    // Held-out: the fit-blocks model, scored where it was not fitted.
+    let sim_fit = cost::simulate(&fit_spec, op, vp[0], dt);
+    let heldout = metrics::scores_masked(vp, &sim_fit, op, dt, sh.held_mask);
+    let (spec, refine_evals) = refine(sh, &layout, &found, &seeds).unwrap_or((fit_spec, 0));
+    let sim = cost::simulate(&spec, op, vp[0], dt);
+    let scores = metrics::scores_masked(vp, &sim, op, dt, sh.scored);
+    let d = layout.len();
+    ModelFit {
+        kind,
+        n_params: d,
+        aic: metrics::aic(scores.sse, scores.n, d),
+        bic: metrics::bic(scores.sse, scores.n, d),
+        figures: figures::measure(&spec, dt),
+        spec,
+        scores,
+        heldout,
+        evals: evals + refine_evals,
+        sim,
+    }
+}
+
+/// Refines the fitted candidates, and the physical seeds, on all scored samples (the model
+/// file and Table 1): the best wins. `None` when there is nothing to refine.
+fn refine(
+    sh: &Shared,
+    layout: &Layout,
+    found: &[Vec<f64>],
+    seeds: &[Vec<f64>],
+) -> Option<(ModelSpec, usize)> {
+    let iters = sh.opts.effort.refine_iters_per_param * layout.len() as u64;
+    if layout.is_empty() || iters == 0 {
+        return None;
+    }
+    let cost = |u: &[f64]| sh.all.sse(&layout.spec(&layout.from_unit(u)));
+    let starts: Vec<Vec<f64>> = found
+        .iter()
+        .chain(seeds)
+        .map(|x| layout.to_unit(x))
+        .collect();
+    let runs = search::polish(&cost, &starts, 0.02, iters);
+    let mut evals = runs.iter().map(|r| r.evals).sum::<usize>();
+    let best = runs.first()?;
+    // A simplex shrunk onto a ridge stops short; one restart with a fresh, small simplex from
+    // its best point (the usual Nelder-Mead remedy) goes on.
+    let again = search::nelder_mead(&cost, &best.best.u, 0.005, iters);
+    evals += again.evals;
+    Some((layout.spec(&layout.from_unit(&again.best.u)), evals))
 }

@@ -27,6 +27,19 @@ pub enum Scale {
     Log,
 }
 
+impl Scale {
+    /// The scale a box calls for: logarithmic when it spans more than a factor of 20 on the
+    /// positive axis (gains, times and speeds, where a simplex must move in proportions or its
+    /// steps are coarse for small values), linear otherwise.
+    pub fn for_box(lo: f64, hi: f64) -> Self {
+        if lo > 0.0 && hi / lo > 20.0 {
+            Scale::Log
+        } else {
+            Scale::Linear
+        }
+    }
+}
+
 /// One free parameter: what it is called, its unit, its box and scale.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ParamDef {
@@ -43,6 +56,17 @@ pub struct ParamDef {
 }
 
 impl ParamDef {
+    /// A parameter searched in `lo..=hi` on the scale that box calls for ([`Scale::for_box`]).
+    pub fn new(name: &'static str, unit: &'static str, lo: f64, hi: f64) -> Self {
+        ParamDef {
+            name,
+            unit,
+            lo,
+            hi,
+            scale: Scale::for_box(lo, hi),
+        }
+    }
+
     /// Maps a physical value to the unit interval of the search box (clamped).
     pub fn to_unit(&self, v: f64) -> f64 {
         let u = match self.scale {
@@ -59,10 +83,12 @@ impl ParamDef {
     /// Maps a point of the unit interval to the physical value (clamped into the box).
     pub fn from_unit(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
-        match self.scale {
+        let v = match self.scale {
             Scale::Linear => self.lo + u * (self.hi - self.lo),
             Scale::Log => (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp(),
-        }
+        };
+        // The exponential can land a rounding step outside the box.
+        v.clamp(self.lo, self.hi)
     }
 }
 
@@ -323,6 +349,17 @@ pub fn table2(spec: &ModelSpec) -> Vec<(&'static str, f64, &'static str)> {
         out.push(("c_p", p.c_p, "s"));
     }
     out
+}
+
+/// Serialises a spec as its Table 2 parameters, `{name: value}` (for `--json`).
+pub fn serialize_table2<S: serde::Serializer>(spec: &ModelSpec, s: S) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let params = table2(spec);
+    let mut map = s.serialize_map(Some(params.len()))?;
+    for (name, value, _) in params {
+        map.serialize_entry(name, &value)?;
+    }
+    map.end()
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ use serde::Serialize;
 
 use super::params::Layout;
 use super::steps::{CrossingSeed, StepAnalysis};
+use crate::metrics::stats::quantile;
 use crate::model::ModelKind;
 
 /// Physical estimates read off a recording.
@@ -66,16 +67,6 @@ pub fn dead_time_xcorr(op: &[f64], vp: &[f64], dt: f64, max_lag_s: f64) -> f64 {
         0.0
     };
     ((best as f64 + frac) * dt).max(0.0)
-}
-
-/// The `q` quantile of `x` (0 when empty).
-fn quantile(x: &mut [f64], q: f64) -> f64 {
-    if x.is_empty() {
-        return 0.0;
-    }
-    let k = ((x.len() - 1) as f64 * q).round() as usize;
-    let (_, v, _) = x.select_nth_unstable_by(k, f64::total_cmp);
-    *v
 }
 
 /// Reads the physical estimates off a recording and its step analysis.

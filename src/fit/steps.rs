@@ -18,6 +18,9 @@
 use serde::Serialize;
 
 use super::params::crossing_poly;
+use super::FitError;
+use crate::metrics::stats::{mean_sd, noise_sd, Differences};
+use crate::recording::RecordingView;
 
 /// What counts as a step and when it has answered.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,6 +31,34 @@ pub struct StepOptions {
     pub fraction: f64,
     /// Shortest hold of O_P after the jump, s (at least three samples).
     pub min_hold_s: f64,
+}
+
+impl StepOptions {
+    /// Options checked for sense: `fraction` strictly between 0 and 1, a positive size and
+    /// hold.
+    pub fn new(min_size_pct: f64, fraction: f64, min_hold_s: f64) -> Result<Self, FitError> {
+        let bad = |detail: String| Err(FitError::StepOptions(detail));
+        if !(fraction > 0.0 && fraction < 1.0) {
+            return bad(format!(
+                "fraction {fraction}: must be between 0 and 1 (e.g. 0.1 for a tenth of the step)"
+            ));
+        }
+        if !(min_size_pct > 0.0 && min_size_pct.is_finite()) {
+            return bad(format!(
+                "smallest step {min_size_pct} %: must be a positive size in % (e.g. 0.5)"
+            ));
+        }
+        if !(min_hold_s > 0.0 && min_hold_s.is_finite()) {
+            return bad(format!(
+                "shortest hold {min_hold_s} s: must be a positive time in s (e.g. 1)"
+            ));
+        }
+        Ok(StepOptions {
+            min_size_pct,
+            fraction,
+            min_hold_s,
+        })
+    }
 }
 
 impl Default for StepOptions {
@@ -86,25 +117,13 @@ impl std::fmt::Display for Population {
 }
 
 impl Population {
-    fn of(x: &[f64]) -> Self {
-        let n = x.len();
-        if n == 0 {
-            return Population {
-                mean_s: f64::NAN,
-                sd_s: 0.0,
-                count: 0,
-            };
-        }
-        let mean = x.iter().sum::<f64>() / n as f64;
-        let sd = if n > 1 {
-            (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
-        } else {
-            0.0
-        };
+    /// Mean, sample standard deviation and count of `x` (mean NaN when empty).
+    pub fn of(x: &[f64]) -> Self {
+        let (mean_s, sd_s, count) = mean_sd(x.iter().copied());
         Population {
-            mean_s: mean,
-            sd_s: sd,
-            count: n,
+            mean_s: if count == 0 { f64::NAN } else { mean_s },
+            sd_s,
+            count,
         }
     }
 }
@@ -153,23 +172,22 @@ pub struct StepAnalysis {
     pub noise_pct: f64,
 }
 
-/// Robust noise standard deviation of a signal from its sample-to-sample differences (median
-/// absolute difference / (0.6745 √2)); movements are rare enough not to move the median.
-pub fn noise_sd(x: &[f64]) -> f64 {
-    let mut d: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    if d.is_empty() {
-        return 0.0;
+/// Analyses the steps of a recording; it must have a measured V_P.
+pub fn analyse_recording(
+    rec: &RecordingView,
+    opts: &StepOptions,
+) -> Result<StepAnalysis, FitError> {
+    if rec.vp.len() != rec.op.len() || rec.vp.is_empty() {
+        return Err(FitError::NoPosition);
     }
-    let k = d.len() / 2;
-    let (_, med, _) = d.select_nth_unstable_by(k, f64::total_cmp);
-    *med / (0.6745 * std::f64::consts::SQRT_2)
+    Ok(analyse(rec.op, rec.vp, rec.dt, opts))
 }
 
 /// Analyses the steps of `op` and the answers in `vp`, sampled every `dt` seconds.
 pub fn analyse(op: &[f64], vp: &[f64], dt: f64, opts: &StepOptions) -> StepAnalysis {
     let n = op.len().min(vp.len());
-    let sigma = noise_sd(&vp[..n]);
-    let op_tol = (4.0 * noise_sd(&op[..n])).max(1e-6);
+    let sigma = noise_sd(&vp[..n], Differences::First);
+    let op_tol = (4.0 * noise_sd(&op[..n], Differences::First)).max(1e-6);
     let min_hold = ((opts.min_hold_s / dt).ceil() as usize).max(3);
     let mut steps = Vec::new();
     let mut last_dir = 0.0;
@@ -355,14 +373,5 @@ mod tests {
         }
         // The first movement has no direction to compare with.
         assert_eq!(a.steps[0].reversal, None);
-    }
-
-    #[test]
-    fn noise_estimate_ignores_rare_jumps() {
-        let x: Vec<f64> = (0..1000)
-            .map(|k| if k < 500 { 0.0 } else { 10.0 } + if k % 2 == 0 { 0.1 } else { -0.1 })
-            .collect();
-        let s = noise_sd(&x);
-        assert!(s > 0.15 && s < 0.3, "{s}");
     }
 }

@@ -171,6 +171,20 @@ impl Split {
     }
 }
 
+/// `(fit, held_out)` masks over `n` samples cut into consecutive blocks of `block_len`
+/// samples from the first, alternately fitted and held out (the first block fitted), so both
+/// halves cover every operating region; the first `skip` samples (an initial transient) are in
+/// neither.
+pub fn alternating(n: usize, block_len: usize, skip: usize) -> (Vec<bool>, Vec<bool>) {
+    let block_len = block_len.max(1);
+    (0..n)
+        .map(|k| {
+            let held = (k / block_len) % 2 == 1;
+            (k >= skip && !held, k >= skip && held)
+        })
+        .unzip()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -213,6 +227,14 @@ mod tests {
         assert!((w[1].start_s - 42.0).abs() < 0.11, "{w:?}");
         let m = mask(&t, &w);
         assert!(!m[350] && m[100] && m[900]);
+    }
+
+    #[test]
+    fn alternating_blocks_skip_the_start() {
+        let (fit, held) = alternating(10, 3, 1);
+        let on = |m: &[bool]| m.iter().map(|&b| b as u8).collect::<Vec<_>>();
+        assert_eq!(on(&fit), [0, 1, 1, 0, 0, 0, 1, 1, 1, 0]);
+        assert_eq!(on(&held), [0, 0, 0, 1, 1, 1, 0, 0, 0, 1]);
     }
 
     #[test]

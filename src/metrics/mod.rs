@@ -6,6 +6,7 @@
 //! - [`sse`], [`mae`], [`r2`]: the single metrics on whole slices.
 //! - [`filtfilt_butter_lowpass`]: the zero-phase Butterworth filter of "MAE filtered".
 //! - [`aic`], [`bic`]: Gaussian-likelihood information criteria from an SSE.
+//! - [`stats`]: quantiles, mean and spread, robust noise and a residual's correlation length.
 //!
 //! Units: MAE in the units of the data (percent of travel for V_P); SSE in those units squared
 //! (%²). The paper's SSE column is on fractions of full travel: its modelless row (MAE 1.106 %,
@@ -15,11 +16,12 @@
 //! Not here: choosing the windows to score (pass a mask), fitting, or any I/O.
 
 mod filter;
+pub mod stats;
 
 pub use filter::{filtfilt_butter_lowpass, PAPER_FILTER_CUTOFF_HZ, PAPER_FILTER_ORDER};
 
 /// One row of Table 1.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Scores {
     /// Mean |measured − simulated|, in the data's units (%).
     pub mae: f64,

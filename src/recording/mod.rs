@@ -52,7 +52,43 @@ pub struct Recording {
     pub warnings: Vec<String>,
 }
 
+/// What analysis reads of a recording, borrowed: the columns and the sample period. Made by
+/// [`Recording::view`], or from plain slices (a simulation, a test).
+#[derive(Debug, Clone, Copy)]
+pub struct RecordingView<'a> {
+    /// Sample times, s.
+    pub t: &'a [f64],
+    /// Wanted opening O_P, %.
+    pub op: &'a [f64],
+    /// Valve position V_P, % (empty when not measured).
+    pub vp: &'a [f64],
+    /// Interval between samples, s.
+    pub dt: f64,
+}
+
+impl RecordingView<'_> {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.op.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.op.is_empty()
+    }
+}
+
 impl Recording {
+    /// The columns and sample period, borrowed, for analysis.
+    pub fn view(&self) -> RecordingView<'_> {
+        RecordingView {
+            t: &self.t,
+            op: &self.op,
+            vp: &self.vp,
+            dt: self.sample_period,
+        }
+    }
+
     /// A recording from in-memory columns (`vp` may be empty), with the same checks and
     /// warnings as a file; `source` is `in-memory`.
     pub fn from_vectors(t: Vec<f64>, op: Vec<f64>, vp: Vec<f64>) -> Result<Self, RecordingError> {

@@ -1,4 +1,5 @@
-//! The identification report: one self-contained HTML page (inline SVG, no server, no external
+//! The identification report: the tables `valve-bridge identify` prints ([`text`]) and one
+//! self-contained HTML page (inline SVG, no server, no external
 //! files) with Table 1 (plus held-out scores and AIC/BIC), Table 2, the maintenance figures and
 //! the plots of the paper: measured against every model over the whole recording and zoomed
 //! into the worst windows (Figs. 8-10), the residuals, the step responses coloured by initial
@@ -12,9 +13,12 @@ use std::fmt::Write;
 use plotters::style::RGBColor;
 
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
-use super::{esc, row};
+use super::{esc, page, row};
+use crate::fit::steps::StepAnalysis;
 use crate::fit::{Identification, ModelFit};
+use crate::metrics;
 use crate::model::ModelKind;
+use crate::recording::RecordingView;
 
 /// Line colour of each model in the charts.
 pub fn model_color(kind: ModelKind) -> RGBColor {
@@ -93,29 +97,24 @@ fn params_text(r: &ModelFit) -> String {
     }
 }
 
+/// An optional figure with two decimals, or a dash.
 fn opt(x: Option<f64>) -> String {
     x.filter(|v| v.is_finite())
         .map_or("–".into(), |v| format!("{v:.2}"))
 }
 
-/// The identification report of a recording (`t`, `op`, `vp`) as one HTML page.
-pub fn identification_html(
-    title: &str,
-    t: &[f64],
-    op: &[f64],
-    vp: &[f64],
-    id: &Identification,
-) -> String {
+/// The identification report of a recording as one HTML page.
+pub fn html(title: &str, rec: &RecordingView, id: &Identification) -> String {
     let mut h = String::new();
-    let _ = write!(
-        h,
-        "<!doctype html><html><head><meta charset=\"utf-8\"><title>Identification: {0}</title><style>\
-         body{{font-family:sans-serif;max-width:960px;margin:auto;color:#222}}\
-         table{{border-collapse:collapse;margin:6px 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
-         td:first-child{{text-align:left}}td.l{{text-align:left}}</style></head><body>\
-         <h1>Identification: {0}</h1>",
-        esc(title)
-    );
+    tables_html(&mut h, id);
+    figures_html(&mut h, id);
+    curves_html(&mut h, rec, id);
+    steps_section(&mut h, rec.vp, id);
+    page(&format!("Identification: {title}"), &h)
+}
+
+/// What was scored, Table 1, the held-out scores and Table 2.
+fn tables_html(h: &mut String, id: &Identification) {
     let wins: Vec<String> = id
         .windows
         .iter()
@@ -167,7 +166,12 @@ pub fn identification_html(
             r.n_params
         );
     }
-    h.push_str("</table><h2>Maintenance figures of the fitted models</h2><p>Measured by running standard tests through each fitted model around 50 % opening: steps of 1 % and 10 % approached from below, a 0.05 %/s ramp up and down, and a 10–90–10 % stroke.</p>\
+    h.push_str("</table>");
+}
+
+/// The maintenance figures of every fitted model.
+fn figures_html(h: &mut String, id: &Identification) {
+    h.push_str("<h2>Maintenance figures of the fitted models</h2><p>Measured by running standard tests through each fitted model around 50 % opening: steps of 1 % and 10 % approached from below, a 0.05 %/s ramp up and down, and a 10–90–10 % stroke.</p>\
         <table><tr><th>model</th><th>dead time (s)</th><th>1 % T63 / T86 (s)</th><th>10 % T63 / T86 (s)</th><th>dead band in ramp (%)</th><th>backlash / band parameter (%)</th><th>stick-slip (%)</th><th>max speed open / close (%/s)</th></tr>");
     for r in &id.rows {
         let f = &r.figures;
@@ -188,6 +192,12 @@ pub fn identification_html(
         );
     }
     h.push_str("</table>");
+}
+
+/// Measured against every model over the whole recording and in the worst windows, and the
+/// residuals.
+fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
+    let (t, op, vp) = (rec.t, rec.op, rec.vp);
     let n = t.len().min(op.len()).min(vp.len());
     let series = |with_op: bool| {
         let mut s = Vec::new();
@@ -274,9 +284,6 @@ pub fn identification_html(
         &res_series,
         0..n,
     ));
-    steps_section(&mut h, vp, id);
-    h.push_str("</body></html>");
-    h
 }
 
 /// Figs. 5/6 and 7: step responses coloured by initial opening, delay against opening.
@@ -383,6 +390,206 @@ fn steps_section(h: &mut String, vp: &[f64], id: &Identification) {
         ],
         &lines,
     ));
+}
+
+/// The tables `valve-bridge identify` prints for the recording `source`.
+pub fn text(source: &str, duration_s: f64, id: &Identification) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "{source}: {} samples at {} s ({duration_s:.1} s)",
+        id.n_samples, id.sample_period_s,
+    );
+    let list: Vec<String> = id
+        .windows
+        .iter()
+        .map(|w| format!("{:.2}-{:.2}", w.start_s, w.end_s))
+        .collect();
+    if id.windows_auto {
+        let _ = writeln!(
+            o,
+            "windows (saturation at 0/100 % left out automatically; choose with --windows): {}",
+            list.join(",")
+        );
+    } else {
+        let _ = writeln!(o, "windows (given): {}", list.join(","));
+    }
+    let _ = writeln!(
+        o,
+        "{} samples scored; held out: {} ({})",
+        id.n_scored,
+        id.n_heldout,
+        id.split.describe()
+    );
+    o.push_str(&steps_summary(&id.steps));
+    let _ = writeln!(o, "\nTable 1: free-run simulation error over the windows");
+    let _ = writeln!(o, "{}", metrics::table1_header());
+    for r in &id.rows {
+        let _ = writeln!(
+            o,
+            "{}",
+            metrics::table1_row(r.kind.display_name(), &r.scores)
+        );
+    }
+    let _ = writeln!(
+        o,
+        "\nHeld-out (fitted on the fit blocks only) and information criteria over the windows"
+    );
+    let _ = writeln!(
+        o,
+        "{:<20} {:>14} {:>10} {:>8} {:>14} {:>14}",
+        "model", "held-out SSE", "Rel. SSE", "params", "AIC", "BIC"
+    );
+    for r in &id.rows {
+        let _ = writeln!(
+            o,
+            "{:<20} {:>14.3} {:>9.2}% {:>8} {:>14.1} {:>14.1}",
+            r.kind.display_name(),
+            r.heldout.sse,
+            100.0 * r.heldout.rel_sse,
+            r.n_params,
+            r.aic,
+            r.bic
+        );
+    }
+    o.push_str(&parameters_text(id));
+    let sims: usize = id.rows.iter().map(|r| r.evals).sum();
+    let _ = writeln!(
+        o,
+        "\nidentified in {:.2} s ({sims} full-length simulations equivalent)",
+        id.elapsed_s
+    );
+    o
+}
+
+/// Table 2 and the maintenance figures as text.
+fn parameters_text(id: &Identification) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "\nTable 2: fitted parameters");
+    let _ = writeln!(o, "{:<20} {:<6} parameters", "model", "count");
+    for r in &id.rows {
+        let p: Vec<String> = r
+            .params()
+            .iter()
+            .map(|(k, v, u)| format!("{k} = {} {u}", fmt_param(*v)))
+            .collect();
+        let _ = writeln!(
+            o,
+            "{:<20} {:<6} {}",
+            r.kind.display_name(),
+            r.n_params,
+            if p.is_empty() {
+                "-".into()
+            } else {
+                p.join(", ")
+            }
+        );
+    }
+    let _ = writeln!(
+        o,
+        "\nMaintenance figures of the fitted models (simulated tests around 50 %)"
+    );
+    let _ = writeln!(
+        o,
+        "{:<20} {:>7} {:>14} {:>14} {:>9} {:>9} {:>10} {:>10} {:>10}",
+        "model",
+        "T_d s",
+        "1% T63/T86 s",
+        "10% T63/T86 s",
+        "band %",
+        "B_L/S %",
+        "slip %",
+        "open %/s",
+        "close %/s"
+    );
+    for r in &id.rows {
+        let f = &r.figures;
+        let _ = writeln!(
+            o,
+            "{:<20} {:>7.3} {:>14} {:>14} {:>9.3} {:>9.3} {:>10.3} {:>10.1} {:>10.1}",
+            r.kind.display_name(),
+            f.dead_time_s,
+            format!("{}/{}", opt(f.t63_small_s), opt(f.t86_small_s)),
+            format!("{}/{}", opt(f.t63_large_s), opt(f.t86_large_s)),
+            f.dead_band_pct,
+            f.backlash_pct,
+            f.stick_slip_pct,
+            f.max_speed_open_pct_per_s,
+            f.max_speed_close_pct_per_s
+        );
+    }
+    o
+}
+
+/// The step-delay populations and the polynomial (identify and steps print them).
+pub fn steps_summary(s: &StepAnalysis) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "steps: {} found; delay to {:.0} % of the step: same direction {} ; reversal {}",
+        s.steps.len(),
+        100.0 * s.options_fraction,
+        s.same,
+        s.reversal
+    );
+    let poly = match (&s.reversal_poly, &s.pincart2) {
+        (Some(p), Some(c)) => format!(
+            "reversal delay = {} V² + {} V + {} s; pin-cart II crossing time: a_p = {}, b_p = {}, c_p = {} ({:.3}/{:.3}/{:.3} s at 0/50/100 %)",
+            fmt_param(p.a),
+            fmt_param(p.b),
+            fmt_param(p.c),
+            fmt_param(c.a_p),
+            fmt_param(c.b_p),
+            fmt_param(c.c_p),
+            c.at_0_50_100_s[0],
+            c.at_0_50_100_s[1],
+            c.at_0_50_100_s[2]
+        ),
+        (Some(p), None) => format!(
+            "reversal delay = {} V² + {} V + {} s (no same-direction steps: no pin-cart II seed)",
+            fmt_param(p.a),
+            fmt_param(p.b),
+            fmt_param(p.c)
+        ),
+        _ => "reversal polynomial: not enough reversals (needs 5 spread over 10 % of travel)".into(),
+    };
+    let _ = writeln!(o, "{poly}");
+    o
+}
+
+/// Each step of the analysis, one line each, times from `t0` (s).
+pub fn steps_list(s: &StepAnalysis, t0: f64) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "{:>10} {:>9} {:>9} {:>10} {:>9}",
+        "t (s)", "from %", "step %", "direction", "delay s"
+    );
+    for st in &s.steps {
+        let _ = writeln!(
+            o,
+            "{:>10.2} {:>9.2} {:>+9.2} {:>10} {:>9}",
+            t0 + st.t_s,
+            st.from_pct,
+            st.size_pct,
+            match st.reversal {
+                Some(true) => "reversal",
+                Some(false) => "same",
+                None => "first",
+            },
+            st.delay_s.map_or("-".into(), fmt_param)
+        );
+    }
+    o
+}
+
+/// Four significant digits, scientific for very small or large magnitudes.
+pub fn fmt_param(v: f64) -> String {
+    if v != 0.0 && (v.abs() < 1e-3 || v.abs() >= 1e5) {
+        format!("{v:.4e}")
+    } else {
+        format!("{v:.4}")
+    }
 }
 
 #[cfg(test)]

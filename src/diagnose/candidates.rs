@@ -1,0 +1,241 @@
+//! Candidates: for each effect of the vocabulary, which knobs of the composed valve it frees,
+//! in which boxes, from which starts; and the refit jobs of a round built from them.
+//!
+//! An effect that is already in the model, or that the data cannot identify (quantization
+//! without a sensor lattice, saturation when V_P never stops short of O_P), has no candidate.
+//! Every candidate also refits the positioner gain and the dead time, so an effect is judged
+//! against the best the rest of the model can do, not against a model fitted without it.
+//!
+//! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
+
+use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
+use super::facts::Facts;
+use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
+use crate::model::ModelSpec;
+use crate::recording::RecordingView;
+
+/// Longest dead time a diagnosis fits, s.
+pub const MAX_DEAD_TIME_S: f64 = 3.0;
+
+/// One effect to refit, from several starts (the knobs and boxes are the same in all).
+#[derive(Debug, Clone)]
+pub(crate) struct Job {
+    pub effect: Effect,
+    pub starts: Vec<Vec<Free>>,
+}
+
+/// The refit jobs of a round: every effect in `effects` with its variants, each from spread
+/// starts, with the gain and dead time freed too. `td_max` bounds the dead time of effects
+/// other than `dead_time` (the baseline's, until a dead time was found).
+pub(crate) fn jobs(
+    effects: &[Effect],
+    current: &ModelSpec,
+    facts: &Facts,
+    rec: &RecordingView,
+    td_max: f64,
+) -> Vec<Job> {
+    let mut jobs: Vec<Job> = Vec::new();
+    let td = composed::get(current, Knob::DeadTime);
+    for &effect in effects {
+        for variant in variants(effect, current, facts, rec, td_max) {
+            for mut free in spread_starts(variant) {
+                free.push(free_gain(current, rec.dt));
+                let hi = if effect == Effect::DeadTime {
+                    MAX_DEAD_TIME_S
+                } else {
+                    td_max.max(td)
+                };
+                if !free.iter().any(|f| f.knob == Knob::DeadTime) {
+                    free.push(Free::new(Knob::DeadTime, 0.0, hi, td));
+                }
+                // Variants that differ only in their own start share the spread starts.
+                let same_box = |starts: &[Vec<Free>]| {
+                    starts[0].len() == free.len()
+                        && starts[0].iter().zip(&free).all(|(a, b)| a.same_box(b))
+                };
+                match jobs
+                    .iter_mut()
+                    .find(|j| j.effect == effect && same_box(&j.starts))
+                {
+                    Some(j) if j.starts.contains(&free) => {}
+                    Some(j) => j.starts.push(free),
+                    None => jobs.push(Job {
+                        effect,
+                        starts: vec![free],
+                    }),
+                }
+            }
+        }
+    }
+    jobs
+}
+
+/// The variants to try for `effect` on top of `spec`, or none when it is already there or the
+/// data cannot identify it.
+pub(crate) fn variants(
+    effect: Effect,
+    spec: &ModelSpec,
+    facts: &Facts,
+    rec: &RecordingView,
+    td_max: f64,
+) -> Vec<Vec<Free>> {
+    let get = |k| composed::get(spec, k);
+    let f = Free::new;
+    let slew = get(Knob::Slew);
+    let half_open_slew = get(Knob::HalfOpenSlew);
+    let speed = facts.open_speed.max(facts.close_speed).max(0.5);
+    match effect {
+        Effect::DeadTime if td_max < MAX_DEAD_TIME_S => vec![vec![f(
+            Knob::DeadTime,
+            0.0,
+            MAX_DEAD_TIME_S,
+            get(Knob::DeadTime).max(0.3),
+        )]],
+        Effect::Backlash if get(Knob::Crossing) == 0.0 => vec![
+            vec![f(Knob::Crossing, 0.02, 5.0, 0.2)],
+            vec![f(Knob::Crossing, 0.02, 5.0, 0.8)],
+        ],
+        Effect::StateDependentDelay
+            if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>
+        {
+            // The slowdown lowers the stroke speed with opening too, so the speed limit is
+            // refitted with it (it may be faster near closed than the baseline's average).
+            // Until a speed limit has been found, it stays a healthy one at half travel: a
+            // valve slower than that is `slew_rate`, judged on its own.
+            let limit = if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
+                f(
+                    Knob::HalfOpenSlew,
+                    NOMINAL_MIN_SLEW_PCT_PER_S,
+                    FASTEST_PCT_PER_S,
+                    half_open_slew.min(FASTEST_PCT_PER_S),
+                )
+            } else {
+                f(
+                    Knob::Slew,
+                    0.5,
+                    FASTEST_PCT_PER_S,
+                    (1.5 * slew).min(FASTEST_PCT_PER_S),
+                )
+            };
+            let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), limit]];
+            let c = get(Knob::Crossing);
+            if c > 0.0 {
+                v.push(vec![
+                    f(Knob::Crossing, 0.0, 5.0, c * 0.5),
+                    f(Knob::CrossingSlope, -c / 100.0, 0.05, c / 100.0),
+                ]);
+            }
+            v
+        }
+        Effect::SlewRate
+            if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S
+                && spec.effects.closing_slew_pct_per_s == 0.0 =>
+        {
+            vec![vec![f(
+                Knob::Slew,
+                0.5,
+                slew.min(FASTEST_PCT_PER_S),
+                speed.min(slew),
+            )]]
+        }
+        Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => vec![vec![
+            f(
+                Knob::Slew,
+                0.5,
+                FASTEST_PCT_PER_S,
+                facts.open_speed.max(0.5),
+            ),
+            f(
+                Knob::ClosingSlew,
+                0.5,
+                FASTEST_PCT_PER_S,
+                facts.close_speed.max(0.5),
+            ),
+        ]],
+        Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => {
+            vec![vec![f(Knob::MinSpeed, 0.01, 2.0, 0.2)]]
+        }
+        // Stick-slip either on the valve's input (Choudhury) or inside the positioner loop
+        // (breakaway: sticks when slow, slips past the target, hunts).
+        Effect::Stiction if get(Knob::Stickband) == 0.0 && get(Knob::Breakaway) == 0.0 => vec![
+            vec![
+                f(Knob::Stickband, 0.05, 10.0, 0.5),
+                f(Knob::JumpFraction, 0.0, 1.0, 0.5),
+            ],
+            vec![
+                f(Knob::Stickband, 0.05, 10.0, 2.0),
+                f(Knob::JumpFraction, 0.0, 1.0, 0.5),
+            ],
+            vec![f(Knob::Breakaway, 0.05, 10.0, 0.5)],
+        ],
+        Effect::Deadband if get(Knob::Deadband) == 0.0 => {
+            vec![vec![f(Knob::Deadband, 0.02, 10.0, 0.5)]]
+        }
+        Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
+            travel_limits(rec).into_iter().collect()
+        }
+        Effect::Quantization if get(Knob::Quantum) == 0.0 && facts.lattice_pct > 0.0 => {
+            let q = facts.lattice_pct;
+            vec![vec![f(Knob::Quantum, q * 0.999, q * 1.001, q)]]
+        }
+        Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
+            let (g, o) = steady_gain_offset(facts);
+            vec![vec![
+                f(Knob::CalGain, 0.7, 1.3, g),
+                f(Knob::CalOffset, -15.0, 15.0, o),
+            ]]
+        }
+        _ => vec![],
+    }
+}
+
+/// The travel limits to fit: a stop below the highest O_P (or above the lowest) where V_P
+/// never went, when O_P asked for at least half a percent more.
+fn travel_limits(rec: &RecordingView) -> Option<Vec<Free>> {
+    let range = |x: &[f64]| {
+        x.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            })
+    };
+    let ((vmin, vmax), (omin, omax)) = (range(rec.vp), range(rec.op));
+    let mut free = Vec::new();
+    if omax > vmax + 0.5 && vmax < 99.5 {
+        free.push(Free::new(
+            Knob::TravelMax,
+            (vmax - 2.0).max(50.0),
+            100.0,
+            vmax,
+        ));
+    }
+    if omin < vmin - 0.5 && vmin > 0.5 {
+        free.push(Free::new(
+            Knob::TravelMin,
+            0.0,
+            (vmin + 2.0).min(50.0),
+            vmin,
+        ));
+    }
+    (!free.is_empty()).then_some(free)
+}
+
+/// Least-squares line through the settled holds: V_P = g O_P + o (1, 0 with too few holds).
+fn steady_gain_offset(facts: &Facts) -> (f64, f64) {
+    let h = &facts.holds;
+    if h.len() < 3 {
+        return (1.0, 0.0);
+    }
+    let n = h.len() as f64;
+    let mx = h.iter().map(|x| x.op_pct).sum::<f64>() / n;
+    let my = h.iter().map(|x| x.vp_pct).sum::<f64>() / n;
+    let sxx: f64 = h.iter().map(|x| (x.op_pct - mx).powi(2)).sum();
+    if sxx < 1.0 {
+        return (1.0, my - mx);
+    }
+    let g = h
+        .iter()
+        .map(|x| (x.op_pct - mx) * (x.vp_pct - my))
+        .sum::<f64>()
+        / sxx;
+    (g.clamp(0.7, 1.3), my - g.clamp(0.7, 1.3) * mx)
+}

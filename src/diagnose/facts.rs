@@ -1,0 +1,416 @@
+//! Facts measured straight from a recording, without any model: step delays by direction,
+//! travel speeds, steady-state offsets, the sensor lattice and the slips of V_P (sudden moves
+//! while O_P is nearly still, the mark of stick-slip; see [`slips`]).
+//!
+//! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
+//! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
+
+use crate::fit::steps::{self, StepOptions};
+use crate::metrics::stats::quantile;
+use crate::recording::RecordingView;
+
+/// One step of O_P and how V_P answered it.
+#[derive(Debug, Clone, Copy)]
+pub struct StepResponse {
+    pub t_s: f64,
+    /// V_P when the step came, %.
+    pub from_pct: f64,
+    pub size_pct: f64,
+    /// True when the step goes against the valve's previous movement.
+    pub reversal: bool,
+    /// Time until V_P moved a tenth of the step (at least four noise sigmas), s.
+    pub delay_s: f64,
+}
+
+/// A hold of O_P long enough for the valve to settle.
+#[derive(Debug, Clone, Copy)]
+pub struct Hold {
+    pub op_pct: f64,
+    /// Mean V_P over the last second of the hold, %.
+    pub vp_pct: f64,
+    /// +1 when the valve came from below (opening), -1 from above.
+    pub approach: f64,
+    /// Largest jump of V_P inside the settled part of the hold, %.
+    pub max_jump_pct: f64,
+}
+
+/// Everything measured from the recording.
+#[derive(Debug, Clone)]
+pub struct Facts {
+    pub steps: Vec<StepResponse>,
+    pub holds: Vec<Hold>,
+    /// 99.5th percentile of the opening and closing speed of V_P, %/s.
+    pub open_speed: f64,
+    pub close_speed: f64,
+    /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
+    pub lattice_pct: f64,
+    /// Number of direction reversals of O_P.
+    pub reversals: usize,
+    /// What counts as a slip in this recording, and the slips of the measured V_P.
+    pub slip_scale: SlipScale,
+    pub slips: Vec<Slip>,
+}
+
+/// Measures the facts of a recording whose V_P has noise `sigma`.
+pub fn measure(rec: &RecordingView, sigma: f64) -> Facts {
+    let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
+    let (open_speed, close_speed) = speeds(vp, dt);
+    let lattice_pct = lattice(vp);
+    let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
+    Facts {
+        reversals: count_reversals(op),
+        steps: step_responses(op, vp, dt),
+        holds: holds(op, vp, dt),
+        open_speed,
+        close_speed,
+        lattice_pct,
+        slips: slips(op, vp, &slip_scale),
+        slip_scale,
+    }
+}
+
+fn count_reversals(op: &[f64]) -> usize {
+    let mut last = 0.0;
+    let mut n = 0;
+    for w in op.windows(2) {
+        let d = w[1] - w[0];
+        if d.abs() > 0.02 {
+            let s = d.signum();
+            if last != 0.0 && s != last {
+                n += 1;
+            }
+            last = s;
+        }
+    }
+    n
+}
+
+/// The step delays of the step analysis (`fit::steps`), for steps of at least 0.3 % held for
+/// a second that V_P answered.
+fn step_responses(op: &[f64], vp: &[f64], dt: f64) -> Vec<StepResponse> {
+    let opts = StepOptions {
+        min_size_pct: 0.3,
+        fraction: 0.1,
+        min_hold_s: 1.0,
+    };
+    steps::analyse(op, vp, dt, &opts)
+        .steps
+        .into_iter()
+        .filter_map(|s| {
+            s.delay_s.map(|delay_s| StepResponse {
+                t_s: s.t_s,
+                from_pct: s.from_pct,
+                size_pct: s.size_pct,
+                reversal: s.reversal == Some(true),
+                delay_s,
+            })
+        })
+        .collect()
+}
+
+/// Stretches of constant O_P of at least 3 s, with the settled V_P of their last second.
+fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
+    let n = op.len();
+    let min_hold = (3.0 / dt) as usize;
+    let settle = (1.0 / dt) as usize;
+    let mut holds = Vec::new();
+    let mut a = 0;
+    for b in 1..=n {
+        if b < n && (op[b] - op[b - 1]).abs() <= 1e-9 {
+            continue;
+        }
+        if b - a >= min_hold && a > 0 {
+            let tail = &vp[b - settle..b];
+            let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+            let max_jump = vp[a + settle..b]
+                .windows(2)
+                .map(|w| (w[1] - w[0]).abs())
+                .fold(0.0, f64::max);
+            holds.push(Hold {
+                op_pct: op[a],
+                vp_pct: mean,
+                approach: (op[a] - op[a - 1]).signum(),
+                max_jump_pct: max_jump,
+            });
+        }
+        a = b;
+    }
+    holds
+}
+
+fn speeds(vp: &[f64], dt: f64) -> (f64, f64) {
+    let h = ((0.1 / dt).round() as usize).max(1);
+    let mut up: Vec<f64> = Vec::new();
+    let mut down: Vec<f64> = Vec::new();
+    for k in (h..vp.len()).step_by(h) {
+        let s = (vp[k] - vp[k - h]) / (h as f64 * dt);
+        if s > 0.0 {
+            up.push(s);
+        } else {
+            down.push(-s);
+        }
+    }
+    (quantile(&mut up, 0.995), quantile(&mut down, 0.995))
+}
+
+/// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
+///
+/// The smallest nonzero change of V_P that occurs at least three times is the candidate
+/// spacing; V_P is on a lattice when at least 95 % of its values sit within 2 % of a spacing of a
+/// multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
+fn lattice(vp: &[f64]) -> f64 {
+    let mut diffs: Vec<f64> = vp
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| *d > 1e-9)
+        .collect();
+    if diffs.len() < 20 {
+        return 0.0;
+    }
+    diffs.sort_by(f64::total_cmp);
+    let q = diffs
+        .windows(3)
+        .find(|w| w[2] - w[0] <= 1e-6 * w[0].max(1e-9) + 1e-9)
+        .map_or(0.0, |w| w[1]);
+    if q < 0.01 {
+        return 0.0;
+    }
+    let near = vp
+        .iter()
+        .filter(|&&v| {
+            let f = v / q - (v / q).round();
+            f.abs() < 0.02
+        })
+        .count();
+    if near as f64 >= 0.95 * vp.len() as f64 {
+        q
+    } else {
+        0.0
+    }
+}
+
+/// A slip of V_P: a sudden move with V_P at rest just before and just after, while O_P was
+/// nearly still.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slip {
+    /// Sample at the middle of the move.
+    pub k: usize,
+    /// Signed size, %: the mean over the `span` samples after minus the mean over those before.
+    pub size_pct: f64,
+}
+
+/// What tells a slip from noise, a sensor step and a smooth move.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlipScale {
+    /// Samples the move may take; the means before and after are over as many (>= 1).
+    pub span: usize,
+    /// Smallest slip, %.
+    pub threshold_pct: f64,
+    /// Samples before the move that O_P must have been nearly still for too (the valve's delay).
+    pub lookback: usize,
+}
+
+/// Longest move that still counts as a slip, s: a stem that breaks loose is at its new place
+/// within a tenth of a second, much faster than a positioner follows a command.
+const SLIP_S: f64 = 0.1;
+/// How long before a slip O_P must have been nearly still, s: covers a healthy positioner's
+/// dead time and response, so a valve catching up with a command is not a slip.
+const SLIP_LOOKBACK_S: f64 = 0.5;
+
+impl SlipScale {
+    /// The scale for a recording sampled every `dt` with V_P noise `sigma` and sensor lattice
+    /// `lattice` (0 = none): a slip stands five noise sigmas of the compared means above the
+    /// noise, is larger than one and a half lattice steps (a sensor step is not a slip), and
+    /// at least 0.1 %.
+    pub fn new(dt: f64, sigma: f64, lattice: f64) -> Self {
+        let span = ((SLIP_S / dt).round() as usize).max(1);
+        let noise = sigma * (2.0 / span as f64).sqrt();
+        SlipScale {
+            span,
+            threshold_pct: (5.0 * noise).max(1.5 * lattice).max(0.1),
+            lookback: (SLIP_LOOKBACK_S / dt).round() as usize,
+        }
+    }
+}
+
+/// Running sums of `x` with a leading 0: the sum of `x[a..b]` is `s[b] - s[a]`.
+fn running_sums(x: &[f64]) -> Vec<f64> {
+    let mut s = Vec::with_capacity(x.len() + 1);
+    let mut acc = 0.0;
+    s.push(acc);
+    for &v in x {
+        acc += v;
+        s.push(acc);
+    }
+    s
+}
+
+/// Mean of `x[k..k + h]` minus mean of `x[k - h..k]`, from the running sums `s` of `x`
+/// (needs h <= k <= len - h).
+fn step_at(s: &[f64], k: usize, h: usize) -> f64 {
+    ((s[k + h] - s[k]) - (s[k] - s[k - h])) / h as f64
+}
+
+/// The slips of `y` (measured or simulated V_P) driven by `op`.
+///
+/// With means over `span` samples, d(k) = mean(y[k..k+span]) - mean(y[k-span..k]) is a step
+/// detector: noise in it shrinks with the span, a jump of A completed within the span gives
+/// |d| close to A at its middle and little one span earlier or later, and a ramp (a valve
+/// following a moving command, or slewing) gives the same d at all three. A slip is a local
+/// peak of |d| above the threshold, with |d| a span before and after below half of it: V_P at
+/// rest on both sides (a spike of the sensor, which comes back within the span, is not). The
+/// command must not explain it: the same step detector on O_P stays below half the slip
+/// from `lookback` samples before the move to its middle (O_P noise averages out in the means
+/// as it does in the valve, a step or a fast move of O_P does not). O(n).
+pub fn slips(op: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
+    let h = scale.span;
+    let n = y.len().min(op.len());
+    let mut out = Vec::new();
+    if n < 4 * h + 1 {
+        return out;
+    }
+    let (sy, so) = (running_sums(&y[..n]), running_sums(&op[..n]));
+    let d = |k: usize| step_at(&sy, k, h);
+    let mut k = 2 * h;
+    while k + 2 * h <= n {
+        let a = d(k).abs();
+        if a < scale.threshold_pct
+            || d(k - h).abs() * 2.0 > a
+            || d(k + h).abs() * 2.0 > a
+            || (k - h + 1..k + h).any(|j| d(j).abs() > a)
+            || (k.saturating_sub(scale.lookback).max(h)..=k)
+                .any(|j| step_at(&so, j, h).abs() * 2.0 >= a)
+        {
+            k += 1;
+            continue;
+        }
+        out.push(Slip { k, size_pct: d(k) });
+        k += h;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::stats::tests::noise;
+
+    #[test]
+    fn lattice_is_found_only_on_a_lattice() {
+        let on: Vec<f64> = (0..2000)
+            .map(|k| ((50.0 + 3.0 * (k as f64 * 0.01).sin()) / 0.1).round() * 0.1)
+            .collect();
+        assert!((lattice(&on) - 0.1).abs() < 1e-9);
+        let off: Vec<f64> = (0..2000)
+            .map(|k| 50.0 + 3.0 * (k as f64 * 0.01).sin())
+            .collect();
+        assert_eq!(lattice(&off), 0.0);
+    }
+
+    #[test]
+    fn slips_are_sudden_moves_the_command_does_not_explain() {
+        let (dt, n) = (0.01, 6000);
+        let e = noise(n, 0.1);
+        let scale = SlipScale::new(dt, 0.1, 0.0);
+        // O_P creeps up 0.1 %/s; V_P sticks and jumps 0.6 % in 50 ms every 2 s, alternately
+        // up and down (hunting), with sensor noise.
+        let op: Vec<f64> = (0..n).map(|k| 50.0 + 0.1 * k as f64 * dt).collect();
+        let level = |k: usize| {
+            let cycle = k / 200;
+            let within = (k % 200).min(5) as f64 / 5.0;
+            let (a, b) = if cycle.is_multiple_of(2) {
+                (0.0, 0.6)
+            } else {
+                (0.6, 0.0)
+            };
+            50.0 + a + (b - a) * within
+        };
+        let vp: Vec<f64> = (0..n).map(|k| level(k) + e[k]).collect();
+        let found = slips(&op, &vp, &scale);
+        // Every jump after the first (k = 200, 400, ... 5800), none more; the means over the
+        // span see a jump spread over 5 samples as a little smaller.
+        let ks: Vec<usize> = found.iter().map(|s| s.k).collect();
+        assert_eq!(found.len(), 29, "{ks:?}");
+        for (i, s) in found.iter().enumerate() {
+            assert!(
+                (s.k as i64 - (200 * (i + 1) + 2) as i64).abs() <= 3,
+                "{s:?}"
+            );
+            assert!((s.size_pct.abs() - 0.55).abs() < 0.15, "{s:?}");
+            assert_eq!(s.size_pct > 0.0, i % 2 == 1, "{s:?}");
+        }
+        // The same moves are no slips when O_P stepped 0.1 s before them.
+        let stepping: Vec<f64> = (0..n).map(|k| level(k + 10)).collect();
+        assert!(slips(&stepping, &vp, &scale).is_empty());
+    }
+
+    #[test]
+    fn smooth_moves_spikes_and_sensor_steps_are_not_slips() {
+        let (dt, n) = (0.01, 6000);
+        let e = noise(n, 0.1);
+        let op = vec![50.0; n];
+        let scale = SlipScale::new(dt, 0.1, 0.0);
+        // Slewing at 5 %/s for 2 s, then resting.
+        let slew: Vec<f64> = (0..n)
+            .map(|k| 50.0 + 5.0 * ((k as f64 - 2000.0).clamp(0.0, 200.0) * dt) + e[k])
+            .collect();
+        assert!(slips(&op, &slew, &scale).is_empty());
+        // One-sample spikes of 3 %.
+        let spiky: Vec<f64> = (0..n)
+            .map(|k| 50.0 + e[k] + if k % 500 == 250 { 3.0 } else { 0.0 })
+            .collect();
+        assert!(slips(&op, &spiky, &scale).is_empty());
+        // A smooth, slow V_P on a 0.5 % lattice steps by one lattice step at a time.
+        let on_lattice: Vec<f64> = (0..n)
+            .map(|k| ((50.0 + 2.0 * (k as f64 * dt * 0.5).sin()) / 0.5).round() * 0.5)
+            .collect();
+        let q = lattice(&on_lattice);
+        assert!((q - 0.5).abs() < 1e-9);
+        assert!(slips(&op, &on_lattice, &SlipScale::new(dt, 0.0, q)).is_empty());
+        // Without the lattice known, those steps would count: the lattice is what excludes them.
+        assert!(!slips(&op, &on_lattice, &SlipScale::new(dt, 0.0, 0.0)).is_empty());
+    }
+
+    #[test]
+    fn step_delays_and_reversals_are_measured() {
+        let dt = 0.01;
+        // O_P: 40 -> 50 at 5 s, -> 45 at 15 s. V_P follows 0.3 s late, 0.8 s late after the reversal.
+        let n = 2500;
+        let op: Vec<f64> = (0..n)
+            .map(|k| {
+                if k < 500 {
+                    40.0
+                } else if k < 1500 {
+                    50.0
+                } else {
+                    45.0
+                }
+            })
+            .collect();
+        let vp: Vec<f64> = (0..n)
+            .map(|k| {
+                if k < 530 {
+                    40.0
+                } else if k < 1580 {
+                    50.0
+                } else {
+                    45.0
+                }
+            })
+            .collect();
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let rec = RecordingView {
+            t: &t,
+            op: &op,
+            vp: &vp,
+            dt,
+        };
+        let f = measure(&rec, 0.0);
+        assert_eq!(f.steps.len(), 2);
+        assert!(!f.steps[0].reversal && f.steps[1].reversal);
+        assert!((f.steps[0].delay_s - 0.3).abs() < 1e-9 && (f.steps[1].delay_s - 0.8).abs() < 1e-9);
+        assert_eq!(f.reversals, 1);
+        assert_eq!(f.holds.len(), 2);
+        assert_eq!(f.holds[1].approach, -1.0);
+    }
+}

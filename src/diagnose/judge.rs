@@ -1,0 +1,315 @@
+//! Judge: whether a refitted effect belongs in the model, decided on held-out blocks it was
+//! never fitted to.
+//!
+//! A refitted candidate is kept only if all of these hold:
+//! - **More than chance, where it matters.** Per held-out block, the drop in squared error is
+//!   tested against measurement noise: with noise σ the drop has a standard deviation of
+//!   2σ √Σ(y_before − y_after)² when nothing real changed. An effect that exists helps
+//!   significantly (z > 2) wherever the recording excites it, in at least two blocks, and what
+//!   it costs elsewhere is small next to what it gains (the blocks hurt lose less than a
+//!   quarter of what the blocks helped gain); one fitted to chance helps some blocks about as
+//!   much as it hurts others.
+//! - **A real share** of the held-out error above the noise floor is removed (10 %).
+//! - **BIC agrees**, counting independent samples (the residual's correlation length).
+//! - **It matters** to a valve engineer and agrees with what the recording shows directly
+//!   ([`material`]), and its fitted value is not pinned at the edge of its box (then it stands
+//!   in for something else rather than measuring itself).
+//!
+//! Not here: what is refitted ([`super::candidates`]) or what is said about it
+//! ([`super::evidence`]).
+
+use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
+use super::facts::Facts;
+use super::refit::{Free, NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
+use super::scorer::{Errors, Scorer};
+use crate::fit::params::Scale;
+use crate::model::ModelSpec;
+
+/// z of a held-out block's drop in error beyond which it counts as helped (or hurt).
+const Z: f64 = 2.0;
+/// Fewest held-out blocks an effect must help.
+const MIN_BLOCKS: f64 = 2.0;
+/// Smallest share of the excess held-out error an effect must remove.
+const MIN_EXCESS_SHARE: f64 = 0.1;
+/// Largest BIC change (it must fall by more than this).
+const MAX_DELTA_BIC: f64 = -10.0;
+
+/// A refitted candidate and how it did on the held-out blocks.
+#[derive(Debug, Clone)]
+pub(crate) struct Trial {
+    pub effect: Effect,
+    pub spec: ModelSpec,
+    pub errors: Errors,
+    pub free: Vec<Free>,
+    /// Held-out blocks helped beyond noise (z > 2); 0 when the blocks hurt lose over a quarter
+    /// of what those gain.
+    pub t_stat: f64,
+    pub excess_share: f64,
+    pub delta_bic: f64,
+    pub material: bool,
+}
+
+impl Trial {
+    /// Whether the candidate passes every test.
+    pub fn passes(&self) -> bool {
+        self.material
+            && self.t_stat >= MIN_BLOCKS
+            && self.excess_share >= MIN_EXCESS_SHARE
+            && self.delta_bic < MAX_DELTA_BIC
+    }
+}
+
+/// What a round judges against: the model so far and the recording's noise.
+pub(crate) struct Judge<'a> {
+    pub scorer: &'a Scorer<'a>,
+    pub facts: &'a Facts,
+    /// Noise floor of V_P, %.
+    pub sigma: f64,
+    /// What noise alone leaves on the held-out blocks, %².
+    pub held_noise: f64,
+    /// The model so far and its errors.
+    pub current: &'a ModelSpec,
+    pub cur: Errors,
+    /// Correlation length of the current residual, samples.
+    pub corr_len: f64,
+}
+
+impl Judge<'_> {
+    /// Scores a refitted candidate (`spec`, whose `free` knobs were refitted) against the
+    /// current model.
+    pub fn judge(&self, effect: Effect, spec: ModelSpec, errors: Errors, free: Vec<Free>) -> Trial {
+        let blocks = self.scorer.paired(self.current, &spec);
+        let t_stat = blocks_helped(&blocks, self.sigma);
+        let excess = (self.cur.held - self.held_noise).max(1e-12);
+        let excess_share = (self.cur.held - errors.held) / excess.max(0.05 * self.cur.held);
+        let k_new = free
+            .iter()
+            .filter(|f| f.knob != Knob::Gain && f.knob != Knob::DeadTime)
+            .count()
+            .max(1);
+        let delta_bic = bic_change(
+            &self.cur,
+            &errors,
+            k_new,
+            self.scorer.n_fit(),
+            self.corr_len,
+        );
+        let material = !pinned(&free, &spec) && material(effect, &spec, self.facts);
+        Trial {
+            effect,
+            spec,
+            errors,
+            free,
+            t_stat,
+            excess_share,
+            delta_bic,
+            material,
+        }
+    }
+}
+
+/// The number of held-out blocks an effect helped beyond noise (z > 2), or 0 when the blocks
+/// it hurt (z < -2) lose more than a quarter of what the helped ones gain. `blocks` holds, per
+/// block, the drop in squared error and the squared difference of the two simulations.
+pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64) -> f64 {
+    let z = |(drop, diff2): (f64, f64)| drop / (2.0 * sigma.max(1e-6) * diff2.sqrt() + 1e-12);
+    let (mut better, mut helped, mut hurt) = (0usize, 0.0, 0.0);
+    for &p in blocks {
+        if z(p) > Z {
+            better += 1;
+            helped += p.0;
+        } else if z(p) < -Z {
+            hurt -= p.0;
+        }
+    }
+    if hurt * 4.0 <= helped {
+        better as f64
+    } else {
+        0.0
+    }
+}
+
+/// Whether a fitted knob sits at the edge of its box: a scale-type knob (or the slowdown)
+/// within 2 % of either bound. The gain and dead time are left out (they are refitted with
+/// every effect and may rest on a bound).
+fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
+    free.iter().any(|f| {
+        let v = composed::get(spec, f.knob);
+        (f.def.scale == Scale::Log || f.knob == Knob::Slowdown)
+            && f.knob != Knob::Gain
+            && f.knob != Knob::DeadTime
+            && (v >= f.def.hi * 0.98 || v <= f.def.lo * 1.02)
+    })
+}
+
+/// BIC change from `cur` to `new` on the fit blocks with `k_new` more parameters, counting
+/// independent samples (`n_fit` over the residual's correlation length, at least 10), not raw
+/// ones.
+pub(crate) fn bic_change(
+    cur: &Errors,
+    new: &Errors,
+    k_new: usize,
+    n_fit: usize,
+    corr_len: f64,
+) -> f64 {
+    let n_eff = (n_fit as f64 / corr_len).max(10.0);
+    n_eff * (new.fit / cur.fit).ln() + k_new as f64 * n_eff.ln()
+}
+
+/// Whether a fitted effect is large enough to matter to a valve engineer, and agrees with what
+/// the recording shows directly (a speed limit must be reached by the measured V_P; opening and
+/// closing speeds must differ the same way as the fit says).
+pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool {
+    let g = |k| composed::get(spec, k);
+    match effect {
+        Effect::DeadTime => g(Knob::DeadTime) > NOMINAL_DEAD_TIME_S + 0.02,
+        Effect::Backlash => g(Knob::Crossing) * composed::half_open(spec) >= 0.03,
+        Effect::StateDependentDelay => {
+            g(Knob::Slowdown) >= 0.3 || g(Knob::CrossingSlope).abs() * 100.0 >= 0.1
+        }
+        Effect::SlewRate => {
+            let top = facts.open_speed.max(facts.close_speed);
+            let half = g(Knob::HalfOpenSlew);
+            half < NOMINAL_MIN_SLEW_PCT_PER_S && top >= 0.7 * half
+        }
+        Effect::Asymmetry => {
+            let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
+            let (oa, ob) = (facts.open_speed, facts.close_speed);
+            let seen = oa.max(ob) / oa.min(ob).max(1e-9) >= 1.2 && (a > b) == (oa > ob);
+            seen && a.max(b) / a.min(b) >= 1.3
+                && a.min(b) < 0.8 * FASTEST_PCT_PER_S
+                && oa.min(ob) >= 0.7 * a.min(b)
+        }
+        Effect::MinSpeed => g(Knob::MinSpeed) >= 0.02,
+        // Stick-slip needs the slip: a stickband without a jump is a deadband on the input.
+        Effect::Stiction => {
+            (g(Knob::Stickband) >= 0.1 && g(Knob::Stickband) * g(Knob::JumpFraction) >= 0.1)
+                || g(Knob::Breakaway) >= 0.1
+        }
+        Effect::Deadband => g(Knob::Deadband) >= 0.05,
+        Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
+        Effect::Quantization => g(Knob::Quantum) > 0.0,
+        Effect::Calibration => {
+            (g(Knob::CalGain) - 1.0).abs() >= 0.01 || g(Knob::CalOffset).abs() >= 0.2
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, ModelKind};
+
+    fn errors(fit: f64) -> Errors {
+        Errors { fit, held: fit }
+    }
+
+    #[test]
+    fn blocks_helped_counts_significant_drops_unless_others_lose_too_much() {
+        // sigma 0.1, simulations 1 %² apart per block: a drop of 0.2 %² is z = 1.
+        let sigma = 0.1;
+        assert_eq!(
+            blocks_helped(&[(0.5, 1.0), (0.5, 1.0), (0.1, 1.0)], sigma),
+            2.0
+        );
+        // One block hurt (z < -2) by more than a quarter of what two gained: chance.
+        let hurt = |drop, diff2| blocks_helped(&[(0.5, 1.0), (0.5, 1.0), (drop, diff2)], sigma);
+        assert_eq!(hurt(-0.5, 1.0), 0.0);
+        // Hurt significantly but by less: still two; hurt by more, within noise: two.
+        assert_eq!(hurt(-0.2, 0.01), 2.0);
+        assert_eq!(hurt(-0.3, 1.0), 2.0);
+        // Identical simulations change nothing.
+        assert_eq!(blocks_helped(&[(0.0, 0.0); 4], sigma), 0.0);
+    }
+
+    #[test]
+    fn bic_charges_each_parameter_and_counts_independent_samples() {
+        // No improvement: the penalty alone, k ln(n_eff).
+        let d = bic_change(&errors(100.0), &errors(100.0), 2, 10000, 10.0);
+        assert!((d - 2.0 * 1000f64.ln()).abs() < 1e-9);
+        // Halving the error on 1000 independent samples beats one parameter by far.
+        let d = bic_change(&errors(100.0), &errors(50.0), 1, 10000, 10.0);
+        assert!(d < -600.0, "{d}");
+        // The same halving on a residual correlated over 1000 samples counts 10 samples.
+        let d = bic_change(&errors(100.0), &errors(50.0), 1, 10000, 1000.0);
+        assert!((d - (10.0 * 0.5f64.ln() + 10f64.ln())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn material_sizes_and_what_the_data_shows() {
+        let facts = |open: f64, close: f64| Facts {
+            steps: vec![],
+            holds: vec![],
+            open_speed: open,
+            close_speed: close,
+            lattice_pct: 0.0,
+            reversals: 0,
+            slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
+            slips: vec![],
+        };
+        let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        let with = |knob, v| {
+            let mut s = base.clone();
+            composed::set(&mut s, knob, v);
+            s
+        };
+        let f = facts(30.0, 30.0);
+        assert!(material(Effect::DeadTime, &with(Knob::DeadTime, 0.3), &f));
+        assert!(!material(Effect::DeadTime, &with(Knob::DeadTime, 0.21), &f));
+        assert!(material(Effect::Deadband, &with(Knob::Deadband, 0.1), &f));
+        assert!(!material(Effect::Deadband, &with(Knob::Deadband, 0.01), &f));
+        // A slew limit of 20 %/s is material only when V_P reaches it.
+        assert!(material(Effect::SlewRate, &with(Knob::Slew, 20.0), &f));
+        assert!(!material(
+            Effect::SlewRate,
+            &with(Knob::Slew, 20.0),
+            &facts(5.0, 5.0)
+        ));
+        // Asymmetry must show in the measured speeds, the same way round.
+        let mut asym = with(Knob::Slew, 50.0);
+        composed::set(&mut asym, Knob::ClosingSlew, 20.0);
+        assert!(material(Effect::Asymmetry, &asym, &facts(50.0, 20.0)));
+        assert!(!material(Effect::Asymmetry, &asym, &facts(20.0, 50.0)));
+        // A stickband without a jump is not stick-slip.
+        let mut band = with(Knob::Stickband, 1.0);
+        composed::set(&mut band, Knob::JumpFraction, 0.0);
+        assert!(!material(Effect::Stiction, &band, &f));
+        composed::set(&mut band, Knob::JumpFraction, 0.5);
+        assert!(material(Effect::Stiction, &band, &f));
+    }
+
+    #[test]
+    fn a_trial_passes_only_when_every_test_does() {
+        let t = Trial {
+            effect: Effect::Backlash,
+            spec: bundled(ModelKind::Pincart2),
+            errors: errors(1.0),
+            free: vec![],
+            t_stat: 3.0,
+            excess_share: 0.5,
+            delta_bic: -50.0,
+            material: true,
+        };
+        assert!(t.passes());
+        for broken in [
+            Trial {
+                t_stat: 1.0,
+                ..t.clone()
+            },
+            Trial {
+                excess_share: 0.05,
+                ..t.clone()
+            },
+            Trial {
+                delta_bic: -5.0,
+                ..t.clone()
+            },
+            Trial {
+                material: false,
+                ..t.clone()
+            },
+        ] {
+            assert!(!broken.passes());
+        }
+    }
+}

@@ -1,0 +1,323 @@
+//! Rounds: grow the model one effect at a time until nothing more passes.
+//!
+//! Each round refits every candidate effect not yet found (in parallel), judges each on the
+//! held-out blocks, and keeps the best that passes. After each kept effect everything kept so
+//! far is refitted together, from the fitted values and from spread starts, so a later effect
+//! can take back what an earlier one was stretched to cover; the joint refit is kept only if
+//! neither error rises. An effect that removed next to nothing is not tried again.
+//!
+//! When no effect passes, stick-slip may still be there, judged by its slips
+//! ([`super::stickslip`]); a finding there ends the search, since free-run error cannot judge
+//! anything after a limit cycle of its own phase.
+//!
+//! Not here: the candidates ([`super::candidates`]), the tests ([`super::judge`]) or the
+//! evidence ([`super::evidence`]).
+
+use rayon::prelude::*;
+use serde_json::{Map, Value};
+
+use super::candidates::{self, MAX_DEAD_TIME_S};
+use super::composed::{self, Effect, Knob};
+use super::evidence::Evidence;
+use super::facts::Facts;
+use super::judge::{bic_change, Judge, Trial};
+use super::locate::Window;
+use super::refit::{refit_from, spread_starts, starting_at, Free};
+use super::scorer::{Errors, Scorer};
+use super::stickslip;
+use super::{Finding, Note};
+use crate::metrics::stats;
+use crate::model::ModelSpec;
+use crate::recording::RecordingView;
+
+/// Most effects one diagnosis adds.
+pub const ROUNDS: usize = 4;
+/// An effect whose best refit removed less held-out error than this share of what remains
+/// after the round's winner is not tried again: to be kept next round it would have to remove
+/// twenty times as much (a tenth of the excess), and each round refits every candidate on the
+/// whole recording.
+const RETRY_SHARE: f64 = 0.005;
+/// Share of the winner's held-out gain a look-alike must reach to be named beside it.
+const LOOK_ALIKE_SHARE: f64 = 0.8;
+
+/// What a search reads and never changes: the recording, its split, what was measured on it.
+#[derive(Clone, Copy)]
+pub(crate) struct Data<'a> {
+    pub rec: &'a RecordingView<'a>,
+    pub scorer: &'a Scorer<'a>,
+    pub facts: &'a Facts,
+    /// Noise floor of V_P, %.
+    pub sigma: f64,
+    /// Where the baseline missed (quoted in the evidence).
+    pub windows: &'a [Window],
+}
+
+/// The growing model and what was found so far.
+pub(crate) struct Search<'a> {
+    data: Data<'a>,
+    /// What noise alone leaves on the held-out blocks, %².
+    held_noise: f64,
+    /// The model so far and its errors.
+    pub current: ModelSpec,
+    pub cur: Errors,
+    /// Correlation length of the current residual, samples.
+    corr_len: f64,
+    /// Bound of the dead time of effects other than `dead_time`, s.
+    td_max: f64,
+    pub findings: Vec<Finding>,
+    pub notes: Vec<Note>,
+    /// Set when stiction was kept by the slips of V_P rather than by the free-run error.
+    pub by_slips: bool,
+    /// The knobs the kept effects freed, with their boxes.
+    freed: Vec<Free>,
+}
+
+impl<'a> Search<'a> {
+    /// A search from `start`, whose residual has correlation length `corr_len`; effects other
+    /// than `dead_time` may use a dead time up to `td_max`.
+    pub fn new(data: Data<'a>, start: ModelSpec, corr_len: f64, td_max: f64) -> Self {
+        Search {
+            held_noise: data.scorer.n_held() as f64 * data.sigma * data.sigma,
+            cur: data.scorer.errors(&start),
+            data,
+            current: start,
+            corr_len,
+            td_max,
+            findings: Vec::new(),
+            notes: Vec::new(),
+            by_slips: false,
+            freed: Vec::new(),
+        }
+    }
+
+    /// What noise alone leaves on the held-out blocks, %².
+    pub fn held_noise(&self) -> f64 {
+        self.held_noise
+    }
+
+    /// Runs the rounds; `progress(done, total)` after each.
+    pub fn run(&mut self, progress: &(dyn Fn(usize, usize) + Sync)) {
+        let total = Effect::ALL.len() * ROUNDS;
+        // Effects worth trying this round: all at first, then those that helped enough before.
+        let mut worth: Vec<Effect> = Effect::ALL.to_vec();
+        for round in 0..ROUNDS {
+            let trials = self.trials(&worth);
+            progress(((round + 1) * Effect::ALL.len()).min(total), total);
+            let best = best_per_effect(&trials);
+            for t in &best {
+                let fitted = Value::Object(params(&t.spec, t.free.iter().map(|f| f.knob)));
+                tracing::debug!(
+                    effect = t.effect.name(),
+                    held_before = self.cur.held,
+                    held_after = t.errors.held,
+                    t_stat = t.t_stat,
+                    excess_share = t.excess_share,
+                    delta_bic = t.delta_bic,
+                    material = t.material,
+                    params = %fitted,
+                    "candidate"
+                );
+            }
+            let Some(winner) = best.iter().find(|t| t.passes()) else {
+                self.stick_slip();
+                break;
+            };
+            worth = best
+                .iter()
+                .filter(|t| self.cur.held - t.errors.held >= RETRY_SHARE * winner.errors.held)
+                .map(|t| t.effect)
+                .collect();
+            self.note_look_alikes(winner, &best);
+            self.keep(winner, round > 0);
+        }
+        if self.findings.is_empty() && self.data.facts.reversals < 10 {
+            self.notes.push(Note::FewReversals {
+                reversals: self.data.facts.reversals,
+            });
+        }
+    }
+
+    /// Every candidate of the effects in `worth` not yet found, refitted and judged.
+    fn trials(&self, worth: &[Effect]) -> Vec<Trial> {
+        let effects: Vec<Effect> = worth
+            .iter()
+            .copied()
+            .filter(|e| !self.findings.iter().any(|f| f.effect == *e))
+            .collect();
+        let jobs = candidates::jobs(
+            &effects,
+            &self.current,
+            self.data.facts,
+            self.data.rec,
+            self.td_max,
+        );
+        tracing::debug!(
+            candidates = jobs.len(),
+            starts = jobs.iter().map(|j| j.starts.len()).sum::<usize>(),
+            "trying effects"
+        );
+        let judge = Judge {
+            scorer: self.data.scorer,
+            facts: self.data.facts,
+            sigma: self.data.sigma,
+            held_noise: self.held_noise,
+            current: &self.current,
+            cur: self.cur,
+            corr_len: self.corr_len,
+        };
+        jobs.par_iter()
+            .map(|job| {
+                let (spec, errors) = refit_from(self.data.scorer, &self.current, &job.starts);
+                judge.judge(job.effect, spec, errors, job.starts[0].clone())
+            })
+            .collect()
+    }
+
+    /// Notes a look-alike that explains nearly as much as the winner.
+    fn note_look_alikes(&mut self, winner: &Trial, best: &[&Trial]) {
+        let gain = self.cur.held - winner.errors.held;
+        for other in best
+            .iter()
+            .filter(|o| o.effect != winner.effect && o.passes())
+        {
+            let g = self.cur.held - other.errors.held;
+            if winner.effect.look_alikes().contains(&other.effect) && g >= LOOK_ALIKE_SHARE * gain {
+                self.notes.push(Note::LookAlike {
+                    effect: winner.effect,
+                    other: other.effect,
+                    removed_share: gain / self.cur.held,
+                    other_removed_share: g / self.cur.held,
+                });
+            }
+        }
+    }
+
+    /// Keeps the round's winner, then (after the first round) refits everything kept so far
+    /// together.
+    fn keep(&mut self, winner: &Trial, joint: bool) {
+        if winner.effect == Effect::DeadTime {
+            self.td_max = MAX_DEAD_TIME_S;
+        }
+        self.findings.push(Finding {
+            effect: winner.effect,
+            facts: Evidence::of(
+                winner.effect,
+                &winner.spec,
+                &self.current,
+                self.data.facts,
+                self.data.windows,
+                self.data.sigma,
+            ),
+            params: params(&winner.spec, winner.free.iter().map(|f| f.knob)),
+            heldout_sse_before: self.cur.held,
+            heldout_sse_after: winner.errors.held,
+            delta_bic: winner.delta_bic,
+        });
+        for f in &winner.free {
+            match self.freed.iter_mut().find(|g| g.knob.same_number(f.knob)) {
+                Some(g) => *g = *f,
+                None => self.freed.push(*f),
+            }
+        }
+        self.current = winner.spec.clone();
+        self.cur = self.data.scorer.errors(&self.current);
+        if joint {
+            self.joint_refit();
+        }
+        let sim = self.data.scorer.simulate(&self.current);
+        let residual: Vec<f64> = self
+            .data
+            .rec
+            .vp
+            .iter()
+            .zip(&sim)
+            .map(|(m, s)| m - s)
+            .collect();
+        self.corr_len = stats::correlation_length(&residual);
+        tracing::debug!(corr_len = self.corr_len, "residual after the round");
+    }
+
+    /// Every knob freed so far refitted together, from where the rounds left it and afresh
+    /// from the starts the rounds began with (effects fitted one at a time can leave the joint
+    /// fit in a valley it only finds its way out of from outside); kept only if neither error
+    /// rises.
+    fn joint_refit(&mut self) {
+        let from_here = starting_at(&self.freed, &self.current);
+        let mut starts = spread_starts(self.freed.clone());
+        starts.push(from_here);
+        let (polished, errors) = refit_from(self.data.scorer, &self.current, &starts);
+        tracing::debug!(
+            held_before = self.cur.held,
+            held_after = errors.held,
+            "polish"
+        );
+        if errors.fit < self.cur.fit && errors.held <= self.cur.held {
+            self.current = polished;
+            self.cur = errors;
+        }
+    }
+
+    /// Stick-slip judged by the slips of V_P, when the model has none yet.
+    fn stick_slip(&mut self) {
+        let stuck = [Knob::Stickband, Knob::Breakaway]
+            .iter()
+            .any(|&k| composed::get(&self.current, k) > 0.0);
+        if stuck {
+            return;
+        }
+        let Some(c) =
+            stickslip::fit(self.data.scorer, &self.current, self.data.facts).filter(|c| c.passes())
+        else {
+            return;
+        };
+        let errors = self.data.scorer.errors(&c.spec);
+        let k_new = c.knobs.iter().filter(|&&k| k != Knob::Gain).count();
+        self.findings.push(Finding {
+            effect: Effect::Stiction,
+            facts: Evidence::of_slips(&c, self.data.facts, self.data.windows, self.data.scorer.dt),
+            params: params(&c.spec, c.knobs.iter().copied()),
+            heldout_sse_before: self.cur.held,
+            heldout_sse_after: errors.held,
+            delta_bic: bic_change(
+                &self.cur,
+                &errors,
+                k_new,
+                self.data.scorer.n_fit(),
+                self.corr_len,
+            ),
+        });
+        self.notes.push(Note::JudgedBySlips {
+            heldout_sse_before: self.cur.held,
+            heldout_sse_after: errors.held,
+        });
+        self.current = c.spec;
+        self.by_slips = true;
+    }
+}
+
+/// The best variant of each effect (lowest held-out error), best effect first.
+fn best_per_effect(trials: &[Trial]) -> Vec<&Trial> {
+    let mut best: Vec<&Trial> = Vec::new();
+    for trial in trials {
+        match best.iter_mut().find(|b| b.effect == trial.effect) {
+            Some(b) if b.errors.held > trial.errors.held => *b = trial,
+            Some(_) => {}
+            None => best.push(trial),
+        }
+    }
+    best.sort_by(|a, b| a.errors.held.total_cmp(&b.errors.held));
+    best
+}
+
+/// The values of `knobs` in `spec`, by label, rounded to four decimals as reported.
+fn params(spec: &ModelSpec, knobs: impl Iterator<Item = Knob>) -> Map<String, Value> {
+    knobs
+        .map(|k| {
+            let v = composed::get(spec, k);
+            (
+                k.label().to_string(),
+                serde_json::json!((v * 1e4).round() / 1e4),
+            )
+        })
+        .collect()
+}

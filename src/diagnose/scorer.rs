@@ -1,0 +1,183 @@
+//! How diagnosis scores a model: alternating fit and held-out blocks over the recording, on
+//! identification's cost ([`crate::fit::cost::Problem`]).
+//!
+//! The recording is cut into blocks from its first sample, alternately fitted and held out
+//! ([`crate::fit::windows::alternating`]), so both halves cover every operating region; the
+//! first second (the start from rest) is scored in neither. Refits minimise the error on the
+//! fit blocks of a *restarted* problem: each fit block simulated on its own from the measured
+//! position [`WARM_UP_S`] before it, so the held-out blocks between them are never simulated
+//! while fitting (half the work). Judging simulates the whole recording once and splits its
+//! error by block.
+//!
+//! Not here: what is refitted or how it is judged ([`super::refit`], [`super::judge`]).
+
+use crate::fit::cost::{self, Problem};
+use crate::fit::windows;
+use crate::model::ModelSpec;
+use crate::recording::RecordingView;
+
+/// Simulated time before each fit block when refits simulate the fit blocks alone, s: longer
+/// than the longest dead time a diagnosis fits (3 s). Hysteresis that outlives it (a pin left
+/// off-centre) costs the fit a little, never the judgement, which simulates the whole recording.
+pub const WARM_UP_S: f64 = 10.0;
+
+/// The data a refit scores against: O_P, V_P and the alternating fit / held-out blocks.
+pub(crate) struct Scorer<'a> {
+    pub op: &'a [f64],
+    pub vp: &'a [f64],
+    pub dt: f64,
+    /// Samples per block; even blocks are fitted, odd ones held out.
+    pub block_len: usize,
+    /// Samples at the start left out of all scoring (initial transient).
+    pub skip: usize,
+    pub n_blocks: usize,
+    fit_mask: Vec<bool>,
+    held_mask: Vec<bool>,
+    /// The fit blocks, each simulated from the measurement [`WARM_UP_S`] before it.
+    fit: Problem,
+}
+
+/// Fit and held-out error of one simulation, %².
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Errors {
+    pub fit: f64,
+    pub held: f64,
+}
+
+impl<'a> Scorer<'a> {
+    /// Blocks of a twentieth of the recording (10-120 s, so about ten held-out blocks), the
+    /// first second left out.
+    pub fn new(rec: &RecordingView<'a>) -> Self {
+        let (n, dt) = (rec.len(), rec.dt);
+        let block_len = (((n as f64 * dt / 20.0).clamp(10.0, 120.0) / dt) as usize).max(1);
+        let skip = (1.0 / dt) as usize;
+        let (fit_mask, held_mask) = windows::alternating(n, block_len, skip);
+        let warm = (WARM_UP_S / dt) as usize;
+        Scorer {
+            op: rec.op,
+            vp: rec.vp,
+            dt,
+            block_len,
+            skip,
+            n_blocks: n.div_ceil(block_len),
+            fit: Problem::restarted(rec.op, rec.vp, &fit_mask, dt, warm),
+            fit_mask,
+            held_mask,
+        }
+    }
+
+    /// Whether sample `k` is scored as held out.
+    pub fn held(&self, k: usize) -> bool {
+        self.held_mask[k]
+    }
+
+    /// The held-out samples.
+    pub fn held_mask(&self) -> &[bool] {
+        &self.held_mask
+    }
+
+    /// Fit error alone, what refits minimise (the fit blocks simulated one by one).
+    pub fn fit_error(&self, spec: &ModelSpec) -> f64 {
+        self.fit.sse(spec)
+    }
+
+    /// Fit and held-out error of `spec` simulated over the whole recording (infinite when it
+    /// cannot run).
+    pub fn errors(&self, spec: &ModelSpec) -> Errors {
+        if spec.validate().is_err() {
+            return Errors {
+                fit: f64::INFINITY,
+                held: f64::INFINITY,
+            };
+        }
+        self.errors_of(&self.simulate(spec))
+    }
+
+    /// Fit and held-out error of a simulated V_P of the whole recording.
+    pub fn errors_of(&self, sim: &[f64]) -> Errors {
+        let mut sums = [0.0, 0.0];
+        for (k, (&m, y)) in self.vp.iter().zip(sim).enumerate() {
+            if self.fit_mask[k] {
+                sums[0] += (m - y) * (m - y);
+            } else if self.held_mask[k] {
+                sums[1] += (m - y) * (m - y);
+            }
+        }
+        Errors {
+            fit: sums[0],
+            held: sums[1],
+        }
+    }
+
+    /// Per held-out block: the drop in squared error from `a` to `b`, and the sum of squared
+    /// differences between the two simulations (what sets the noise of that drop).
+    pub fn paired(&self, a: &ModelSpec, b: &ModelSpec) -> Vec<(f64, f64)> {
+        let (ya, yb) = (self.simulate(a), self.simulate(b));
+        let mut out = vec![(0.0, 0.0); self.n_blocks.div_ceil(2)];
+        for (k, &m) in self.vp.iter().enumerate() {
+            if self.held_mask[k] {
+                let o = &mut out[k / self.block_len / 2];
+                o.0 += (m - ya[k]).powi(2) - (m - yb[k]).powi(2);
+                o.1 += (ya[k] - yb[k]).powi(2);
+            }
+        }
+        out
+    }
+
+    /// The free-run V_P of `spec` over the whole recording, from rest at the first sample.
+    pub fn simulate(&self, spec: &ModelSpec) -> Vec<f64> {
+        cost::simulate(spec, self.op, self.vp[0], self.dt)
+    }
+
+    /// Number of fitted samples.
+    pub fn n_fit(&self) -> usize {
+        self.fit.n_scored()
+    }
+
+    /// Number of held-out samples.
+    pub fn n_held(&self) -> usize {
+        self.held_mask.iter().filter(|&&h| h).count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, ModelKind};
+
+    #[test]
+    fn blocks_alternate_and_errors_split_by_block() {
+        let dt = 0.01;
+        let op: Vec<f64> = (0..60000)
+            .map(|k| 30.0 + 10.0 * ((k / 700) % 4) as f64)
+            .collect();
+        let truth = bundled(ModelKind::Fopdt);
+        let vp = cost::simulate(&truth, &op, 30.0, dt);
+        let t: Vec<f64> = (0..op.len()).map(|k| k as f64 * dt).collect();
+        let rec = RecordingView {
+            t: &t,
+            op: &op,
+            vp: &vp,
+            dt,
+        };
+        let s = Scorer::new(&rec);
+        // 600 s: blocks of 30 s, twenty of them, ten held out.
+        assert_eq!((s.block_len, s.n_blocks, s.skip), (3000, 20, 100));
+        assert!(!s.held(2999) && s.held(3000) && !s.held(6000));
+        assert_eq!(s.n_fit() + s.n_held(), op.len() - 100);
+        assert_eq!(
+            s.errors(&truth),
+            Errors {
+                fit: 0.0,
+                held: 0.0
+            }
+        );
+        let other = bundled(ModelKind::Delayed);
+        let e = s.errors(&other);
+        assert!(e.fit > 0.0 && e.held > 0.0);
+        let blocks = s.paired(&other, &truth);
+        assert_eq!(blocks.len(), 10);
+        let total: f64 = blocks.iter().map(|b| b.0).sum();
+        assert!((total - e.held).abs() < 1e-6 * e.held);
+    }
+}

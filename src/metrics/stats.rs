@@ -1,0 +1,159 @@
+//! Small statistics shared by identification and diagnosis: quantiles, the median, mean and
+//! spread, a robust noise estimate and the correlation length of a residual.
+//!
+//! Written here rather than taken from a crate because each is a few lines over `f64` slices
+//! with the exact conventions the analysis relies on (a quantile is an order statistic found
+//! in linear time, an empty input gives 0), and the statistics crates bring matrices and
+//! distributions this code does not need.
+//!
+//! Not here: the Table 1 metrics ([`super::scores`]) or anything that reads a model.
+
+/// The `q` quantile of `x` (0-1) as the order statistic at `round((len - 1) q)`, found in
+/// linear time (reorders `x`); 0 for an empty slice.
+pub fn quantile(x: &mut [f64], q: f64) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let k = ((x.len() - 1) as f64 * q).round() as usize;
+    let (_, v, _) = x.select_nth_unstable_by(k, f64::total_cmp);
+    *v
+}
+
+/// The median of `x` (the upper one for an even count), or `None` when empty.
+pub fn median(x: &[f64]) -> Option<f64> {
+    if x.is_empty() {
+        return None;
+    }
+    let mut v = x.to_vec();
+    Some(quantile(&mut v, 0.5))
+}
+
+/// Mean, sample standard deviation and count (`(0, 0, 0)` when empty; the spread of one value
+/// is 0).
+pub fn mean_sd(x: impl Iterator<Item = f64>) -> (f64, f64, usize) {
+    let v: Vec<f64> = x.collect();
+    if v.is_empty() {
+        return (0.0, 0.0, 0);
+    }
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    let s = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64).sqrt();
+    (m, s, v.len())
+}
+
+/// How many times differenced a signal is before its noise is measured ([`noise_sd`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Differences {
+    /// Sample-to-sample differences: white noise of σ gives σ√2. Steps barely move the median.
+    First,
+    /// Second differences: white noise of σ gives σ√6; steps and smooth moves (ramps, slewing)
+    /// barely move the median either.
+    Second,
+}
+
+/// Robust standard deviation of the white measurement noise of `x`: the median absolute
+/// difference of the chosen order, divided by what a Gaussian of σ = 1 gives (0.6745 times the
+/// difference's standard deviation). Movements are rare enough not to move the median.
+/// 0 for fewer than five samples.
+pub fn noise_sd(x: &[f64], order: Differences) -> f64 {
+    if x.len() < 5 {
+        return 0.0;
+    }
+    let mut d: Vec<f64> = match order {
+        Differences::First => x.windows(2).map(|w| (w[1] - w[0]).abs()).collect(),
+        Differences::Second => x
+            .windows(3)
+            .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+            .collect(),
+    };
+    let mid = d.len() / 2;
+    let (_, med, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    match order {
+        Differences::First => *med / (0.6745 * std::f64::consts::SQRT_2),
+        Differences::Second => *med / 0.6745 / 6f64.sqrt(),
+    }
+}
+
+/// Number of samples over which `r` stays correlated, from its lag-1 autocorrelation ρ:
+/// `(1 + ρ) / (1 - ρ)` (1 for white noise; ρ is clamped to 0-0.999). Information criteria count
+/// a residual's independent samples as its length over this.
+pub fn correlation_length(r: &[f64]) -> f64 {
+    let m = r.iter().sum::<f64>() / r.len().max(1) as f64;
+    let var: f64 = r.iter().map(|x| (x - m).powi(2)).sum();
+    if var <= 0.0 {
+        return 1.0;
+    }
+    let c1: f64 = r.windows(2).map(|w| (w[0] - m) * (w[1] - m)).sum();
+    let rho = (c1 / var).clamp(0.0, 0.999);
+    (1.0 + rho) / (1.0 - rho)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// Deterministic Gaussian noise of standard deviation `sd` (seeded, so tests repeat).
+    pub(crate) fn noise(n: usize, sd: f64) -> Vec<f64> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(987654321);
+        let normal = Normal::new(0.0, sd).unwrap();
+        (0..n).map(|_| normal.sample(&mut rng)).collect()
+    }
+
+    #[test]
+    fn quantiles_are_order_statistics() {
+        let mut x = vec![5.0, 1.0, 4.0, 2.0, 3.0];
+        assert_eq!(quantile(&mut x, 0.0), 1.0);
+        assert_eq!(quantile(&mut x, 0.5), 3.0);
+        assert_eq!(quantile(&mut x, 1.0), 5.0);
+        assert_eq!(quantile(&mut [], 0.5), 0.0);
+        assert_eq!(median(&[2.0, 1.0]), Some(2.0));
+        assert_eq!(median(&[]), None);
+        let (m, s, n) = mean_sd([1.0, 2.0, 3.0].into_iter());
+        assert_eq!((m, s, n), (2.0, 1.0, 3));
+        assert_eq!(mean_sd([7.0].into_iter()), (7.0, 0.0, 1));
+    }
+
+    #[test]
+    fn noise_is_recovered_and_steps_and_ramps_are_ignored() {
+        let e = noise(20000, 0.1);
+        let step: Vec<f64> = e
+            .iter()
+            .enumerate()
+            .map(|(k, e)| if k < 10000 { 30.0 } else { 60.0 } + e)
+            .collect();
+        for order in [Differences::First, Differences::Second] {
+            let s = noise_sd(&step, order);
+            assert!((s - 0.1).abs() < 0.01, "{order:?}: {s}");
+        }
+        // A ramp of 0.3 % a sample (far above the noise) shifts every first difference, not
+        // the second ones.
+        let ramp: Vec<f64> = e
+            .iter()
+            .enumerate()
+            .map(|(k, e)| 0.3 * k as f64 + e)
+            .collect();
+        assert!((noise_sd(&ramp, Differences::Second) - 0.1).abs() < 0.01);
+        assert!(noise_sd(&ramp, Differences::First) > 0.2);
+        assert_eq!(noise_sd(&[1.0, 2.0], Differences::First), 0.0);
+    }
+
+    #[test]
+    fn correlation_length_is_one_for_white_noise_and_long_for_a_random_walk() {
+        let e = noise(20000, 1.0);
+        let white = correlation_length(&e);
+        assert!((white - 1.0).abs() < 0.05, "{white}");
+        // AR(1) with rho = 0.9: (1 + 0.9) / (1 - 0.9) = 19.
+        let mut x = 0.0;
+        let ar: Vec<f64> = e
+            .iter()
+            .map(|v| {
+                x = 0.9 * x + v;
+                x
+            })
+            .collect();
+        let l = correlation_length(&ar);
+        assert!((l - 19.0).abs() < 2.0, "{l}");
+        assert_eq!(correlation_length(&[3.0; 10]), 1.0);
+    }
+}

@@ -1,0 +1,579 @@
+//! A diagnosis for people: the sentences of its evidence, outcome and notes, the text printed
+//! by `valve-bridge diagnose`, its `--json` document and its HTML page.
+//!
+//! The diagnosis itself ([`Diagnosis`]) is typed numbers; everything worded lives here. The
+//! JSON document is the diagnosis as serde derives it, plus the rendered sentences
+//! (`evidence` of each finding, `verdict`, `text` of each note, `context` of each window), so
+//! a script can read either.
+
+use std::fmt::Write;
+
+use serde_json::Value;
+
+use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
+use super::{esc, page, row};
+use crate::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
+use crate::diagnose::locate::{Context, Window};
+use crate::diagnose::{Diagnosis, Effect, Finding, Note, Outcome};
+use crate::metrics;
+use crate::recording::RecordingView;
+
+/// What experiment separates `effect` from its look-alikes.
+pub fn experiment(effect: Effect) -> &'static str {
+    match effect {
+        Effect::Backlash | Effect::Deadband | Effect::StateDependentDelay => {
+            "random steps with many reversals over the whole travel (`[source] kind = \"random-steps\"`)"
+        }
+        Effect::Quantization | Effect::Stiction => {
+            "a slow ramp (`[source] kind = \"ramp\"`): stiction moves in jumps larger than the sensor step"
+        }
+        Effect::SlewRate | Effect::Asymmetry => {
+            "large steps in both directions (`[source] kind = \"steps\"` from 20 to 90 % and back)"
+        }
+        Effect::Calibration | Effect::Saturation => {
+            "steps held to steady state across the whole travel, up to 0 and 100 % (`[source] kind = \"steps\"`)"
+        }
+        Effect::DeadTime | Effect::MinSpeed => "small steps (<= 1 %) held for several seconds",
+    }
+}
+
+/// What the valve was doing in a window of a kind.
+pub fn describe(kind: Context) -> &'static str {
+    match kind {
+        Context::Reversal => "after a direction reversal of O_P",
+        Context::LargeStep => "during a large step",
+        Context::Move => "while O_P moves on in the same direction",
+        Context::Rest => "at rest (O_P steady)",
+        Context::NearLimit => "near a travel limit",
+    }
+}
+
+/// A window's context: "after a direction reversal of O_P at 63 % opening".
+pub fn context(w: &Window) -> String {
+    format!("{} at {:.0} % opening", describe(w.kind), w.opening_pct)
+}
+
+/// "84 % of the excess error lies in 12 windows after direction reversals; ", or nothing
+/// under half a percent (that is not where the error lies).
+fn share(s: &Share, what: &str) -> String {
+    if s.windows == 0 || s.share < 0.005 {
+        return String::new();
+    }
+    format!(
+        "{:.0} % of the excess error lies in {} windows {what}; ",
+        100.0 * s.share,
+        s.windows
+    )
+}
+
+/// The step delays by direction, or the number of reversals when there are none to compare.
+fn steps_text(e: &Evidence) -> String {
+    let (r, s) = (&e.delays.reversal, &e.delays.same_direction);
+    if r.count > 0 && s.count > 0 {
+        format!(
+            "steps against the previous movement start after {:.2} ± {:.2} s ({} steps), same-direction steps after {:.2} ± {:.2} s ({})",
+            r.mean_s, r.sd_s, r.count, s.mean_s, s.sd_s, s.count
+        )
+    } else {
+        format!(
+            "{} reversals of O_P in the recording",
+            e.delays.reversals_of_op
+        )
+    }
+}
+
+fn stick_slip_model(m: &StickSlipModel, capital: bool) -> String {
+    match *m {
+        StickSlipModel::Breakaway {
+            breakaway_pct,
+            gain_per_s,
+        } if capital => format!(
+            "Stick-slip inside the positioner loop (breakaway {breakaway_pct:.2} %, positioner gain {gain_per_s:.2} /s)"
+        ),
+        StickSlipModel::Breakaway { breakaway_pct, .. } => format!(
+            "stick-slip inside the positioner loop: the valve sticks when it slows and breaks away {breakaway_pct:.2} % later, overshooting and hunting"
+        ),
+        StickSlipModel::Input {
+            stickband_pct,
+            jump_pct,
+            gain_per_s,
+        } if capital => format!(
+            "Stick-slip on the valve's input (stickband {stickband_pct:.2} %, jump {jump_pct:.2} %, positioner gain {gain_per_s:.2} /s)"
+        ),
+        StickSlipModel::Input {
+            stickband_pct,
+            jump_pct,
+            ..
+        } => format!("stick-slip with a stickband of {stickband_pct:.2} % and jumps of {jump_pct:.2} %"),
+    }
+}
+
+fn slips_text(s: &Slips, f: &Finding) -> String {
+    format!(
+        "V_P slips by {:.2} ± {:.2} % within {span:.2} s {} times while O_P moves less than half of that \
+         (a slip is at least {:.2} %: five noise sigmas of {span:.2} s means, 1.5 sensor steps, 0.1 %), every {:.1} s on median, {} of {} successive slips \
+         reversing (hunting); the model before slips {} times. {} slips {} times by {:.2} %. Judged by \
+         the slip-size histograms of 10 s pieces of the held-out blocks: closer to the measured ones in {} of {} pieces (signed-rank test \
+         p = {:.3}), distance {:.0} -> {:.0} slips; the held-out SSE goes {:.1} -> {:.1} %², which cannot judge a \
+         limit cycle whose phase O_P does not set",
+        s.size_pct,
+        s.size_sd_pct,
+        s.count,
+        s.threshold_pct,
+        s.median_interval_s,
+        s.reversing,
+        s.successive,
+        s.slips_before,
+        stick_slip_model(&s.model, true),
+        s.slips_after,
+        s.size_after_pct,
+        s.pieces_closer,
+        s.pieces_compared,
+        s.p_value,
+        s.distance_before,
+        s.distance_after,
+        f.heldout_sse_before,
+        f.heldout_sse_after,
+        span = s.within_s,
+    )
+}
+
+/// The evidence of a finding, as a sentence a person can follow against the plots.
+pub fn evidence(f: &Finding) -> String {
+    let e = &f.facts;
+    let l = &e.located;
+    let rev = share(&l.after_reversals, "after direction reversals");
+    let moves = share(&l.during_moves, "during moves of O_P");
+    let rest = share(&l.at_rest, "at rest");
+    let limit = share(&l.near_limits, "near a travel limit");
+    let steps = steps_text(e);
+    match &e.detail {
+        Detail::DeadTime { dead_time_s, was_s } => format!(
+            "{moves}{steps}; the valve answers every move late: a pure delay of {dead_time_s:.2} s (was {was_s:.2} s)"
+        ),
+        Detail::Backlash {
+            crossing_half_open_s,
+            crossing_closed_s,
+            crossing_open_s,
+        } => {
+            let range = match (crossing_closed_s, crossing_open_s) {
+                (Some(c), Some(o)) => format!(" at half travel ({c:.2} s closed, {o:.2} s open)"),
+                _ => String::new(),
+            };
+            format!(
+                "{rev}{steps}; V_P stays flat for about {crossing_half_open_s:.2} s more after a reversal{range}: lost motion (backlash)"
+            )
+        }
+        Detail::StateDependentDelay {
+            reversal_below_half_s,
+            reversal_above_half_s,
+            open_vs_closed,
+            crossing_closed_s,
+            crossing_open_s,
+        } => {
+            let split = match (reversal_below_half_s, reversal_above_half_s) {
+                (Some(b), Some(a)) => format!(
+                    "reversal delays average {b:.2} s below 50 % opening and {a:.2} s above"
+                ),
+                _ => steps,
+            };
+            match (open_vs_closed, crossing_closed_s, crossing_open_s) {
+                (Some(r), _, _) => format!(
+                    "the response slows with opening: {split}; the fit gives a valve {r:.1} times slower fully open than closed"
+                ),
+                (None, Some(c), Some(o)) => format!(
+                    "{split}; the cart-crossing time grows from {c:.2} s closed to {o:.2} s open (pin-cart II, eq. 7)"
+                ),
+                _ => split,
+            }
+        }
+        Detail::SlewRate {
+            open_speed,
+            close_speed,
+            slew_pct_per_s,
+        } => format!(
+            "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.5th percentile): a slew-rate limit of {slew_pct_per_s:.1} %/s"
+        ),
+        Detail::Asymmetry {
+            open_speed,
+            close_speed,
+            fitted_open_pct_per_s,
+            fitted_close_pct_per_s,
+        } => format!(
+            "V_P opens at up to {open_speed:.1} %/s but closes at up to {close_speed:.1} %/s (99.5th percentile); the fit gives \
+             {fitted_open_pct_per_s:.1} %/s opening and {fitted_close_pct_per_s:.1} %/s closing"
+        ),
+        Detail::MinSpeed {
+            min_speed_pct_per_s,
+        } => format!(
+            "small errors close at a constant rate of about {min_speed_pct_per_s:.2} %/s instead of exponentially"
+        ),
+        Detail::Stiction {
+            holds_with_jumps,
+            holds,
+            model,
+        } => format!(
+            "{rest}{rev}{holds_with_jumps} of {holds} holds show a sudden jump of V_P after it had settled: {}",
+            stick_slip_model(model, false)
+        ),
+        Detail::Slips(s) => slips_text(s, f),
+        Detail::Deadband {
+            offset_after_opening_pct,
+            holds_opening,
+            offset_after_closing_pct,
+            holds_closing,
+            deadband_pct,
+        } => format!(
+            "settled V_P sits {offset_after_opening_pct:+.2} % from O_P after opening ({holds_opening} holds) and {offset_after_closing_pct:+.2} % after closing ({holds_closing}): \
+             the positioner stops inside a deadband of {deadband_pct:.2} %"
+        ),
+        Detail::Saturation {
+            travel_min_pct,
+            travel_max_pct,
+        } => format!(
+            "{limit}V_P stays within {travel_min_pct:.1}-{travel_max_pct:.1} % while O_P goes beyond: travel limited"
+        ),
+        Detail::Quantization { lattice_pct } => format!(
+            "every V_P value lies on a lattice of {lattice_pct:.3} %: the position sensor's resolution"
+        ),
+        Detail::Calibration {
+            mean_offset_pct,
+            holds,
+            gain,
+            offset_pct,
+        } => format!(
+            "{rest}settled V_P sits {mean_offset_pct:+.2} % from O_P on average over {holds} holds; the fit gives V_P = {gain:.3} × O_P {offset_pct:+.2} %: \
+             a gain or offset between command and position"
+        ),
+    }
+}
+
+/// The verdict: what was missing and what adding it did, or that nothing was.
+pub fn verdict(outcome: &Outcome) -> String {
+    match outcome {
+        Outcome::Noise => {
+            "Nothing significant is missing: the residual is consistent with measurement noise."
+                .into()
+        }
+        Outcome::NotSignificant { windows } => format!(
+            "Nothing significant is missing from the vocabulary: {windows} windows stand above the noise floor, but no effect \
+             improves the held-out fit by more than chance."
+        ),
+        Outcome::Missing {
+            effects,
+            heldout_sse_before: before,
+            heldout_sse_after: after,
+            by_slips,
+        } => {
+            let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+            let (change, share) = if after < before {
+                ("lowers", format!("{:.0} % less", 100.0 * (1.0 - after / before)))
+            } else {
+                ("raises", format!("{:.0} % more", 100.0 * (after / before - 1.0)))
+            };
+            format!(
+                "The model was missing {}. Adding {} {change} the held-out SSE from {before:.1} to {after:.1} %² ({share}).{}",
+                names.join(", "),
+                if names.len() == 1 { "it" } else { "them" },
+                if *by_slips {
+                    " Stiction was judged by the slips of V_P on the held-out blocks: free-run SSE cannot judge a \
+                     stick-slip limit cycle, whose phase O_P does not set."
+                } else {
+                    ""
+                }
+            )
+        }
+    }
+}
+
+/// A note as a sentence.
+pub fn note(n: &Note) -> String {
+    match *n {
+        Note::LookAlike {
+            effect,
+            other,
+            removed_share,
+            other_removed_share,
+        } => format!(
+            "{} and {} explain the mismatch almost equally well ({:.0} % vs {:.0} % of the held-out error removed): \
+             this recording cannot tell them apart; {} would",
+            effect.name(),
+            other.name(),
+            100.0 * removed_share,
+            100.0 * other_removed_share,
+            experiment(effect)
+        ),
+        Note::JudgedBySlips {
+            heldout_sse_before,
+            heldout_sse_after,
+        } => format!(
+            "stiction was judged by the slips of V_P (slip-size histograms of 10 s pieces of the held-out blocks, signed-rank test), \
+             not by the free-run error: a stick-slip limit cycle's phase is not set by O_P, so a simulated one \
+             slips at other moments than the valve, and the held-out SSE cannot show that it slips like the \
+             valve ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²); to confirm it, run {}",
+            experiment(Effect::Stiction)
+        ),
+        Note::FewReversals { reversals } => format!(
+            "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
+            experiment(Effect::Backlash)
+        ),
+    }
+}
+
+/// The `--json` document: the diagnosis as derived, plus the rendered sentences.
+pub fn json(d: &Diagnosis) -> Value {
+    let mut v = serde_json::to_value(d).unwrap_or(Value::Null);
+    if let Some(list) = v["findings"].as_array_mut() {
+        for (j, f) in list.iter_mut().zip(&d.findings) {
+            j["evidence"] = Value::String(evidence(f));
+        }
+    }
+    if let Some(list) = v["notes"].as_array_mut() {
+        for (j, n) in list.iter_mut().zip(&d.notes) {
+            j["text"] = Value::String(note(n));
+        }
+    }
+    if let Some(list) = v["mismatch_windows"].as_array_mut() {
+        for (j, w) in list.iter_mut().zip(&d.mismatch_windows) {
+            j["context"] = Value::String(context(w));
+        }
+    }
+    v["verdict"] = Value::String(verdict(&d.outcome));
+    v
+}
+
+/// The text `valve-bridge diagnose` prints.
+pub fn text(d: &Diagnosis) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "baseline: {} (held-out SSE {:.2} %², whole SSE {:.2} %²)",
+        d.baseline.model, d.baseline.heldout_sse, d.baseline.sse
+    );
+    let _ = writeln!(
+        o,
+        "noise floor of V_P: {:.3} % (standard deviation)",
+        d.noise_floor_pct
+    );
+    let mut worst = d.mismatch_windows.clone();
+    worst.sort_by(|a, b| b.excess_sse.total_cmp(&a.excess_sse));
+    let _ = writeln!(
+        o,
+        "\n{} windows where the baseline misses by more than the noise (largest first):",
+        worst.len()
+    );
+    for w in worst.iter().take(10) {
+        let _ = writeln!(
+            o,
+            "  {:>8.2}-{:<8.2} s  excess {:>8.2} %²  {}",
+            w.start_s,
+            w.end_s,
+            w.excess_sse,
+            context(w)
+        );
+    }
+    if d.findings.is_empty() {
+        let _ = writeln!(o, "\nfindings: none");
+    }
+    for f in &d.findings {
+        let _ = writeln!(o, "\nfinding: {}", f.effect.name());
+        let _ = writeln!(o, "  evidence: {}", evidence(f));
+        let _ = writeln!(o, "  parameters: {}", Value::Object(f.params.clone()));
+        let _ = writeln!(
+            o,
+            "  held-out SSE {:.2} -> {:.2} %² ({:+.1} %), delta BIC {:.0}",
+            f.heldout_sse_before,
+            f.heldout_sse_after,
+            100.0 * (f.heldout_sse_after / f.heldout_sse_before - 1.0),
+            f.delta_bic
+        );
+    }
+    if let Some(h) = &d.heldout {
+        let _ = writeln!(o, "\nTable 1 on the held-out blocks:");
+        let _ = writeln!(o, "{}", metrics::table1_header());
+        let _ = writeln!(o, "{}", metrics::table1_row("before (baseline)", &h.before));
+        let _ = writeln!(o, "{}", metrics::table1_row("after (final)", &h.after));
+    }
+    let _ = writeln!(
+        o,
+        "\nmismatch windows: {} before, {} after; excess {:.1} -> {:.1} %²",
+        d.mismatch_windows.len(),
+        d.windows_after.len(),
+        d.mismatch_windows.iter().map(|w| w.excess_sse).sum::<f64>(),
+        d.windows_after.iter().map(|w| w.excess_sse).sum::<f64>()
+    );
+    for n in &d.notes {
+        let _ = writeln!(o, "note: {}", note(n));
+    }
+    let _ = writeln!(o, "\nverdict: {}", verdict(&d.outcome));
+    o
+}
+
+/// The diagnosis report of a recording as one self-contained HTML page.
+pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<p class=\"verdict\">{}</p><p>Baseline: <b>{}</b>. Noise floor of V_P: {:.3} % (standard deviation). Final model: <b>{}</b>.</p>",
+        esc(&verdict(&d.outcome)),
+        esc(&d.baseline.model),
+        d.noise_floor_pct,
+        esc(&d.final_model.model)
+    );
+    for n in &d.notes {
+        let _ = write!(h, "<p><i>Note: {}</i></p>", esc(&note(n)));
+    }
+    findings_html(&mut h, d);
+    curves_html(&mut h, rec, d);
+    steps_html(&mut h, d);
+    h.push_str("<h2>All windows of the baseline</h2><table><tr><th>start (s)</th><th>end (s)</th><th>excess (%²)</th><th>context</th></tr>");
+    for w in &d.mismatch_windows {
+        let _ = write!(
+            h,
+            "<tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td></tr>",
+            w.start_s,
+            w.end_s,
+            w.excess_sse,
+            esc(&context(w))
+        );
+    }
+    h.push_str("</table>");
+    page(&format!("Diagnosis: {title}"), &h)
+}
+
+/// The findings and the held-out Table 1 rows.
+fn findings_html(h: &mut String, d: &Diagnosis) {
+    h.push_str("<h2>Findings</h2>");
+    if d.findings.is_empty() {
+        h.push_str("<p>None.</p>");
+    }
+    for f in &d.findings {
+        let _ = write!(
+            h,
+            "<h3>{}</h3><p>{}</p><p>Parameters: <code>{}</code><br>Held-out SSE {:.2} → {:.2} %², ΔBIC {:.0}</p>",
+            f.effect.name(),
+            esc(&evidence(f)),
+            esc(&Value::Object(f.params.clone()).to_string()),
+            f.heldout_sse_before,
+            f.heldout_sse_after,
+            f.delta_bic
+        );
+    }
+    if let Some(c) = &d.heldout {
+        let _ = write!(
+            h,
+            "<h2>Table 1 on the held-out blocks</h2><table><tr><th>model</th><th>MAE</th><th>MAE filtered</th>\
+             <th>R²</th><th>SSE (%²)</th><th>Rel. SSE</th><th>samples</th></tr>{}{}</table>",
+            row("before (baseline)", &c.before),
+            row("after (final)", &c.after)
+        );
+    }
+}
+
+/// The whole recording, the residual, and the worst windows zoomed in.
+fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
+    let (t, n) = (rec.t, rec.len());
+    let lines = |title: &str, range: std::ops::Range<usize>| {
+        plot::lines(
+            title,
+            "position (%)",
+            t,
+            &[
+                Series {
+                    name: "O_P",
+                    y: rec.op,
+                    color: EXTRA,
+                },
+                Series {
+                    name: "V_P measured",
+                    y: rec.vp,
+                    color: MEASURED,
+                },
+                Series {
+                    name: "baseline",
+                    y: &d.sim_before,
+                    color: BEFORE,
+                },
+                Series {
+                    name: "final",
+                    y: &d.sim_after,
+                    color: AFTER,
+                },
+            ],
+            range,
+        )
+    };
+    h.push_str("<h2>Whole recording</h2>");
+    h.push_str(&lines("measured and simulated V_P", 0..n));
+    let before: Vec<f64> = rec
+        .vp
+        .iter()
+        .zip(&d.sim_before)
+        .map(|(m, s)| m - s)
+        .collect();
+    let after: Vec<f64> = rec
+        .vp
+        .iter()
+        .zip(&d.sim_after)
+        .map(|(m, s)| m - s)
+        .collect();
+    h.push_str(&plot::lines(
+        "residual (measured - simulated)",
+        "residual (%)",
+        t,
+        &[
+            Series {
+                name: "baseline",
+                y: &before,
+                color: BEFORE,
+            },
+            Series {
+                name: "final",
+                y: &after,
+                color: AFTER,
+            },
+        ],
+        0..n,
+    ));
+    let mut worst = d.mismatch_windows.clone();
+    worst.sort_by(|a, b| b.excess_sse.total_cmp(&a.excess_sse));
+    let _ = write!(
+        h,
+        "<h2>Mismatch windows: {} before, {} after</h2><p>The worst, zoomed in (±3 s):</p>",
+        d.mismatch_windows.len(),
+        d.windows_after.len()
+    );
+    let dt = rec.dt;
+    for w in worst.iter().take(4) {
+        let a = (((w.start_s - t[0]) / dt - 3.0 / dt).max(0.0) as usize).min(n.saturating_sub(1));
+        let b = ((((w.end_s - t[0]) / dt) + 3.0 / dt) as usize).clamp(a + 1, n);
+        h.push_str(&lines(
+            &format!("{:.1}-{:.1} s: {}", w.start_s, w.end_s, context(w)),
+            a..b,
+        ));
+    }
+}
+
+/// The step delays against opening.
+fn steps_html(h: &mut String, d: &Diagnosis) {
+    let steps = |rev: bool| {
+        d.steps
+            .iter()
+            .filter(|s| s.reversal == rev)
+            .map(|s| (s.from_pct, s.delay_s))
+            .collect::<Vec<_>>()
+    };
+    let scatter = plot::scatter(
+        "step delay against opening (evidence for backlash and state-dependent delay)",
+        "V_P at the step (%)",
+        "delay (s)",
+        &[
+            ("same direction", AFTER, steps(false)),
+            ("reversal", BEFORE, steps(true)),
+        ],
+    );
+    if !scatter.is_empty() {
+        h.push_str("<h2>Step delays</h2>");
+        h.push_str(&scatter);
+    }
+}
