@@ -49,6 +49,9 @@ pub use refit::{NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
 use rounds::{Data, Search};
 use scorer::{Errors, Scorer};
 
+/// Slowest sampling diagnosis accepts, s.
+pub const MAX_SAMPLE_PERIOD_S: f64 = 2.0;
+
 /// The starting point, scored.
 #[derive(Debug, Clone, Serialize)]
 pub struct Baseline {
@@ -164,6 +167,8 @@ pub enum DiagnoseError {
         "the recording has no measured V_P column: diagnosis compares a model to measurements"
     )]
     NoPosition,
+    #[error("the recording is sampled every {0} s: a valve's dead time, stroke and lost motion last seconds, so diagnosis needs a sample at least every {MAX_SAMPLE_PERIOD_S} s (identify fits the delayed and FOPDT models to slower data)")]
+    TooSlow(f64),
     #[error("the starting model cannot run: {0}")]
     Model(#[from] crate::model::ModelError),
 }
@@ -179,6 +184,9 @@ pub fn diagnose(
         return Err(DiagnoseError::NoPosition);
     }
     let (n, dt) = (rec.len(), rec.dt);
+    if dt > MAX_SAMPLE_PERIOD_S {
+        return Err(DiagnoseError::TooSlow(dt));
+    }
     if (n as f64) * dt < 20.0 {
         return Err(DiagnoseError::TooShort(n));
     }

@@ -49,6 +49,12 @@ pub struct Figures {
     pub max_speed_close_pct_per_s: f64,
 }
 
+/// Samples in `secs` at `dt`, at least three, so every test has a before, a during and an after
+/// even on data sampled once a minute.
+fn samples(secs: f64, dt: f64) -> usize {
+    ((secs / dt) as usize).max(3)
+}
+
 fn run(spec: &ModelSpec, dt: f64, op: &[f64]) -> Option<Vec<f64>> {
     let mut v = Valve::new(spec, dt).ok()?;
     Some(v.simulate(op, op[0]))
@@ -56,8 +62,8 @@ fn run(spec: &ModelSpec, dt: f64, op: &[f64]) -> Option<Vec<f64>> {
 
 /// T63 and T86 of a step of `size` % at 50 %, approached from below.
 fn step_times(spec: &ModelSpec, dt: f64, size: f64) -> (Option<f64>, Option<f64>) {
-    let n_hold = (20.0 / dt) as usize;
-    let n_after = (30.0 / dt) as usize;
+    let n_hold = samples(20.0, dt);
+    let n_after = samples(30.0, dt);
     let op: Vec<f64> = std::iter::repeat_n(AROUND_PCT - 2.0, n_hold)
         .chain(std::iter::repeat_n(AROUND_PCT, n_hold))
         .chain(std::iter::repeat_n(AROUND_PCT + size, n_after))
@@ -85,8 +91,8 @@ pub fn measure(spec: &ModelSpec, dt: f64) -> Figures {
     let (t63_large_s, t86_large_s) = step_times(spec, dt, 10.0);
     // Slow ramp up 45 -> 55 %, hold, down to 45 %.
     let rate = 0.05;
-    let n_ramp = (10.0 / rate / dt) as usize;
-    let n_hold = (10.0 / dt) as usize;
+    let n_ramp = samples(10.0 / rate, dt);
+    let n_hold = samples(10.0, dt);
     let mut op: Vec<f64> = vec![45.0; n_hold];
     op.extend((0..n_ramp).map(|k| 45.0 + rate * dt * k as f64));
     op.extend(std::iter::repeat_n(55.0, n_hold));
@@ -107,7 +113,7 @@ pub fn measure(spec: &ModelSpec, dt: f64) -> Figures {
             - rate * dt;
         stick_slip_pct = stick_slip_pct.max(0.0);
     }
-    let n_big = (30.0 / dt) as usize;
+    let n_big = samples(30.0, dt);
     let op: Vec<f64> = std::iter::repeat_n(10.0, n_big)
         .chain(std::iter::repeat_n(90.0, n_big))
         .chain(std::iter::repeat_n(10.0, n_big))
@@ -146,7 +152,16 @@ pub fn measure(spec: &ModelSpec, dt: f64) -> Figures {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{FopdtParams, ModelKind, PinCart1Params, StictionParams};
+
+    use crate::model::{bundled, FopdtParams, ModelKind, PinCart1Params, StictionParams};
+
+    #[test]
+    fn figures_of_data_sampled_once_a_minute_are_measured_without_panicking() {
+        for kind in ModelKind::ALL {
+            let f = measure(&bundled(kind), 60.0);
+            assert!(f.dead_time_s >= 0.0, "{kind}: {f:?}");
+        }
+    }
 
     #[test]
     fn fopdt_figures_follow_from_its_time_constant() {

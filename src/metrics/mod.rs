@@ -82,12 +82,15 @@ fn score(
         "simulated and measured V_P lengths"
     );
     assert_eq!(op.len(), measured.len(), "O_P and measured V_P lengths");
+    // At absurd sample rates the filter's coefficients lose all precision: no filtered MAE
+    // then, rather than NaN.
     let filtered = filter::filtfilt(
         measured,
         PAPER_FILTER_ORDER,
         PAPER_FILTER_CUTOFF_HZ,
         1.0 / sample_period,
-    );
+    )
+    .filter(|f| f.iter().all(|v| v.is_finite()));
     let smooth = filtered.as_deref().unwrap_or(measured);
     let kept = || (0..measured.len()).filter(|&i| keep(i));
     let n = kept().count();

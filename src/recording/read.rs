@@ -232,11 +232,11 @@ impl<'m> Columns<'m> {
             })?;
             (ns - *self.t_ref.get_or_insert(ns)) as f64 / 1e9
         } else {
-            number(&self.map.t, cell(self.t[0]))?
+            number(&self.map.t, cell(self.t[0]), MAX_TIME_S)?
         };
-        let op = number(&self.map.op, cell(self.op))?;
+        let op = number(&self.map.op, cell(self.op), MAX_POSITION)?;
         let vp = match (self.vp, &self.map.vp) {
-            (Some(i), Some(name)) => Some(number(name, cell(i))?),
+            (Some(i), Some(name)) => Some(number(name, cell(i), MAX_POSITION)?),
             _ => None,
         };
         Ok((t, op, vp))
@@ -246,10 +246,26 @@ impl<'m> Columns<'m> {
 /// What is wrong with one row, before knowing whether it is the last.
 #[derive(Debug)]
 enum Problem {
-    Short { cells: usize },
-    Missing { column: String, cell: String },
-    NotNumber { column: String, cell: String },
-    BadTimestamp { column: String, cell: String },
+    Short {
+        cells: usize,
+    },
+    Missing {
+        column: String,
+        cell: String,
+    },
+    NotNumber {
+        column: String,
+        cell: String,
+    },
+    OutOfRange {
+        column: String,
+        cell: String,
+        max: f64,
+    },
+    BadTimestamp {
+        column: String,
+        cell: String,
+    },
 }
 
 impl std::fmt::Display for Problem {
@@ -257,9 +273,9 @@ impl std::fmt::Display for Problem {
         match self {
             Problem::Short { cells } => write!(f, "{cells} cells"),
             Problem::Missing { column, .. } => write!(f, "no value in `{column}`"),
-            Problem::NotNumber { column, cell } | Problem::BadTimestamp { column, cell } => {
-                write!(f, "`{cell}` in `{column}`")
-            }
+            Problem::NotNumber { column, cell }
+            | Problem::OutOfRange { column, cell, .. }
+            | Problem::BadTimestamp { column, cell } => write!(f, "`{cell}` in `{column}`"),
         }
     }
 }
@@ -301,6 +317,18 @@ impl Problem {
                     hint,
                 }
             }
+            Problem::OutOfRange { column, cell, max } => RecordingError::BadCell {
+                file,
+                line,
+                column,
+                cell,
+                expected: if max == MAX_TIME_S {
+                    "a time within ±1e11 s"
+                } else {
+                    "a value within ±1e6 (a position in %, or raw units scaled by --scale)"
+                },
+                hint: "",
+            },
             Problem::BadTimestamp { column, cell } => {
                 let hint = if cell.parse::<f64>().is_ok() {
                     "; it is a number: drop --timestamps to read times in seconds"
@@ -320,8 +348,14 @@ impl Problem {
     }
 }
 
-/// A finite number, or the problem with the cell.
-fn number(column: &str, cell: &str) -> Result<f64, Problem> {
+/// Largest magnitude of an O_P or V_P value as written: no instrument reads beyond it in any
+/// unit, and squares of it stay finite (SSE, R²).
+const MAX_POSITION: f64 = 1e6;
+/// Largest magnitude of a time in seconds (3,000 years).
+const MAX_TIME_S: f64 = 1e11;
+
+/// A finite number of magnitude at most `max`, or the problem with the cell.
+fn number(column: &str, cell: &str, max: f64) -> Result<f64, Problem> {
     let missing = cell.is_empty()
         || ["nan", "null", "na", "n/a"]
             .iter()
@@ -333,7 +367,12 @@ fn number(column: &str, cell: &str) -> Result<f64, Problem> {
         });
     }
     match cell.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) if v.abs() <= max => Ok(v),
+        Ok(v) if v.is_finite() => Err(Problem::OutOfRange {
+            column: column.into(),
+            cell: cell.into(),
+            max,
+        }),
         _ => Err(Problem::NotNumber {
             column: column.into(),
             cell: cell.into(),
