@@ -73,7 +73,7 @@ mod tests {
         let path = dir.path().join("sim.csv");
         let t: Vec<f64> = (0..5).map(|k| k as f64 * 0.01).collect();
         let op = [0.1 + 0.2, 1.0 / 3.0, 1e-300, 12345.678901234567, 50.0];
-        let vp = [f64::MAX, -0.0, 2.0f64.sqrt(), 99.99, 100.0];
+        let vp = [999_999.999_999_9, -0.0, 2.0f64.sqrt(), 99.99, 100.0];
         let meas = [1.0, f64::NAN, 3.0, 4.0, 5.0];
         write_columns(
             &path,
