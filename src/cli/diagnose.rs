@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use valve_bridge::diagnose::{self, Diagnosis};
 use valve_bridge::metrics;
-use valve_bridge::model::ModelSpec;
+use valve_bridge::model::{ModelKind, ModelSpec};
 use valve_bridge::recording;
 use valve_bridge::report;
 
@@ -33,6 +33,9 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let rec = recording::read(&args.recording, &args.read.options()?)?;
     let base = args.model.as_deref().map(ModelSpec::load).transpose()?;
+    if let (Some(b), Some(path)) = (&base, &args.model) {
+        anyhow::ensure!(b.model != ModelKind::Physical, "--model {}: model = \"physical\" is a simulator, not a starting model diagnosis can extend: give one of the paper's models (e.g. config/models/pincart2.toml) or none", path.display());
+    }
     let bar = super::progress_bar(
         1,
         "diagnosing {bar:30} {pos}/{len} refit rounds of candidates",

@@ -95,6 +95,19 @@ impl Effect {
     }
 }
 
+impl std::str::FromStr for Effect {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Effect::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Effect::ALL.iter().map(|e| e.name()).collect();
+                format!("unknown effect `{s}`: expected one of {}", names.join(", "))
+            })
+    }
+}
+
 /// One number of the composed spec that a fit may move.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Knob {
@@ -285,6 +298,7 @@ pub fn compose(base: &ModelSpec, dt: f64) -> ModelSpec {
         fopdt: None,
         stiction: None,
         pincart1: None,
+        physical: None,
         ..base.clone()
     };
     let pass_through = 1.0 / dt;
@@ -313,6 +327,8 @@ pub fn compose(base: &ModelSpec, dt: f64) -> ModelSpec {
             }
         }
         ModelKind::Pincart2 => p = base.pincart2.unwrap_or(p),
+        // A physical valve is a simulator, not a starting model (`diagnose --model` refuses it).
+        ModelKind::Physical => {}
     }
     spec.pincart2 = Some(p);
     spec

@@ -47,6 +47,9 @@ pub enum FitError {
     /// A `--windows` list that cannot be read.
     #[error("--windows {text}: {detail}")]
     Windows { text: String, detail: String },
+    /// A model that is not one of the paper's (the physical simulator).
+    #[error("{0} is a simulator with {count} parameters, not one of the paper's identifiable models: choose from fopdt, stiction, pincart1, pincart2 (modelless and delayed are always added)", count = crate::model::PhysicalParams::COUNT)]
+    NotIdentifiable(ModelKind),
     /// No measured V_P to fit to.
     #[error("the recording has no measured V_P column: identification fits models to measurements (map it with --columns vp=NAME)")]
     NoPosition,
@@ -281,6 +284,9 @@ pub fn identify(
     opts: &Options,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Identification, FitError> {
+    if let Some(&kind) = opts.models.iter().find(|k| !k.is_identifiable()) {
+        return Err(FitError::NotIdentifiable(kind));
+    }
     if vp.len() != op.len() || vp.is_empty() {
         return Err(FitError::NoPosition);
     }

@@ -6,7 +6,8 @@
 //! numbers: it does not parse, locate lines or build valves.
 
 use super::{
-    Effects, FopdtParams, ModelKind, ModelSpec, PinCart1Params, PinCart2Params, StictionParams,
+    Effects, FopdtParams, ModelKind, ModelSpec, PhysicalParams, PinCart1Params, PinCart2Params,
+    StictionParams,
 };
 
 /// One violated rule: table, key, value and what is allowed.
@@ -63,6 +64,9 @@ impl ModelSpec {
         if let Some(p) = &self.pincart2 {
             pincart2(&mut c, p);
         }
+        if let Some(p) = &self.physical {
+            physical(&mut c, p);
+        }
         effects(&mut c, &self.effects);
         effects_need_pincart2(&mut c, self.model, &self.effects);
         c.out
@@ -77,6 +81,7 @@ fn tables(c: &mut Checks, spec: &ModelSpec) {
         ("stiction", spec.stiction.is_some(), ModelKind::Stiction),
         ("pincart1", spec.pincart1.is_some(), ModelKind::Pincart1),
         ("pincart2", spec.pincart2.is_some(), ModelKind::Pincart2),
+        ("physical", spec.physical.is_some(), ModelKind::Physical),
     ];
     for (table, is_there, owner) in present {
         if is_there && owner != kind {
@@ -87,6 +92,10 @@ fn tables(c: &mut Checks, spec: &ModelSpec) {
             c.need(false, None, "model", f64::NAN,
                 &format!("model = \"{kind}\" needs a [{table}] table with its parameters (see config/models/{table}.toml)"));
         }
+    }
+    if kind == ModelKind::Physical && !spec.effects.is_none() {
+        c.need(false, Some("effects"), "", f64::NAN,
+            "[effects] belongs to the composed pin-cart valve; model = \"physical\" has its physics in [physical] (deadband_pct, coulomb_band_pct, static_band_pct, sensor_resolution_pct, ...): remove [effects]");
     }
 }
 
@@ -211,6 +220,60 @@ fn pincart2_crossing(c: &mut Checks, p: &PinCart2Params) {
         "c_p",
         p.c_p,
         "a_p*V^2 + b_p*V + c_p (cart-crossing time, s) must stay >= 0 for V in 0-100 %",
+    );
+}
+
+/// The allowed range of every number of `[physical]`: key, value, lowest, highest, meaning.
+#[rustfmt::skip]
+fn physical_ranges(p: &PhysicalParams) -> [(&'static str, f64, f64, f64, &'static str); 15] {
+    let slowest = p.fill_rate_pct_per_s.min(p.vent_rate_pct_per_s);
+    [
+        ("positioner_gain_per_s", p.positioner_gain_per_s, 1e-3, 100.0, "the positioner gain K in 1/s (chamber flow per % of error)"),
+        ("deadband_pct", p.deadband_pct, 0.0, 10.0, "a positioner deadband in % (0 = none)"),
+        ("fill_rate_pct_per_s", p.fill_rate_pct_per_s, 0.1, 1000.0, "the largest filling (opening) flow in %/s"),
+        ("vent_rate_pct_per_s", p.vent_rate_pct_per_s, 0.1, 1000.0, "the largest venting (closing) flow in %/s"),
+        ("min_rate_pct_per_s", p.min_rate_pct_per_s, 0.0, slowest, "a minimum flow in %/s (0 = none), at most the smaller of fill_rate_pct_per_s and vent_rate_pct_per_s"),
+        ("volume_growth", p.volume_growth, 0.0, 20.0, "the chamber volume growth g over the stroke (fully open is 1 + g times slower; 0 = none)"),
+        ("natural_freq_hz", p.natural_freq_hz, 1.0, 100.0, "the natural frequency of spring and stem in Hz"),
+        ("damping_ratio", p.damping_ratio, 0.3, 5.0, "the stem's damping ratio"),
+        ("coulomb_band_pct", p.coulomb_band_pct, 0.0, 20.0, "the Coulomb friction band in % of travel (lost motion on a reversal)"),
+        ("static_band_pct", p.static_band_pct, p.coulomb_band_pct.max(0.0), 20.0, "the static friction band in % of travel, at least coulomb_band_pct (above it: stick-slip)"),
+        ("sensor_gain", p.sensor_gain, 0.5, 1.5, "the sensor gain (1 = calibrated)"),
+        ("sensor_offset_pct", p.sensor_offset_pct, -10.0, 10.0, "the sensor offset in % (0 = calibrated)"),
+        ("sensor_noise_pct", p.sensor_noise_pct, 0.0, 5.0, "the standard deviation of the sensor noise in %"),
+        ("sensor_resolution_pct", p.sensor_resolution_pct, 0.0, 10.0, "the sensor resolution in % (0 = continuous)"),
+        ("internal_step_s", p.internal_step_s, 1e-5, 0.01, "the longest internal integration step in s"),
+    ]
+}
+
+/// The physical valve: every number in its range, then the two stability limits.
+fn physical(c: &mut Checks, p: &PhysicalParams) {
+    for (key, value, lo, hi, what) in physical_ranges(p) {
+        c.need(
+            value.is_finite() && (lo..=hi).contains(&value),
+            Some("physical"),
+            key,
+            value,
+            &format!("{what}, {lo} to {hi}"),
+        );
+    }
+    let damped = p.damping_ratio * std::f64::consts::TAU * p.natural_freq_hz;
+    c.need(
+        p.positioner_gain_per_s <= damped,
+        Some("physical"),
+        "positioner_gain_per_s",
+        p.positioner_gain_per_s,
+        &format!("at most damping_ratio * 2 pi * natural_freq_hz = {damped:.3} 1/s, or the positioner oscillates with the stem: lower the gain or raise natural_freq_hz or damping_ratio"),
+    );
+    let stable = 0.08 / p.natural_freq_hz;
+    c.need(
+        p.internal_step_s <= stable,
+        Some("physical"),
+        "internal_step_s",
+        p.internal_step_s,
+        &format!(
+            "at most 0.08 / natural_freq_hz = {stable} s, or the stem's integration is unstable"
+        ),
     );
 }
 

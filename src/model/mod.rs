@@ -10,13 +10,17 @@
 //! ```
 //!
 //! The cores are modelless (V_P = input), FOPDT, the Choudhury stiction model, pin-cart I and
-//! pin-cart II. `model = "delayed"` is the delayed modelless model. Nothing here does I/O beyond
-//! [`ModelSpec::load`]; stepping never allocates.
+//! pin-cart II. `model = "delayed"` is the delayed modelless model. `model = "physical"` is not
+//! one of the paper's models: a first-principles pneumatic valve with positioner, friction,
+//! stops and sensor ([`PhysicalParams`]), for emulation and for testing diagnosis against
+//! physics it does not share; its sensor reading is reported unclamped. Nothing here does I/O
+//! beyond [`ModelSpec::load`]; stepping never allocates.
 
 mod checks;
 mod delay;
 mod effects;
 mod fopdt;
+mod physical;
 mod pincart;
 mod stiction;
 
@@ -27,12 +31,14 @@ use serde::{Deserialize, Serialize};
 pub use delay::DelayLine;
 pub use effects::Effects;
 pub use fopdt::FopdtParams;
+pub use physical::PhysicalParams;
 pub use pincart::{PinCart1Params, PinCart2Params};
 pub use stiction::StictionParams;
 
 use crate::toml_file::{self, TomlError};
 use effects::EffectState;
 use fopdt::Fopdt;
+use physical::Physical;
 use pincart::PinCart;
 use stiction::Stiction;
 
@@ -55,10 +61,13 @@ pub enum ModelKind {
     Pincart1,
     /// Pin-cart II plus dead time.
     Pincart2,
+    /// A first-principles pneumatic valve (positioner, chamber, stem friction, stops, sensor)
+    /// plus dead time; a simulator, not one of the paper's identifiable models.
+    Physical,
 }
 
 impl ModelKind {
-    /// All kinds, in the order of the paper's Table 1.
+    /// The paper's models, in the order of its Table 1: the kinds identification fits.
     pub const ALL: [ModelKind; 6] = [
         ModelKind::Modelless,
         ModelKind::Delayed,
@@ -67,6 +76,22 @@ impl ModelKind {
         ModelKind::Pincart1,
         ModelKind::Pincart2,
     ];
+
+    /// Every kind: the paper's models, then the physical simulator.
+    pub const EVERY: [ModelKind; 7] = [
+        ModelKind::Modelless,
+        ModelKind::Delayed,
+        ModelKind::Fopdt,
+        ModelKind::Stiction,
+        ModelKind::Pincart1,
+        ModelKind::Pincart2,
+        ModelKind::Physical,
+    ];
+
+    /// Whether identification can fit this kind (every kind of the paper; not `physical`).
+    pub fn is_identifiable(self) -> bool {
+        self != ModelKind::Physical
+    }
 
     /// The tag used in model files (`model = "..."`).
     pub fn tag(self) -> &'static str {
@@ -77,6 +102,7 @@ impl ModelKind {
             ModelKind::Stiction => "stiction",
             ModelKind::Pincart1 => "pincart1",
             ModelKind::Pincart2 => "pincart2",
+            ModelKind::Physical => "physical",
         }
     }
 
@@ -89,6 +115,7 @@ impl ModelKind {
             ModelKind::Stiction => "Stiction",
             ModelKind::Pincart1 => "Pin-cart I",
             ModelKind::Pincart2 => "Pin-cart II",
+            ModelKind::Physical => "Physical",
         }
     }
 }
@@ -102,11 +129,11 @@ impl std::fmt::Display for ModelKind {
 impl std::str::FromStr for ModelKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        ModelKind::ALL
+        ModelKind::EVERY
             .into_iter()
             .find(|k| k.tag() == s)
             .ok_or_else(|| {
-                let all: Vec<&str> = ModelKind::ALL.iter().map(|k| k.tag()).collect();
+                let all: Vec<&str> = ModelKind::EVERY.iter().map(|k| k.tag()).collect();
                 format!("unknown model `{s}`: expected one of {}", all.join(", "))
             })
     }
@@ -163,6 +190,8 @@ pub struct ModelSpec {
     pub pincart1: Option<PinCart1Params>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pincart2: Option<PinCart2Params>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub physical: Option<PhysicalParams>,
     /// Travel range (default 0-100 %).
     #[serde(default)]
     pub travel: Travel,
@@ -200,6 +229,7 @@ impl ModelSpec {
             stiction: None,
             pincart1: None,
             pincart2: None,
+            physical: None,
             travel: Travel::default(),
             effects: Effects::default(),
         }
@@ -267,6 +297,8 @@ enum Core {
     Fopdt(Fopdt),
     Stiction(Stiction),
     PinCart(PinCart),
+    /// Boxed: its noise generator is large, and the other cores stay small.
+    Physical(Box<Physical>),
 }
 
 /// A runnable valve model: `reset`, then `step(O_P) -> V_P` once per sample.
@@ -310,6 +342,11 @@ impl Valve {
                 &spec.effects,
                 dt,
             )),
+            ModelKind::Physical => Core::Physical(Box::new(Physical::new(
+                spec.physical.as_ref().ok_or_else(missing)?,
+                &spec.travel,
+                dt,
+            ))),
         };
         let mut valve = Valve {
             spec: spec.clone(),
@@ -332,8 +369,10 @@ impl Valve {
         self.sample_period_s
     }
 
-    /// Puts the valve at rest: position `vp0`, and O_P having been `op0` for ever.
+    /// Puts the valve at rest: position `vp0`, and O_P having been `op0` for ever. (A physical
+    /// valve starts where its sensor would read `vp0`.)
     pub fn reset(&mut self, op0: f64, vp0: f64) {
+        let reported = vp0;
         let vp0 = vp0.clamp(self.spec.travel.min_pct, self.spec.travel.max_pct);
         self.delay.reset(op0);
         self.effects.reset(op0, vp0);
@@ -342,6 +381,7 @@ impl Valve {
             Core::Fopdt(c) => c.reset(vp0),
             Core::Stiction(c) => c.reset(op0, vp0),
             Core::PinCart(c) => c.reset(vp0),
+            Core::Physical(c) => c.reset(reported),
         }
     }
 
@@ -356,6 +396,8 @@ impl Valve {
             Core::Fopdt(c) => c.step(u),
             Core::Stiction(c) => c.step(u),
             Core::PinCart(c) => c.step(u),
+            // Its stops act on the stem; its sensor reading is reported as it is.
+            Core::Physical(c) => return c.step(u),
         };
         let (lo, hi) = (self.spec.travel.min_pct, self.spec.travel.max_pct);
         if v >= lo && v <= hi {
@@ -367,6 +409,7 @@ impl Valve {
             Core::Fopdt(c) => c.set_position(clamped),
             Core::Stiction(c) => c.set_position(clamped),
             Core::PinCart(c) => c.set_position(clamped),
+            Core::Physical(_) => {}
         }
         self.effects.output(clamped)
     }
@@ -391,7 +434,7 @@ impl Valve {
 }
 
 /// The model files shipped in `config/models/`, embedded so the binary runs with no files.
-const BUNDLED: [(ModelKind, &str); 6] = [
+const BUNDLED: [(ModelKind, &str); 7] = [
     (
         ModelKind::Modelless,
         include_str!("../../config/models/modelless.toml"),
@@ -415,6 +458,10 @@ const BUNDLED: [(ModelKind, &str); 6] = [
     (
         ModelKind::Pincart2,
         include_str!("../../config/models/pincart2.toml"),
+    ),
+    (
+        ModelKind::Physical,
+        include_str!("../../config/models/physical.toml"),
     ),
 ];
 
