@@ -12,6 +12,7 @@
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`report`]: self-contained HTML reports with SVG charts.
+//! - [`signal`]: time-only O_P generators (random steps, steps, ramp, sine, PRBS, replay, constant).
 //! - [`synth`]: synthetic recordings (random steps or a closed level loop) for demos and tests.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
@@ -23,6 +24,7 @@ pub mod modbus;
 pub mod model;
 pub mod recording;
 pub mod report;
+pub mod signal;
 pub mod synth;
 pub mod toml_file;
 

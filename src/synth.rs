@@ -11,10 +11,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use crate::daemon::config::{SafetyConfig, SourceConfig};
-use crate::daemon::source::Source;
 use crate::model::{ModelError, ModelSpec, Valve};
 use crate::recording::{Recording, RecordingError};
+use crate::signal::{RandomSteps, RandomStepsParams};
 
 /// A synthetic recording that could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -57,14 +56,15 @@ pub fn generate(
     );
     match excitation {
         Excitation::RandomSteps => {
-            let mut cfg = SourceConfig::default();
-            cfg.random_steps.seed = seed;
-            let mut source = Source::new(&cfg, &SafetyConfig::default(), dt);
-            let first = source.op_at(0.0).unwrap_or(50.0);
+            let mut source = RandomSteps::new(&RandomStepsParams {
+                seed,
+                ..RandomStepsParams::default()
+            });
+            let first = source.op_at(0.0);
             valve.reset(first, first);
             for k in 0..n {
                 let tk = k as f64 * dt;
-                let u = source.op_at(tk).unwrap_or(first);
+                let u = source.op_at(tk);
                 t.push(tk);
                 op.push(u);
                 vp.push(valve.step(u) + noise.sample(&mut rng));

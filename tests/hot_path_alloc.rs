@@ -1,6 +1,7 @@
 //! What the loop calls every cycle for the `modbus-server` source and the Prometheus metrics
 //! allocates nothing: reading the controller's set-point, publishing V_P and status, and
-//! updating the metric handles. A counting global allocator (this test binary only) counts the
+//! updating the metric handles. Nor does stepping a model (the physical valve, with its internal
+//! steps and seeded sensor noise). A counting global allocator (this test binary only) counts the
 //! allocations made on the calling thread around those calls.
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -13,6 +14,7 @@ use valve_bridge::daemon::config::Config;
 use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::logger::{Sample, Status};
 use valve_bridge::daemon::source::Source;
+use valve_bridge::model::{bundled, ModelKind, Valve};
 
 struct Counting;
 
@@ -92,4 +94,20 @@ fn per_cycle_calls_do_not_allocate() {
     assert_eq!(counted, 0, "allocations in 500 cycles");
     // The counter does count.
     assert_eq!(allocations(|| drop(std::hint::black_box(vec![0u8; 64]))), 1);
+}
+
+#[test]
+fn stepping_a_physical_valve_does_not_allocate() {
+    let mut valve = Valve::new(&bundled(ModelKind::Physical), 0.01).unwrap();
+    valve.reset(30.0, 30.0);
+    let mut last = 0.0;
+    let counted = allocations(|| {
+        for k in 0..2000 {
+            let op = if (k / 300) % 2 == 0 { 30.0 } else { 70.0 };
+            last = valve.step(op);
+        }
+        valve.reset(50.0, 50.0);
+    });
+    assert_eq!(counted, 0, "allocations in 2000 steps");
+    assert!(last.is_finite());
 }

@@ -43,7 +43,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let started = std::time::Instant::now();
-    let d = diagnose::diagnose(&rec.view(), base.as_ref(), &report)?;
+    let d = diagnose::diagnose(&rec.view(), base.as_ref(), &report).with_context(|| match &args
+        .model
+    {
+        Some(m) => format!("diagnosing {} from --model {}", rec.source, m.display()),
+        None => format!("diagnosing {}", rec.source),
+    })?;
     if let Some(b) = bar {
         b.finish_and_clear();
     }

@@ -22,6 +22,12 @@ use crate::modbus::link::{RtuLink, TcpLink};
 use crate::modbus::map::{RegisterMap, StatusRegister, Table};
 use crate::model::{bundled, ModelError, ModelKind, ModelSpec};
 use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
+/// The settings of the generated sources (`[source.random-steps]`, `[source.steps]`, ...) are
+/// the parameters of the generators in [`crate::signal`].
+pub use crate::signal::{
+    ConstantParams as ConstantConfig, PrbsParams as PrbsConfig, RampParams as RampConfig,
+    RandomStepsParams as RandomStepsConfig, SineParams as SineConfig, StepsParams as StepsConfig,
+};
 use crate::toml_file::{self, TomlError};
 
 /// The default configuration, `config/emulated.toml`, embedded so default == file by construction.
@@ -273,123 +279,6 @@ impl SourceKind {
     }
 }
 
-/// `[source.random-steps]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RandomStepsConfig {
-    /// Lowest level, %.
-    pub min_pct: f64,
-    /// Highest level, %.
-    pub max_pct: f64,
-    /// Shortest hold, s.
-    pub hold_min_s: f64,
-    /// Longest hold, s.
-    pub hold_max_s: f64,
-    /// Seed of the levels and holds.
-    pub seed: u64,
-}
-
-impl Default for RandomStepsConfig {
-    fn default() -> Self {
-        RandomStepsConfig {
-            min_pct: 20.0,
-            max_pct: 97.0,
-            hold_min_s: 0.0,
-            hold_max_s: 20.0,
-            seed: 1,
-        }
-    }
-}
-
-/// `[source.steps]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct StepsConfig {
-    /// The levels, %, in order.
-    pub levels_pct: Vec<f64>,
-    /// How long each level is held, s.
-    pub hold_s: f64,
-    /// Start again after the last level (otherwise hold it).
-    #[serde(default = "yes")]
-    pub repeat: bool,
-}
-
-fn yes() -> bool {
-    true
-}
-
-/// `[source.ramp]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RampConfig {
-    /// Start level, %.
-    pub from_pct: f64,
-    /// End level, %.
-    pub to_pct: f64,
-    /// Time from start to end, s.
-    pub duration_s: f64,
-    /// Go back and forth (triangle) instead of holding `to_pct` at the end.
-    pub repeat: bool,
-}
-
-impl Default for RampConfig {
-    fn default() -> Self {
-        RampConfig {
-            from_pct: 20.0,
-            to_pct: 80.0,
-            duration_s: 30.0,
-            repeat: false,
-        }
-    }
-}
-
-/// `[source.sine]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SineConfig {
-    /// Mean level, %.
-    pub mean_pct: f64,
-    /// Amplitude, %.
-    pub amplitude_pct: f64,
-    /// Period, s.
-    pub period_s: f64,
-}
-
-impl Default for SineConfig {
-    fn default() -> Self {
-        SineConfig {
-            mean_pct: 50.0,
-            amplitude_pct: 20.0,
-            period_s: 10.0,
-        }
-    }
-}
-
-/// `[source.prbs]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct PrbsConfig {
-    /// Mean level, %.
-    pub mean_pct: f64,
-    /// The two levels are mean ± amplitude, %.
-    pub amplitude_pct: f64,
-    /// Highest frequency excited, Hz: a new random level every 1/(2 band_hz) s.
-    pub band_hz: f64,
-    /// Seed of the levels.
-    pub seed: u64,
-}
-
-impl Default for PrbsConfig {
-    fn default() -> Self {
-        PrbsConfig {
-            mean_pct: 50.0,
-            amplitude_pct: 10.0,
-            band_hz: 1.0,
-            seed: 1,
-        }
-    }
-}
-
 /// `[source.replay]`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -399,14 +288,6 @@ pub struct ReplayConfig {
     /// Its O_P held onto the loop grid (slot k = index k), resolved at load time.
     #[serde(skip)]
     pub op_pct: Arc<Vec<f64>>,
-}
-
-/// `[source.constant]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ConstantConfig {
-    /// The O_P, %.
-    pub op_pct: f64,
 }
 
 /// `[source.modbus-server]`: the Modbus TCP server a process controller writes O_P into.

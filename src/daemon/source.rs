@@ -6,24 +6,20 @@
 //! sources are seeded (ChaCha8) and depend on the time only, not on how often they are asked, so a
 //! skipped cycle does not change what later cycles get. Asking never allocates.
 //!
-//! Generated sources do not know about valves or timing; the clamp range comes from `[source]`.
+//! The generators themselves live in [`crate::signal`] (offline generation uses them too); a
+//! source adds the clamp to `[source]`'s range. Generated sources do not know about valves or
+//! timing.
 //! The `modbus-server` source is the exception: its set-points were range-checked when written
 //! (its safe O_P, like the stop action's, is not clamped), and the loop hands it each cycle's row
 //! ([`Source::feedback`]) to publish V_P to the controller.
 
-use std::f64::consts::TAU;
 use std::sync::Arc;
-
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 use super::config::{SafetyConfig, SourceConfig, SourceKind};
 use super::hil::Controller;
 use super::logger::Sample;
 use crate::modbus::server::RegisterBank;
-
-/// Slack when turning a time into a step or bit index, so `0.3 / 0.1` counts as 3, not 2.999...
-const INDEX_EPS: f64 = 1e-9;
+use crate::signal::{Prbs, RandomSteps, Signal, StepsParams};
 
 /// An O_P source with its clamp range.
 #[derive(Debug)]
@@ -35,42 +31,8 @@ pub struct Source {
 
 #[derive(Debug)]
 enum Kind {
-    RandomSteps {
-        rng: ChaCha8Rng,
-        level_range: (f64, f64),
-        hold_range: (f64, f64),
-        level: f64,
-        next_change_s: f64,
-    },
-    Steps {
-        levels: Vec<f64>,
-        hold_s: f64,
-        repeat: bool,
-    },
-    Ramp {
-        from: f64,
-        to: f64,
-        duration_s: f64,
-        repeat: bool,
-    },
-    Sine {
-        mean: f64,
-        amplitude: f64,
-        period_s: f64,
-    },
-    Prbs {
-        rng: ChaCha8Rng,
-        mean: f64,
-        amplitude: f64,
-        bit_s: f64,
-        bits_drawn: u64,
-        high: bool,
-    },
-    Replay {
-        op: Arc<Vec<f64>>,
-        period_s: f64,
-    },
-    Constant(f64),
+    /// A time-only generator of [`crate::signal`] (boxed once: its random generator is large).
+    Generated(Box<Signal>),
     Controller(Controller),
 }
 
@@ -81,62 +43,8 @@ impl Source {
     /// The config must have been checked by [`super::config::Config::load`] (ranges, tables).
     pub fn new(cfg: &SourceConfig, safety: &SafetyConfig, period_s: f64) -> Source {
         let kind = match cfg.kind {
-            SourceKind::RandomSteps => {
-                let r = &cfg.random_steps;
-                Kind::RandomSteps {
-                    rng: ChaCha8Rng::seed_from_u64(r.seed),
-                    level_range: (r.min_pct, r.max_pct),
-                    hold_range: (r.hold_min_s, r.hold_max_s),
-                    level: r.min_pct,
-                    next_change_s: 0.0,
-                }
-            }
-            SourceKind::Steps => {
-                let s = cfg
-                    .steps
-                    .clone()
-                    .unwrap_or_else(|| super::config::StepsConfig {
-                        levels_pct: vec![cfg.op_min_pct],
-                        hold_s: 1.0,
-                        repeat: false,
-                    });
-                Kind::Steps {
-                    levels: s.levels_pct,
-                    hold_s: s.hold_s,
-                    repeat: s.repeat,
-                }
-            }
-            SourceKind::Ramp => Kind::Ramp {
-                from: cfg.ramp.from_pct,
-                to: cfg.ramp.to_pct,
-                duration_s: cfg.ramp.duration_s,
-                repeat: cfg.ramp.repeat,
-            },
-            SourceKind::Sine => Kind::Sine {
-                mean: cfg.sine.mean_pct,
-                amplitude: cfg.sine.amplitude_pct,
-                period_s: cfg.sine.period_s,
-            },
-            SourceKind::Prbs => Kind::Prbs {
-                rng: ChaCha8Rng::seed_from_u64(cfg.prbs.seed),
-                mean: cfg.prbs.mean_pct,
-                amplitude: cfg.prbs.amplitude_pct,
-                bit_s: 1.0 / (2.0 * cfg.prbs.band_hz),
-                bits_drawn: 0,
-                high: false,
-            },
-            SourceKind::Replay => Kind::Replay {
-                op: cfg
-                    .replay
-                    .as_ref()
-                    .map(|r| r.op_pct.clone())
-                    .unwrap_or_default(),
-                period_s,
-            },
-            SourceKind::Constant => {
-                Kind::Constant(cfg.constant.as_ref().map_or(cfg.op_min_pct, |c| c.op_pct))
-            }
             SourceKind::ModbusServer => Kind::Controller(Controller::new(cfg, safety)),
+            _ => Kind::Generated(Box::new(generator(cfg, period_s))),
         };
         Source {
             kind,
@@ -148,79 +56,7 @@ impl Source {
     /// The O_P at loop time `t_s` (s from the first cycle), clamped; `None` once a replay is over.
     pub fn op_at(&mut self, t_s: f64) -> Option<f64> {
         let raw = match &mut self.kind {
-            Kind::RandomSteps {
-                rng,
-                level_range,
-                hold_range,
-                level,
-                next_change_s,
-            } => {
-                while t_s >= *next_change_s {
-                    *level = rng.gen_range(level_range.0..=level_range.1);
-                    *next_change_s += rng.gen_range(hold_range.0..=hold_range.1);
-                }
-                *level
-            }
-            Kind::Steps {
-                levels,
-                hold_s,
-                repeat,
-            } => {
-                let i = (t_s / *hold_s + INDEX_EPS).floor() as usize;
-                let i = if *repeat {
-                    i % levels.len()
-                } else {
-                    i.min(levels.len() - 1)
-                };
-                levels[i]
-            }
-            Kind::Ramp {
-                from,
-                to,
-                duration_s,
-                repeat,
-            } => {
-                let phase = t_s / *duration_s;
-                let frac = if *repeat {
-                    let p = phase % 2.0;
-                    if p <= 1.0 {
-                        p
-                    } else {
-                        2.0 - p
-                    }
-                } else {
-                    phase.min(1.0)
-                };
-                *from + (*to - *from) * frac
-            }
-            Kind::Sine {
-                mean,
-                amplitude,
-                period_s,
-            } => *mean + *amplitude * (TAU * t_s / *period_s).sin(),
-            Kind::Prbs {
-                rng,
-                mean,
-                amplitude,
-                bit_s,
-                bits_drawn,
-                high,
-            } => {
-                // Draw every bit up to this time, so the sequence does not depend on skipped cycles.
-                let bits_due = (t_s / *bit_s + INDEX_EPS).floor() as u64 + 1;
-                while *bits_drawn < bits_due {
-                    *high = rng.gen::<bool>();
-                    *bits_drawn += 1;
-                }
-                if *high {
-                    *mean + *amplitude
-                } else {
-                    *mean - *amplitude
-                }
-            }
-            // Held onto the loop grid at load time (`recording::resample_zoh`): slot k is entry k.
-            Kind::Replay { op, period_s } => *op.get((t_s / *period_s).round() as usize)?,
-            Kind::Constant(v) => *v,
+            Kind::Generated(g) => g.op_at(t_s)?,
             Kind::Controller(c) => return Some(c.op_at(t_s)),
         };
         Some(raw.clamp(self.min_pct, self.max_pct))
@@ -252,6 +88,34 @@ impl Source {
         if let Kind::Controller(c) = &self.kind {
             c.feedback(row);
         }
+    }
+}
+
+/// The time-only generator of a generated source kind (`modbus-server` gets a constant
+/// `op_min_pct`; [`Source::new`] never asks for it).
+fn generator(cfg: &SourceConfig, period_s: f64) -> Signal {
+    match cfg.kind {
+        SourceKind::RandomSteps => Signal::RandomSteps(RandomSteps::new(&cfg.random_steps)),
+        SourceKind::Steps => Signal::Steps(cfg.steps.clone().unwrap_or_else(|| StepsParams {
+            levels_pct: vec![cfg.op_min_pct],
+            hold_s: 1.0,
+            repeat: false,
+        })),
+        SourceKind::Ramp => Signal::Ramp(cfg.ramp.clone()),
+        SourceKind::Sine => Signal::Sine(cfg.sine.clone()),
+        SourceKind::Prbs => Signal::Prbs(Prbs::new(&cfg.prbs)),
+        SourceKind::Replay => Signal::Replay {
+            op: cfg
+                .replay
+                .as_ref()
+                .map(|r| r.op_pct.clone())
+                .unwrap_or_default(),
+            period_s,
+        },
+        SourceKind::Constant => {
+            Signal::Constant(cfg.constant.as_ref().map_or(cfg.op_min_pct, |c| c.op_pct))
+        }
+        SourceKind::ModbusServer => Signal::Constant(cfg.op_min_pct),
     }
 }
 

@@ -299,6 +299,7 @@ pub fn compose(base: &ModelSpec, dt: f64) -> ModelSpec {
         fopdt: None,
         stiction: None,
         pincart1: None,
+        physical: None,
         ..base.clone()
     };
     let pass_through = 1.0 / dt;
@@ -327,6 +328,8 @@ pub fn compose(base: &ModelSpec, dt: f64) -> ModelSpec {
             }
         }
         ModelKind::Pincart2 => p = base.pincart2.unwrap_or(p),
+        // A physical valve is a simulator, not a starting model (`diagnose --model` refuses it).
+        ModelKind::Physical => {}
     }
     spec.pincart2 = Some(p);
     spec

@@ -169,6 +169,8 @@ pub enum DiagnoseError {
     NoPosition,
     #[error("the recording is sampled every {0} s: a valve's dead time, stroke and lost motion last seconds, so diagnosis needs a sample at least every {MAX_SAMPLE_PERIOD_S} s (identify fits the delayed and FOPDT models to slower data)")]
     TooSlow(f64),
+    #[error("model = \"physical\" is a simulator, not a starting model diagnosis can extend: give one of the paper's models (e.g. config/models/pincart2.toml) or none")]
+    NotExtendable,
     #[error("the starting model cannot run: {0}")]
     Model(#[from] crate::model::ModelError),
 }
@@ -194,6 +196,7 @@ pub fn diagnose(
     let facts = facts::measure(rec, sigma);
     let scorer = Scorer::new(rec);
     let (base_spec, base_label, td_max) = match base {
+        Some(b) if !b.model.is_identifiable() => return Err(DiagnoseError::NotExtendable),
         Some(b) => {
             Valve::new(b, dt)?;
             (b.clone(), format!("{} (given)", b.model), b.dead_time_s)

@@ -51,6 +51,9 @@ pub enum FitError {
     /// Step-analysis options that make no sense.
     #[error("step analysis: {0}")]
     StepOptions(String),
+    /// A model that is not one of the paper's (the physical simulator).
+    #[error("{0} is a simulator with {count} parameters, not one of the paper's identifiable models: choose from fopdt, stiction, pincart1, pincart2 (modelless and delayed are always added)", count = crate::model::PhysicalParams::COUNT)]
+    NotIdentifiable(ModelKind),
     /// No measured V_P to fit to.
     #[error("the recording has no measured V_P column: identification and step delays need it (map it with --columns vp=NAME)")]
     NoPosition,
@@ -321,6 +324,9 @@ pub fn identify(
 ) -> Result<Identification, FitError> {
     let started = std::time::Instant::now();
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
+    if let Some(&kind) = opts.models.iter().find(|k| !k.is_identifiable()) {
+        return Err(FitError::NotIdentifiable(kind));
+    }
     if vp.len() != op.len() || vp.is_empty() {
         return Err(FitError::NoPosition);
     }

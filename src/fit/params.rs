@@ -179,6 +179,8 @@ impl Layout {
                 lin("crossing_50_s", "s", 0.0, 5.0),
                 lin("crossing_100_s", "s", 0.0, 5.0),
             ],
+            // Not identifiable: `identify` refuses it before a layout is built.
+            ModelKind::Physical => vec![],
         };
         Layout { kind, defs }
     }
@@ -242,6 +244,7 @@ impl Layout {
                     ..ModelSpec::bare(ModelKind::Pincart2, v(0))
                 }
             }
+            ModelKind::Physical => crate::model::bundled(ModelKind::Physical),
         }
     }
 
@@ -278,6 +281,7 @@ impl Layout {
                 ],
                 None => self.defs.iter().map(|d| d.lo).collect(),
             },
+            ModelKind::Physical => vec![],
         };
         for (v, d) in x.iter_mut().zip(&self.defs) {
             *v = v.clamp(d.lo, d.hi);

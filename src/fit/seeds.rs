@@ -114,6 +114,7 @@ pub fn starts(layout: &Layout, p: &Physical) -> Vec<Vec<f64>> {
         ModelKind::Fopdt => vec![vec![td, tau], vec![td2, tau]],
         ModelKind::Stiction => vec![vec![td, 0.5, 0.2], vec![td + 0.5 * tau, 1.0, 0.5]],
         ModelKind::Pincart1 => vec![vec![td, 1.0, k], vec![td2, 0.3, k]],
+        ModelKind::Physical => vec![vec![]],
         ModelKind::Pincart2 => vec![
             [vec![td, k, speed, 0.3], cross.to_vec()].concat(),
             [vec![td2, k, speed, 0.1], cross.to_vec()].concat(),

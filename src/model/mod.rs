@@ -10,12 +10,17 @@
 //! ```
 //!
 //! The cores are modelless (V_P = input), FOPDT, the Choudhury stiction model, pin-cart I and
-//! pin-cart II. `model = "delayed"` is the delayed modelless model. Nothing here does I/O beyond
-//! [`ModelSpec::load`]; stepping never allocates.
+//! pin-cart II. `model = "delayed"` is the delayed modelless model. `model = "physical"` is not
+//! one of the paper's models: a first-principles pneumatic valve with positioner, friction,
+//! stops and sensor ([`PhysicalParams`]), for emulation and for testing diagnosis against
+//! physics it does not share; its sensor reading is reported unclamped. Nothing here does I/O
+//! beyond [`ModelSpec::load`]; stepping never allocates.
 
+mod checks;
 mod delay;
 mod effects;
 mod fopdt;
+mod physical;
 mod pincart;
 mod stiction;
 
@@ -26,12 +31,14 @@ use serde::{Deserialize, Serialize};
 pub use delay::DelayLine;
 pub use effects::Effects;
 pub use fopdt::FopdtParams;
+pub use physical::PhysicalParams;
 pub use pincart::{PinCart1Params, PinCart2Params};
 pub use stiction::StictionParams;
 
 use crate::toml_file::{self, TomlError};
 use effects::EffectState;
 use fopdt::Fopdt;
+use physical::Physical;
 use pincart::PinCart;
 use stiction::Stiction;
 
@@ -54,10 +61,13 @@ pub enum ModelKind {
     Pincart1,
     /// Pin-cart II plus dead time.
     Pincart2,
+    /// A first-principles pneumatic valve (positioner, chamber, stem friction, stops, sensor)
+    /// plus dead time; a simulator, not one of the paper's identifiable models.
+    Physical,
 }
 
 impl ModelKind {
-    /// All kinds, in the order of the paper's Table 1.
+    /// The paper's models, in the order of its Table 1: the kinds identification fits.
     pub const ALL: [ModelKind; 6] = [
         ModelKind::Modelless,
         ModelKind::Delayed,
@@ -66,6 +76,22 @@ impl ModelKind {
         ModelKind::Pincart1,
         ModelKind::Pincart2,
     ];
+
+    /// Every kind: the paper's models, then the physical simulator.
+    pub const EVERY: [ModelKind; 7] = [
+        ModelKind::Modelless,
+        ModelKind::Delayed,
+        ModelKind::Fopdt,
+        ModelKind::Stiction,
+        ModelKind::Pincart1,
+        ModelKind::Pincart2,
+        ModelKind::Physical,
+    ];
+
+    /// Whether identification can fit this kind (every kind of the paper; not `physical`).
+    pub fn is_identifiable(self) -> bool {
+        self != ModelKind::Physical
+    }
 
     /// The tag used in model files (`model = "..."`).
     pub fn tag(self) -> &'static str {
@@ -76,6 +102,7 @@ impl ModelKind {
             ModelKind::Stiction => "stiction",
             ModelKind::Pincart1 => "pincart1",
             ModelKind::Pincart2 => "pincart2",
+            ModelKind::Physical => "physical",
         }
     }
 
@@ -88,6 +115,7 @@ impl ModelKind {
             ModelKind::Stiction => "Stiction",
             ModelKind::Pincart1 => "Pin-cart I",
             ModelKind::Pincart2 => "Pin-cart II",
+            ModelKind::Physical => "Physical",
         }
     }
 }
@@ -101,11 +129,11 @@ impl std::fmt::Display for ModelKind {
 impl std::str::FromStr for ModelKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        ModelKind::ALL
+        ModelKind::EVERY
             .into_iter()
             .find(|k| k.tag() == s)
             .ok_or_else(|| {
-                let all: Vec<&str> = ModelKind::ALL.iter().map(|k| k.tag()).collect();
+                let all: Vec<&str> = ModelKind::EVERY.iter().map(|k| k.tag()).collect();
                 format!("unknown model `{s}`: expected one of {}", all.join(", "))
             })
     }
@@ -162,6 +190,8 @@ pub struct ModelSpec {
     pub pincart1: Option<PinCart1Params>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pincart2: Option<PinCart2Params>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub physical: Option<PhysicalParams>,
     /// Travel range (default 0-100 %).
     #[serde(default)]
     pub travel: Travel,
@@ -189,14 +219,6 @@ pub enum ModelError {
     SamplePeriod(f64),
 }
 
-/// One violated rule found by [`ModelSpec::check`]: table, key, value and what is allowed.
-struct Violation {
-    table: Option<&'static str>,
-    key: &'static str,
-    value: f64,
-    allowed: String,
-}
-
 impl ModelSpec {
     /// A spec of `kind` with no parameter tables yet (fill the one for the kind).
     pub fn bare(kind: ModelKind, dead_time_s: f64) -> Self {
@@ -207,6 +229,7 @@ impl ModelSpec {
             stiction: None,
             pincart1: None,
             pincart2: None,
+            physical: None,
             travel: Travel::default(),
             effects: Effects::default(),
         }
@@ -265,217 +288,6 @@ impl ModelSpec {
             .into()),
         }
     }
-
-    fn violations(&self) -> Vec<Violation> {
-        let mut out = Vec::new();
-        let mut need = |ok: bool, table, key, value: f64, allowed: &str| {
-            if !ok || value.is_nan() {
-                out.push(Violation {
-                    table,
-                    key,
-                    value,
-                    allowed: allowed.to_string(),
-                });
-            }
-        };
-        let kind = self.model;
-        let present = [
-            ("fopdt", self.fopdt.is_some(), ModelKind::Fopdt),
-            ("stiction", self.stiction.is_some(), ModelKind::Stiction),
-            ("pincart1", self.pincart1.is_some(), ModelKind::Pincart1),
-            ("pincart2", self.pincart2.is_some(), ModelKind::Pincart2),
-        ];
-        for (table, is_there, owner) in present {
-            if is_there && owner != kind {
-                need(false, Some(table), "", f64::NAN,
-                    &format!("table [{table}] does not belong to model = \"{kind}\": remove it or set model = \"{table}\""));
-            }
-            if !is_there && owner == kind {
-                need(false, None, "model", f64::NAN,
-                    &format!("model = \"{kind}\" needs a [{table}] table with its parameters (see config/models/{table}.toml)"));
-            }
-        }
-        let td = self.dead_time_s;
-        need(
-            td.is_finite() && td >= 0.0,
-            None,
-            "dead_time_s",
-            td,
-            "a dead time in seconds, >= 0",
-        );
-        need(td <= 60.0, None, "dead_time_s", td, "at most 60 s");
-        if kind == ModelKind::Modelless {
-            need(
-                td == 0.0,
-                None,
-                "dead_time_s",
-                td,
-                "modelless has no dead time: use model = \"delayed\"",
-            );
-        }
-        let tr = self.travel;
-        need(
-            tr.min_pct.is_finite() && tr.max_pct.is_finite() && tr.min_pct < tr.max_pct,
-            Some("travel"),
-            "max_pct",
-            tr.max_pct,
-            "travel.min_pct < travel.max_pct, both finite",
-        );
-        if let Some(p) = &self.fopdt {
-            need(
-                p.time_constant_s.is_finite() && p.time_constant_s > 0.0,
-                Some("fopdt"),
-                "time_constant_s",
-                p.time_constant_s,
-                "a time constant in seconds, > 0",
-            );
-        }
-        if let Some(p) = &self.stiction {
-            need(
-                p.stickband_pct.is_finite() && p.stickband_pct >= 0.0,
-                Some("stiction"),
-                "stickband_pct",
-                p.stickband_pct,
-                "S in % of travel, >= 0",
-            );
-            need(
-                p.jumpband_pct >= 0.0 && p.jumpband_pct <= p.stickband_pct,
-                Some("stiction"),
-                "jumpband_pct",
-                p.jumpband_pct,
-                "J in % of travel, 0 <= J <= stickband_pct",
-            );
-        }
-        if let Some(p) = &self.pincart1 {
-            need(
-                p.backlash_pct.is_finite() && p.backlash_pct >= 0.0,
-                Some("pincart1"),
-                "backlash_pct",
-                p.backlash_pct,
-                "B_L in % of travel, >= 0",
-            );
-            need(
-                p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0,
-                Some("pincart1"),
-                "p_gain_per_s",
-                p.p_gain_per_s,
-                "P_k in 1/s, > 0",
-            );
-        }
-        if let Some(p) = &self.pincart2 {
-            need(
-                p.p_gain_per_s.is_finite() && p.p_gain_per_s > 0.0,
-                Some("pincart2"),
-                "p_gain_per_s",
-                p.p_gain_per_s,
-                "P_k in 1/s, > 0",
-            );
-            need(
-                p.dy_max_pct_per_s.is_finite() && p.dy_max_pct_per_s > 0.0,
-                Some("pincart2"),
-                "dy_max_pct_per_s",
-                p.dy_max_pct_per_s,
-                "maximum speed in %/s, > 0",
-            );
-            need(
-                p.dy_min_pct_per_s >= 0.0 && p.dy_min_pct_per_s <= p.dy_max_pct_per_s,
-                Some("pincart2"),
-                "dy_min_pct_per_s",
-                p.dy_min_pct_per_s,
-                "minimum speed in %/s, 0 <= dy_min <= dy_max",
-            );
-            need(
-                p.backlash_pct.is_finite() && p.backlash_pct >= 0.0,
-                Some("pincart2"),
-                "backlash_pct",
-                p.backlash_pct,
-                "B_L in % of travel, >= 0",
-            );
-            let worst = [0.0, 25.0, 50.0, 75.0, 100.0, -p.b_p / (2.0 * p.a_p)]
-                .into_iter()
-                .filter(|v| (0.0..=100.0).contains(v))
-                .map(|v| p.crossing_time_s(v))
-                .fold(f64::INFINITY, f64::min);
-            need(
-                worst >= 0.0 && p.a_p.is_finite() && p.b_p.is_finite() && p.c_p.is_finite(),
-                Some("pincart2"),
-                "c_p",
-                p.c_p,
-                "a_p*V^2 + b_p*V + c_p (cart-crossing time, s) must stay >= 0 for V in 0-100 %",
-            );
-        }
-        let e = &self.effects;
-        need(
-            e.calibration_gain.is_finite() && e.calibration_gain > 0.0,
-            Some("effects"),
-            "calibration_gain",
-            e.calibration_gain,
-            "a positive gain (1 = none)",
-        );
-        need(
-            e.calibration_offset_pct.abs() <= 100.0,
-            Some("effects"),
-            "calibration_offset_pct",
-            e.calibration_offset_pct,
-            "an offset in %, between -100 and 100",
-        );
-        need(
-            (0.0..=50.0).contains(&e.deadband_pct),
-            Some("effects"),
-            "deadband_pct",
-            e.deadband_pct,
-            "a band in %, 0-50 (0 = none)",
-        );
-        need(
-            (0.0..=50.0).contains(&e.stickband_pct),
-            Some("effects"),
-            "stickband_pct",
-            e.stickband_pct,
-            "S in %, 0-50 (0 = none)",
-        );
-        need(
-            e.jumpband_pct >= 0.0 && e.jumpband_pct <= e.stickband_pct,
-            Some("effects"),
-            "jumpband_pct",
-            e.jumpband_pct,
-            "J in %, 0 <= J <= stickband_pct",
-        );
-        need(
-            (0.0..=10.0).contains(&e.quantization_pct),
-            Some("effects"),
-            "quantization_pct",
-            e.quantization_pct,
-            "a sensor resolution in %, 0-10 (0 = continuous)",
-        );
-        need(
-            e.closing_slew_pct_per_s >= 0.0 && e.closing_slew_pct_per_s.is_finite(),
-            Some("effects"),
-            "closing_slew_pct_per_s",
-            e.closing_slew_pct_per_s,
-            "a speed in %/s, >= 0 (0 = same as opening)",
-        );
-        need(
-            (0.0..=20.0).contains(&e.open_slowdown),
-            Some("effects"),
-            "open_slowdown",
-            e.open_slowdown,
-            "a slowdown ratio r, 0-20 (fully open is 1 + r times slower; 0 = none)",
-        );
-        if kind != ModelKind::Pincart2 {
-            need(
-                e.closing_slew_pct_per_s == 0.0,
-                Some("effects"),
-                "closing_slew_pct_per_s",
-                e.closing_slew_pct_per_s,
-                "asymmetric slew rates need model = \"pincart2\" (the only core with a slew rate)",
-            );
-            need(e.open_slowdown == 0.0, Some("effects"), "open_slowdown", e.open_slowdown,
-                "an opening-dependent speed needs model = \"pincart2\" (the only core with a pin speed)");
-            need(e.breakaway_pct == 0.0, Some("effects"), "breakaway_pct", e.breakaway_pct,
-                "stick-slip by breakaway needs model = \"pincart2\" (use stickband_pct with other models)");
-        }
-        out
-    }
 }
 
 /// The dynamics between the delay line and the travel clamp.
@@ -485,6 +297,8 @@ enum Core {
     Fopdt(Fopdt),
     Stiction(Stiction),
     PinCart(PinCart),
+    /// Boxed: its noise generator is large, and the other cores stay small.
+    Physical(Box<Physical>),
 }
 
 /// A runnable valve model: `reset`, then `step(O_P) -> V_P` once per sample.
@@ -528,6 +342,11 @@ impl Valve {
                 &spec.effects,
                 dt,
             )),
+            ModelKind::Physical => Core::Physical(Box::new(Physical::new(
+                spec.physical.as_ref().ok_or_else(missing)?,
+                &spec.travel,
+                dt,
+            ))),
         };
         let mut valve = Valve {
             spec: spec.clone(),
@@ -550,8 +369,10 @@ impl Valve {
         self.sample_period_s
     }
 
-    /// Puts the valve at rest: position `vp0`, and O_P having been `op0` for ever.
+    /// Puts the valve at rest: position `vp0`, and O_P having been `op0` for ever. (A physical
+    /// valve starts where its sensor would read `vp0`.)
     pub fn reset(&mut self, op0: f64, vp0: f64) {
+        let reported = vp0;
         let vp0 = vp0.clamp(self.spec.travel.min_pct, self.spec.travel.max_pct);
         self.delay.reset(op0);
         self.effects.reset(op0, vp0);
@@ -560,6 +381,7 @@ impl Valve {
             Core::Fopdt(c) => c.reset(vp0),
             Core::Stiction(c) => c.reset(op0, vp0),
             Core::PinCart(c) => c.reset(vp0),
+            Core::Physical(c) => c.reset(reported),
         }
     }
 
@@ -574,6 +396,8 @@ impl Valve {
             Core::Fopdt(c) => c.step(u),
             Core::Stiction(c) => c.step(u),
             Core::PinCart(c) => c.step(u),
+            // Its stops act on the stem; its sensor reading is reported as it is.
+            Core::Physical(c) => return c.step(u),
         };
         let (lo, hi) = (self.spec.travel.min_pct, self.spec.travel.max_pct);
         if v >= lo && v <= hi {
@@ -585,6 +409,7 @@ impl Valve {
             Core::Fopdt(c) => c.set_position(clamped),
             Core::Stiction(c) => c.set_position(clamped),
             Core::PinCart(c) => c.set_position(clamped),
+            Core::Physical(_) => {}
         }
         self.effects.output(clamped)
     }
@@ -609,7 +434,7 @@ impl Valve {
 }
 
 /// The model files shipped in `config/models/`, embedded so the binary runs with no files.
-const BUNDLED: [(ModelKind, &str); 6] = [
+const BUNDLED: [(ModelKind, &str); 7] = [
     (
         ModelKind::Modelless,
         include_str!("../../config/models/modelless.toml"),
@@ -633,6 +458,10 @@ const BUNDLED: [(ModelKind, &str); 6] = [
     (
         ModelKind::Pincart2,
         include_str!("../../config/models/pincart2.toml"),
+    ),
+    (
+        ModelKind::Physical,
+        include_str!("../../config/models/physical.toml"),
     ),
 ];
 

@@ -40,7 +40,7 @@ fn run(valve: &mut Valve, op: f64, n: usize) -> Vec<f64> {
 
 #[test]
 fn bundled_model_files_load_and_match_their_kind() {
-    for kind in ModelKind::ALL {
+    for kind in ModelKind::EVERY {
         let spec = bundled(kind);
         assert_eq!(spec.model, kind);
         let on_disk = ModelSpec::load(
@@ -55,7 +55,7 @@ fn bundled_model_files_load_and_match_their_kind() {
 
 #[test]
 fn toml_round_trip_keeps_every_parameter() {
-    for kind in ModelKind::ALL {
+    for kind in ModelKind::EVERY {
         let spec = bundled(kind);
         let back = ModelSpec::from_toml(&spec.to_toml(), Path::new("x.toml")).unwrap();
         assert_eq!(back, spec);

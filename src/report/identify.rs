@@ -29,6 +29,7 @@ pub fn model_color(kind: ModelKind) -> RGBColor {
         ModelKind::Stiction => RGBColor(255, 127, 14),
         ModelKind::Pincart1 => EXTRA,
         ModelKind::Pincart2 => AFTER,
+        ModelKind::Physical => RGBColor(44, 160, 44),
     }
 }
 
