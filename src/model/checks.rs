@@ -341,9 +341,16 @@ fn effects_friction_and_sensor(c: &mut Checks, e: &Effects) {
         e.open_slowdown,
         "a slowdown ratio r, 0-20 (fully open is 1 + r times slower; 0 = none)",
     );
+    c.need(
+        (0.0..=20.0).contains(&e.friction_band_pct),
+        t,
+        "friction_band_pct",
+        e.friction_band_pct,
+        "a friction band in %, 0-20 (0 = none)",
+    );
 }
 
-/// Asymmetry, slowdown and breakaway live in pin-cart II's core only.
+/// Asymmetry, slowdown, breakaway and the friction band live in pin-cart II's core only.
 fn effects_need_pincart2(c: &mut Checks, kind: ModelKind, e: &Effects) {
     if kind == ModelKind::Pincart2 {
         return;
@@ -369,5 +376,12 @@ fn effects_need_pincart2(c: &mut Checks, kind: ModelKind, e: &Effects) {
         "breakaway_pct",
         e.breakaway_pct,
         "stick-slip by breakaway needs model = \"pincart2\" (use stickband_pct with other models)",
+    );
+    c.need(
+        e.friction_band_pct == 0.0,
+        t,
+        "friction_band_pct",
+        e.friction_band_pct,
+        "a friction band needs model = \"pincart2\" (pin-cart I's backlash_pct is one crossed at the positioner's speed)",
     );
 }

@@ -4,7 +4,8 @@
 //! deadband" means setting `deadband_pct`, not writing a new model. Effects that live inside
 //! the pin-cart II core (backlash, state-dependent delay, slew rate, minimum speed) are
 //! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s`, `open_slowdown` and
-//! `breakaway_pct` here, which only pin-cart II uses); the others wrap any core:
+//! `breakaway_pct` and `friction_band_pct` here, which only pin-cart II uses); the others wrap
+//! any core:
 //!
 //! ```text
 //! O_P ─▶ T_d ─▶ calibration ─▶ deadband ─▶ stiction ─▶ core ─▶ travel clamp ─▶ quantization ─▶ V_P
@@ -55,6 +56,13 @@ pub struct Effects {
     /// slips the whole way, so it overshoots and hunts around a steady O_P.
     #[serde(skip_serializing_if = "is_zero")]
     pub breakaway_pct: f64,
+    /// Friction band of pin-cart II, % (0 = none): the cart is this wide, and on a reversal
+    /// the pin crosses it at the positioner's own speed (eqs. 4-5, with the error to the cart)
+    /// instead of in eq. (7)'s crossing time. The lost time of a reversal then depends on how
+    /// hard the positioner pushes, as it does when a chamber's pressure must cross a Coulomb
+    /// friction band before the stem moves.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub friction_band_pct: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -77,6 +85,7 @@ impl Default for Effects {
             closing_slew_pct_per_s: 0.0,
             open_slowdown: 0.0,
             breakaway_pct: 0.0,
+            friction_band_pct: 0.0,
         }
     }
 }

@@ -80,6 +80,8 @@ enum PinLaw {
         close_max: f64,
         /// Opening-dependent slowdown r: the proportional gain scales by 1 / (1 + r V / 100).
         slowdown: f64,
+        /// The cart is a friction band crossed at the pushing speed, not in eq. (7)'s time.
+        band: bool,
     },
 }
 
@@ -112,21 +114,29 @@ impl PinCart {
     /// closing its own slew rate (asymmetry); `open_slowdown` r > 0 makes the proportional pin
     /// speed and the slew limit fall with opening as `1 / (1 + r V / 100)` (a pneumatic chamber
     /// that grows with opening: slower response and slower stroke); `breakaway_pct` > 0 makes the cart stick
-    /// whenever it stops, until the pin pushes that much beyond the side, then slip.
+    /// whenever it stops, until the pin pushes that much beyond the side, then slip;
+    /// `friction_band_pct` > 0 makes the cart that wide and crossed at the pushing speed.
     pub(crate) fn two(p: &PinCart2Params, fx: &Effects, dt: f64) -> Self {
         let close_max = if fx.closing_slew_pct_per_s > 0.0 {
             fx.closing_slew_pct_per_s
         } else {
             p.dy_max_pct_per_s
         };
+        let band = fx.friction_band_pct > 0.0;
         let law = PinLaw::StateDependent {
             p: *p,
             close_max,
             slowdown: fx.open_slowdown,
+            band,
+        };
+        let width = if band {
+            fx.friction_band_pct
+        } else {
+            p.backlash_pct
         };
         PinCart {
             breakaway: fx.breakaway_pct,
-            ..Self::with_law(law, p.backlash_pct, dt)
+            ..Self::with_law(law, width, dt)
         }
     }
 
@@ -160,7 +170,8 @@ impl PinCart {
                 p,
                 close_max,
                 slowdown,
-            } => self.pin_step_two(p, *close_max, *slowdown, e),
+                band,
+            } => self.pin_step_two(p, *close_max, *slowdown, *band, e),
         };
         self.y += dy;
         // eq. (3): the cart follows only when the pin pushes a side; a stuck cart only once the
@@ -182,9 +193,17 @@ impl PinCart {
         self.v
     }
 
-    /// Pin movement of pin-cart II for one sample, eqs. (4)-(7).
+    /// Pin movement of pin-cart II for one sample, eqs. (4)-(7); with a friction `band`, the
+    /// crossing of the cart at the pushing speed too.
     #[inline]
-    fn pin_step_two(&self, p: &PinCart2Params, close_max: f64, slowdown: f64, e: f64) -> f64 {
+    fn pin_step_two(
+        &self,
+        p: &PinCart2Params,
+        close_max: f64,
+        slowdown: f64,
+        band: bool,
+        e: f64,
+    ) -> f64 {
         if e == 0.0 {
             return 0.0;
         }
@@ -198,7 +217,7 @@ impl PinCart {
         // loading the stem: it unloads at the pushing speed, back to the side, before it
         // crosses the cart.
         let unload = -along(rel) - self.half;
-        if pushing || unload > 1e-12 {
+        if pushing || unload > 1e-12 || band {
             // A chamber that grows with opening fills and vents more slowly: the response and
             // the stroke speed fall alike (dy_min, the positioner's creep, does not).
             let max = if opening {
@@ -214,7 +233,14 @@ impl PinCart {
             };
             let speed = (gain * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
             let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
-            along(if pushing { step } else { step.min(unload) })
+            along(if pushing {
+                step
+            } else if unload > 1e-12 {
+                step.min(unload)
+            } else {
+                // Crossing the friction band at the pushing speed, up to its far side.
+                (speed.min(max) * self.dt).min(self.half - along(rel))
+            })
         } else {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
             // its far side. A crossing time of 0 means no apparent backlash. The slower chamber

@@ -541,6 +541,39 @@ fn open_slowdown_also_slows_the_crossing_of_the_cart() {
 }
 
 #[test]
+fn a_friction_band_is_crossed_at_the_positioners_speed() {
+    // A 2 % band, positioner gain 4 /s, no speed limit to speak of: a reversal by E % costs
+    // the time the pin needs to cross the band at 4 E %/s, so small reversals lose more time
+    // than large ones (eq. 7's crossing time would be the same for both).
+    let mut spec = bundled(ModelKind::Pincart2);
+    if let Some(p) = spec.pincart2.as_mut() {
+        (p.p_gain_per_s, p.dy_max_pct_per_s, p.dy_min_pct_per_s) = (4.0, 1000.0, 0.0);
+        (p.a_p, p.b_p, p.c_p) = (0.0, 0.0, 0.0);
+    }
+    spec.dead_time_s = 0.0;
+    spec.effects.friction_band_pct = 2.0;
+    let first_move = |size: f64| {
+        let mut v = Valve::new(&spec, DT).unwrap();
+        v.reset(40.0, 40.0);
+        let settled = *run(&mut v, 50.0, 2000).last().unwrap();
+        let out = run(&mut v, 50.0 - size, 2000);
+        out.iter().position(|y| *y < settled - 1e-6).unwrap_or(2000) as f64 * DT
+    };
+    let (small, large) = (first_move(2.0), first_move(20.0));
+    // Crossing 2 % at about 4 * 2 = 8 %/s takes ~0.25 s; at 80 %/s ~0.025 s.
+    assert!(
+        (0.2..0.35).contains(&small),
+        "{small} s after a 2 % reversal"
+    );
+    assert!(large < 0.06, "{large} s after a 20 % reversal");
+    // Same-direction steps start at once.
+    let mut v = Valve::new(&spec, DT).unwrap();
+    v.reset(40.0, 40.0);
+    let settled = *run(&mut v, 50.0, 2000).last().unwrap();
+    assert!(v.step(52.0) > settled);
+}
+
+#[test]
 fn slow_sampling_keeps_every_model_stable() {
     // At 1 Hz, P_k dt exceeds 1 for the bundled pin-cart gains: no model may overshoot a step.
     for kind in ModelKind::ALL {
