@@ -91,9 +91,12 @@ pub(crate) fn variants(
             MAX_DEAD_TIME_S,
             get(Knob::DeadTime).max(0.3),
         )]],
-        Effect::Backlash if get(Knob::Crossing) == 0.0 => vec![
+        // Lost motion either as pin-cart II's crossing time (eq. 7) or as a friction band the
+        // positioner crosses at its own speed (the lost time then depends on the move).
+        Effect::Backlash if get(Knob::Crossing) == 0.0 && get(Knob::FrictionBand) == 0.0 => vec![
             vec![f(Knob::Crossing, 0.02, 5.0, 0.2)],
             vec![f(Knob::Crossing, 0.02, 5.0, 0.8)],
+            vec![f(Knob::FrictionBand, 0.05, 20.0, 1.0)],
         ],
         Effect::StateDependentDelay
             if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>

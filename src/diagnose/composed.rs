@@ -119,6 +119,8 @@ pub enum Knob {
     JumpFraction,
     /// Breakaway distance of stick-slip inside the positioner loop, %.
     Breakaway,
+    /// Friction band crossed at the positioner's speed, %.
+    FrictionBand,
     /// Deadband width, %.
     Deadband,
     /// Lowest travel, %.
@@ -150,6 +152,7 @@ impl Knob {
             Knob::Slew | Knob::HalfOpenSlew | Knob::ClosingSlew | Knob::MinSpeed => "%/s",
             Knob::Stickband
             | Knob::Breakaway
+            | Knob::FrictionBand
             | Knob::Deadband
             | Knob::TravelMin
             | Knob::TravelMax
@@ -173,6 +176,7 @@ impl Knob {
             Knob::Stickband => "stickband_pct",
             Knob::JumpFraction => "jump_fraction",
             Knob::Breakaway => "breakaway_pct",
+            Knob::FrictionBand => "friction_band_pct",
             Knob::Deadband => "deadband_pct",
             Knob::TravelMin => "travel_min_pct",
             Knob::TravelMax => "travel_max_pct",
@@ -236,6 +240,7 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
             }
         }
         Knob::Breakaway => e.breakaway_pct,
+        Knob::FrictionBand => e.friction_band_pct,
         Knob::Deadband => e.deadband_pct,
         Knob::TravelMin => spec.travel.min_pct,
         Knob::TravelMax => spec.travel.max_pct,
@@ -277,6 +282,7 @@ pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
         }
         Knob::JumpFraction => e.jumpband_pct = v.clamp(0.0, 1.0) * e.stickband_pct,
         Knob::Breakaway => e.breakaway_pct = v,
+        Knob::FrictionBand => e.friction_band_pct = v,
         Knob::Deadband => e.deadband_pct = v,
         Knob::TravelMin => spec.travel.min_pct = v,
         Knob::TravelMax => spec.travel.max_pct = v,

@@ -135,6 +135,8 @@ pub enum Detail {
         /// Closed and fully open, when it depends on the opening.
         crossing_closed_s: Option<f64>,
         crossing_open_s: Option<f64>,
+        /// The friction band crossed at the positioner's speed, %, when fitted as one.
+        friction_band_pct: Option<f64>,
     },
     StateDependentDelay {
         /// Mean reversal delay below and above 50 % opening, s.
@@ -288,6 +290,18 @@ fn delays(facts: &Facts) -> Delays {
     }
 }
 
+/// Time a friction band costs a 5 % reversal at half travel, s: the band crossed at the
+/// positioner's speed for that error (at least a sample's worth of nothing).
+fn band_crossing_s(spec: &ModelSpec) -> f64 {
+    let g = |k| composed::get(spec, k);
+    let slow = composed::half_open(spec);
+    let speed = (g(Knob::Gain) * 5.0)
+        .max(g(Knob::MinSpeed))
+        .min(g(Knob::Slew))
+        / slow;
+    g(Knob::FrictionBand) / speed.max(1e-9)
+}
+
 /// Mean settled V_P - O_P over the holds `approach` selects, and their count.
 fn hold_offset(facts: &Facts, approach: impl Fn(f64) -> bool) -> (f64, usize) {
     let (m, _, n) = stats::mean_sd(
@@ -314,10 +328,17 @@ fn detail(
             dead_time_s: g(Knob::DeadTime),
             was_s: composed::get(before, Knob::DeadTime),
         },
+        Effect::Backlash if g(Knob::FrictionBand) > 0.0 => Detail::Backlash {
+            crossing_half_open_s: band_crossing_s(spec),
+            crossing_closed_s: None,
+            crossing_open_s: None,
+            friction_band_pct: Some(g(Knob::FrictionBand)),
+        },
         Effect::Backlash => Detail::Backlash {
             crossing_half_open_s: g(Knob::Crossing) * composed::half_open(spec),
             crossing_closed_s: slowed.then(|| g(Knob::Crossing)),
             crossing_open_s: slowed.then(|| g(Knob::Crossing) * (1.0 + g(Knob::Slowdown))),
+            friction_band_pct: None,
         },
         Effect::StateDependentDelay => {
             let mean = |below: bool| {

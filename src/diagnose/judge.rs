@@ -34,6 +34,9 @@ const MIN_EXCESS_SHARE: f64 = 0.1;
 /// Largest BIC change (it must fall by more than this).
 const MAX_DELTA_BIC: f64 = -10.0;
 
+/// Smallest friction band worth naming, %: a healthy stem's is a tenth of a percent.
+const MIN_FRICTION_BAND_PCT: f64 = 0.3;
+
 /// A refitted candidate and how it did on the held-out blocks.
 #[derive(Debug, Clone)]
 pub(crate) struct Trial {
@@ -163,7 +166,10 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
     let g = |k| composed::get(spec, k);
     match effect {
         Effect::DeadTime => g(Knob::DeadTime) > NOMINAL_DEAD_TIME_S + 0.02,
-        Effect::Backlash => g(Knob::Crossing) * composed::half_open(spec) >= 0.03,
+        Effect::Backlash => {
+            g(Knob::Crossing) * composed::half_open(spec) >= 0.03
+                || g(Knob::FrictionBand) >= MIN_FRICTION_BAND_PCT
+        }
         Effect::StateDependentDelay => {
             g(Knob::Slowdown) >= 0.3 || g(Knob::CrossingSlope).abs() * 100.0 >= 0.1
         }

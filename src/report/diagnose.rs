@@ -152,9 +152,18 @@ pub fn evidence(f: &Finding) -> String {
             "{moves}{steps}; the valve answers every move late: a pure delay of {dead_time_s:.2} s (was {was_s:.2} s)"
         ),
         Detail::Backlash {
+            friction_band_pct: Some(band),
+            crossing_half_open_s,
+            ..
+        } => format!(
+            "{rev}{steps}; after a reversal the positioner must cross a friction band of {band:.2} % before V_P moves \
+             (about {crossing_half_open_s:.2} s after a 5 % reversal at half travel, longer after smaller ones): lost motion (backlash)"
+        ),
+        Detail::Backlash {
             crossing_half_open_s,
             crossing_closed_s,
             crossing_open_s,
+            ..
         } => {
             let range = match (crossing_closed_s, crossing_open_s) {
                 (Some(c), Some(o)) => format!(" at half travel ({c:.2} s closed, {o:.2} s open)"),
