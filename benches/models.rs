@@ -1,4 +1,4 @@
-//! Model stepping speed: nanoseconds per step for every model, and the time to simulate the
+//! Model stepping speed: nanoseconds per step for every model (the physical one too), and the time to simulate the
 //! 41,300 samples of the paper's validation set. Run with `cargo bench --bench models`.
 //! `benches/models_python.py` times the same pin-cart II loop in plain Python for comparison.
 
@@ -32,7 +32,7 @@ fn bench_models(c: &mut Criterion) {
     let op = random_steps(N);
     let mut per_step = c.benchmark_group("step");
     per_step.throughput(Throughput::Elements(1));
-    for kind in ModelKind::ALL {
+    for kind in ModelKind::EVERY {
         let mut valve = Valve::new(&bundled(kind), 0.01).expect("bundled model");
         valve.reset(op[0], op[0]);
         let mut k = 0usize;

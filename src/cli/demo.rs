@@ -1,15 +1,19 @@
 //! `valve-bridge demo concealed`: hide an effect in a plausible recording, show that the
 //! baseline fit looks fine, then let `diagnose` find it.
+//!
+//! The valve is the physical one (`model = "physical"`: positioner, chamber, stem friction,
+//! stops, sensor), not the composed valve diagnosis fits, with the named effect built from the
+//! physics that causes it at a moderate size ([`synth::physical`]).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use valve_bridge::diagnose::{self, composed};
+use valve_bridge::diagnose::{self, Effect};
 use valve_bridge::metrics;
-use valve_bridge::model::{bundled, ModelKind, ModelSpec};
+use valve_bridge::model::ModelSpec;
 use valve_bridge::recording;
 use valve_bridge::report::diagnose as report;
-use valve_bridge::synth::{self, Excitation};
+use valve_bridge::synth::{self, physical, Excitation};
 
 /// Arguments of `valve-bridge demo`.
 #[derive(clap::Args)]
@@ -17,9 +21,10 @@ pub struct Args {
     /// Which demo: only `concealed` so far.
     #[arg(value_parser = ["concealed"])]
     which: String,
-    /// The effect to hide: backlash, deadband, calibration, quantization, stiction, dead_time.
+    /// The effect to hide, any of the vocabulary: dead_time, backlash, state_dependent_delay,
+    /// slew_rate, asymmetry, min_speed, stiction, deadband, saturation, quantization, calibration.
     #[arg(long, default_value = "backlash")]
-    effect: String,
+    effect: Effect,
     /// Seed of the recording's noise and disturbances.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -28,46 +33,40 @@ pub struct Args {
     out: PathBuf,
 }
 
-/// A healthy valve (FOPDT-like, 0.1 s dead time, 60 %/s stroke) with one small effect added.
-fn hidden(effect: &str) -> anyhow::Result<ModelSpec> {
-    let mut spec = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
-    spec.dead_time_s = 0.1;
-    let set = |spec: &mut ModelSpec, knob, v| composed::set(spec, knob, v);
-    match effect {
-        "backlash" => set(&mut spec, composed::Knob::Crossing, 0.4),
-        "deadband" => set(&mut spec, composed::Knob::Deadband, 0.4),
-        "calibration" => set(&mut spec, composed::Knob::CalOffset, 0.8),
-        "quantization" => set(&mut spec, composed::Knob::Quantum, 0.2),
-        "stiction" => set(&mut spec, composed::Knob::Stickband, 0.8),
-        "dead_time" => spec.dead_time_s = 0.6,
-        other => anyhow::bail!("unknown effect `{other}`: one of backlash, deadband, calibration, quantization, stiction, dead_time"),
+/// A healthy physical valve with `effect` at a moderate size, its sensor noise `noise` (%).
+fn hidden(effect: Effect, noise: f64, seed: u64) -> ModelSpec {
+    let mut spec = physical::with_effect(effect, physical::moderate_size(effect));
+    if let Some(p) = spec.physical.as_mut() {
+        p.sensor_noise_pct = noise;
+        p.noise_seed = seed;
     }
-    composed::set(&mut spec, composed::Knob::Slew, 60.0);
-    Ok(spec)
+    spec
 }
 
 /// Generates the recording, shows the baseline, runs the diagnosis and prints what it found.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let spec = hidden(&args.effect)?;
+    let effect = args.effect;
     let dt = 0.01;
     // A quantizing sensor reports the lattice itself, so that case is recorded without extra noise.
-    let noise = if args.effect == "quantization" {
+    let noise = if effect == Effect::Quantization {
         0.0
     } else {
         0.1
     };
+    let spec = hidden(effect, noise, args.seed);
     let rec = synth::generate(
         &spec,
         Excitation::ClosedLoop { level_pct: 50.0 },
         900.0,
         dt,
-        noise,
+        0.0,
         args.seed,
     )?;
     recording::write(&args.out, &rec).with_context(|| format!("writing {}", args.out.display()))?;
     println!(
-        "1. Generated 15 min of closed-loop level control through a valve with a hidden `{}` ({noise} % sensor noise): {}",
-        args.effect,
+        "1. Generated 15 min of closed-loop level control through a physical valve (positioner, chamber, stem friction, sensor) with a hidden `{}` ({}; {noise} % sensor noise): {}",
+        effect.name(),
+        physical::describe(effect, physical::moderate_size(effect)),
         args.out.display()
     );
     let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})?;
@@ -88,7 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             f.heldout_sse_after
         );
     }
-    let hit = d.findings.iter().any(|f| f.effect.name() == args.effect);
+    let hit = d.findings.iter().any(|f| f.effect == effect);
     println!(
         "4. {} {}",
         if hit { "Right:" } else { "Missed:" },

@@ -1,0 +1,295 @@
+//! Scores of the blind diagnosis benchmark: the confusion matrix of true effect against first
+//! finding, precision and recall over all findings, the false-finding rate on healthy valves,
+//! the held-out gain, the smallest size found reliably per excitation, the time per case, and
+//! the overall figures against their targets. Only arithmetic and printing; no diagnosis.
+
+use valve_bridge::diagnose::Effect;
+
+/// What one case was and what diagnosis said about it.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub excitation: &'static str,
+    pub labels: Vec<Effect>,
+    /// Each planned effect with the size it was drawn at.
+    pub sizes: Vec<(Effect, f64)>,
+    /// The effects found, in the order diagnosis found them.
+    pub findings: Vec<Effect>,
+    pub baseline_heldout_sse: f64,
+    pub final_heldout_sse: f64,
+    pub seconds: f64,
+}
+
+impl Outcome {
+    /// 1 - final / baseline held-out SSE.
+    pub fn gain(&self) -> f64 {
+        1.0 - self.final_heldout_sse / self.baseline_heldout_sse
+    }
+}
+
+/// Targets the method is judged against.
+pub const FIRST_HIT_TARGET: f64 = 0.90;
+pub const PRECISION_TARGET: f64 = 0.90;
+pub const RECALL_TARGET: f64 = 0.85;
+pub const HEALTHY_FALSE_TARGET: f64 = 0.02;
+pub const GAIN_TARGET: f64 = 0.50;
+pub const SECONDS_TARGET: f64 = 15.0;
+/// Share of cases a size bin must find to count as found reliably.
+pub const RELIABLE: f64 = 0.80;
+
+fn short(e: Option<Effect>) -> &'static str {
+    match e {
+        None => "none",
+        Some(Effect::DeadTime) => "dt",
+        Some(Effect::Backlash) => "bkl",
+        Some(Effect::StateDependentDelay) => "sdd",
+        Some(Effect::SlewRate) => "slew",
+        Some(Effect::Asymmetry) => "asym",
+        Some(Effect::MinSpeed) => "mins",
+        Some(Effect::Stiction) => "stic",
+        Some(Effect::Deadband) => "db",
+        Some(Effect::Saturation) => "sat",
+        Some(Effect::Quantization) => "qnt",
+        Some(Effect::Calibration) => "cal",
+    }
+}
+
+fn classes() -> Vec<Option<Effect>> {
+    let mut c: Vec<Option<Effect>> = Effect::ALL.iter().map(|e| Some(*e)).collect();
+    c.push(None);
+    c
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn pct(num: usize, den: usize) -> String {
+    if den == 0 {
+        "  -".into()
+    } else {
+        format!("{:.0} %", 100.0 * num as f64 / den as f64)
+    }
+}
+
+/// The confusion matrix over valves with at most one effect, then the two-effect valves.
+pub fn print_confusion(all: &[Outcome]) {
+    println!("\nConfusion matrix, valves with at most one effect (rows: true effect, columns: first finding):");
+    let cls = classes();
+    print!("{:>6}", "");
+    for c in &cls {
+        print!("{:>6}", short(*c));
+    }
+    println!("{:>7}", "cases");
+    for row in &cls {
+        let cases: Vec<&Outcome> = all
+            .iter()
+            .filter(|o| o.labels.len() <= 1 && o.labels.first().copied() == *row)
+            .collect();
+        print!("{:>6}", short(*row));
+        for col in &cls {
+            let n = cases
+                .iter()
+                .filter(|o| o.findings.first().copied() == *col)
+                .count();
+            print!("{:>6}", if n == 0 { ".".into() } else { n.to_string() });
+        }
+        println!("{:>7}", cases.len());
+    }
+    let doubles: Vec<&Outcome> = all.iter().filter(|o| o.labels.len() >= 2).collect();
+    let first = doubles
+        .iter()
+        .filter(|o| o.findings.first().is_some_and(|f| o.labels.contains(f)))
+        .count();
+    let both = doubles
+        .iter()
+        .filter(|o| o.labels.iter().all(|l| o.findings.contains(l)))
+        .count();
+    println!(
+        "Two effects at once: first finding names one of them in {first}/{} valves, both found in {both}/{}",
+        doubles.len(),
+        doubles.len()
+    );
+}
+
+/// Precision and recall per effect over all findings; returns the overall (precision, recall).
+pub fn print_precision_recall(all: &[Outcome]) -> (f64, f64) {
+    println!("\nPer effect, over all findings:");
+    println!(
+        "{:<22}{:>8}{:>8}{:>8}{:>11}{:>8}",
+        "effect", "labelled", "found", "false", "precision", "recall"
+    );
+    let (mut tp, mut fp, mut labelled) = (0, 0, 0);
+    for e in Effect::ALL {
+        let with: Vec<&Outcome> = all.iter().filter(|o| o.labels.contains(&e)).collect();
+        let hits = with.iter().filter(|o| o.findings.contains(&e)).count();
+        let false_ = all
+            .iter()
+            .filter(|o| !o.labels.contains(&e) && o.findings.contains(&e))
+            .count();
+        tp += hits;
+        fp += false_;
+        labelled += with.len();
+        println!(
+            "{:<22}{:>8}{:>8}{:>8}{:>11}{:>8}",
+            e.name(),
+            with.len(),
+            hits,
+            false_,
+            pct(hits, hits + false_),
+            pct(hits, with.len())
+        );
+    }
+    let precision = tp as f64 / (tp + fp).max(1) as f64;
+    let recall = tp as f64 / labelled.max(1) as f64;
+    (precision, recall)
+}
+
+/// Bins of the sizes of `effect` over `all` (three log-spaced bins between the extremes).
+fn size_bins(all: &[Outcome], effect: Effect) -> Vec<f64> {
+    let sizes: Vec<f64> = all
+        .iter()
+        .flat_map(|o| o.sizes.iter())
+        .filter(|(e, s)| *e == effect && *s > 0.0)
+        .map(|(_, s)| *s)
+        .collect();
+    let lo = sizes.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = sizes.iter().copied().fold(0.0, f64::max);
+    if !lo.is_finite() || hi <= lo {
+        return vec![lo, hi];
+    }
+    (0..=3)
+        .map(|k| (lo.ln() + (hi.ln() - lo.ln()) * k as f64 / 3.0).exp())
+        .collect()
+}
+
+/// Per effect and excitation: the lower edge of the smallest size bin found in at least 80 %
+/// of its valves (found: the effect is among the findings).
+pub fn print_smallest_found(all: &[Outcome], excitations: &[&str]) {
+    println!("\nSmallest size found in >= 80 % of valves, per excitation (size bin lower edge, found/valves in it):");
+    print!("{:<30}", "effect (size unit)");
+    for x in excitations {
+        print!("{:>17}", x);
+    }
+    println!();
+    for e in Effect::ALL {
+        let edges = size_bins(all, e);
+        print!("{:<30}", format!("{} ({})", e.name(), unit(e)));
+        for x in excitations {
+            let mut cell = "-".to_string();
+            for b in 0..edges.len().saturating_sub(1) {
+                let (lo, hi) = (edges[b], edges[b + 1]);
+                let last = b + 2 == edges.len();
+                let inside: Vec<&Outcome> = all
+                    .iter()
+                    .filter(|o| o.excitation == *x && o.labels.contains(&e))
+                    .filter(|o| {
+                        o.sizes
+                            .iter()
+                            .any(|(f, s)| *f == e && *s >= lo && (*s < hi || (last && *s <= hi)))
+                    })
+                    .collect();
+                let found = inside.iter().filter(|o| o.findings.contains(&e)).count();
+                if !inside.is_empty() && found as f64 >= RELIABLE * inside.len() as f64 {
+                    cell = format!("{lo:.3} ({found}/{})", inside.len());
+                    break;
+                }
+            }
+            print!("{cell:>17}");
+        }
+        println!();
+    }
+}
+
+fn unit(e: Effect) -> &'static str {
+    match e {
+        Effect::DeadTime => "s",
+        Effect::StateDependentDelay => "g",
+        Effect::SlewRate => "%/s",
+        Effect::MinSpeed => "q_min/K, %",
+        Effect::Asymmetry => "ratio",
+        Effect::Saturation => "100 - stop, %",
+        _ => "%",
+    }
+}
+
+/// The overall figures against their targets.
+pub fn print_overall(all: &[Outcome], precision: f64, recall: f64) {
+    let with: Vec<&Outcome> = all.iter().filter(|o| !o.labels.is_empty()).collect();
+    let healthy: Vec<&Outcome> = all.iter().filter(|o| o.labels.is_empty()).collect();
+    let first = with
+        .iter()
+        .filter(|o| o.findings.first().is_some_and(|f| o.labels.contains(f)))
+        .count();
+    let first_rate = first as f64 / with.len().max(1) as f64;
+    let false_healthy = healthy.iter().filter(|o| !o.findings.is_empty()).count();
+    let false_rate = false_healthy as f64 / healthy.len().max(1) as f64;
+    let gain = median(with.iter().map(|o| o.gain()).collect());
+    let secs: Vec<f64> = all.iter().map(|o| o.seconds).collect();
+    let (t_med, t_max) = (
+        median(secs.clone()),
+        secs.iter().copied().fold(0.0, f64::max),
+    );
+    println!(
+        "\nHealthy valves with any finding: {false_healthy}/{}",
+        healthy.len()
+    );
+    println!("Time per case (diagnosis): median {t_med:.1} s, max {t_max:.1} s");
+    println!(
+        "\nOverall, {} valves ({} with an effect, {} healthy):",
+        all.len(),
+        with.len(),
+        healthy.len()
+    );
+    let line = |what: &str, value: String, ok: bool, target: &str| {
+        println!(
+            "  {what:<52}{value:>9}   target {target:<8} {}",
+            if ok { "met" } else { "MISSED" }
+        );
+    };
+    line(
+        "first finding names a true effect",
+        format!("{:.1} %", 100.0 * first_rate),
+        first_rate >= FIRST_HIT_TARGET,
+        ">= 90 %",
+    );
+    line(
+        "precision over all findings",
+        format!("{:.1} %", 100.0 * precision),
+        precision >= PRECISION_TARGET,
+        ">= 90 %",
+    );
+    line(
+        "recall over all labels",
+        format!("{:.1} %", 100.0 * recall),
+        recall >= RECALL_TARGET,
+        ">= 85 %",
+    );
+    line(
+        "healthy valves with any finding",
+        format!("{:.1} %", 100.0 * false_rate),
+        false_rate <= HEALTHY_FALSE_TARGET,
+        "<= 2 %",
+    );
+    line(
+        "median held-out gain (valves with an effect)",
+        format!("{:.1} %", 100.0 * gain),
+        gain >= GAIN_TARGET,
+        ">= 50 %",
+    );
+    line(
+        "time per case (max)",
+        format!("{t_max:.1} s"),
+        t_max <= SECONDS_TARGET,
+        "<= 15 s",
+    );
+}

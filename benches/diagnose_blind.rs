@@ -1,0 +1,210 @@
+//! A blind, randomised benchmark of `diagnose` on physical valves.
+//!
+//! Draws valves from the physical model (`model = "physical"`, not the composed pin-cart valve
+//! diagnosis fits): healthy ones, ones with one effect of the vocabulary, and ones with two,
+//! under five excitations (random steps, closed-loop level control, small steps, ramps, a mix),
+//! three sensor-noise levels, with and without a fine sensor lattice. Each valve is labelled
+//! from its physics by the thresholds in `benches/blind/cases.rs`, never from what diagnosis
+//! finds; each 10-minute recording at 100 Hz is diagnosed and scored (`benches/blind/score.rs`).
+//!
+//! Run: `cargo bench --bench diagnose_blind -- [--seed N] [--cases N] [--only EFFECT|none]
+//! [--jsonl PATH]` (also `VB_BLIND_SEED`, `VB_BLIND_CASES`; defaults seed 1, 220 cases).
+//! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis.
+
+#[path = "blind/cases.rs"]
+mod cases;
+#[path = "blind/score.rs"]
+mod score;
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use serde_json::json;
+use valve_bridge::diagnose::{self, Effect};
+use valve_bridge::report::diagnose as report;
+
+/// Length of every recording, s.
+const DURATION_S: f64 = 600.0;
+
+struct Options {
+    seed: u64,
+    cases: usize,
+    only: Option<Option<Effect>>,
+    jsonl: Option<PathBuf>,
+}
+
+fn env_number(name: &str) -> Result<Option<u64>, String> {
+    match std::env::var(name) {
+        Ok(v) => v
+            .parse()
+            .map(Some)
+            .map_err(|_| format!("{name}={v}: expected a whole number")),
+        Err(_) => Ok(None),
+    }
+}
+
+fn options() -> Result<Options, String> {
+    let mut o = Options {
+        seed: env_number("VB_BLIND_SEED")?.unwrap_or(1),
+        cases: env_number("VB_BLIND_CASES")?.map_or(220, |n| n as usize),
+        only: None,
+        jsonl: None,
+    };
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = |what: &str| args.next().ok_or(format!("{a} needs {what}"));
+        match a.as_str() {
+            "--seed" => {
+                o.seed = value("a number")?
+                    .parse()
+                    .map_err(|_| "--seed: expected a whole number".to_string())?
+            }
+            "--cases" => {
+                o.cases = value("a number")?
+                    .parse()
+                    .map_err(|_| "--cases: expected a whole number".to_string())?
+            }
+            "--only" => {
+                let v = value("an effect name or `none`")?;
+                o.only = Some(if v == "none" {
+                    None
+                } else {
+                    Some(v.parse::<Effect>()?)
+                });
+            }
+            "--jsonl" => o.jsonl = Some(PathBuf::from(value("a file path")?)),
+            // `cargo bench` passes `--bench` to every bench binary.
+            "--bench" => {}
+            other => {
+                return Err(format!(
+                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --jsonl PATH"
+                ))
+            }
+        }
+    }
+    Ok(o)
+}
+
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("diagnose_blind: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
+    let o = options()?;
+    let mut plans = cases::plans(o.seed, o.cases);
+    if let Some(only) = o.only {
+        plans.retain(|p| match only {
+            None => p.effects.is_empty(),
+            Some(e) => p.effects.contains(&e),
+        });
+    }
+    let mut jsonl = match &o.jsonl {
+        Some(path) => Some(
+            std::fs::File::create(path)
+                .map_err(|e| format!("--jsonl {}: cannot create: {e}", path.display()))?,
+        ),
+        None => None,
+    };
+    println!(
+        "diagnose_blind: seed {}, {} valves, {DURATION_S} s at 100 Hz each",
+        o.seed,
+        plans.len()
+    );
+    let mut outcomes = Vec::new();
+    for (k, plan) in plans.iter().enumerate() {
+        let case =
+            cases::build(plan, DURATION_S).map_err(|e| format!("case {}: {e}", plan.index))?;
+        let rec = &case.rec;
+        let started = Instant::now();
+        let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})
+            .map_err(|e| format!("case {}: diagnose: {e}", plan.index))?;
+        let seconds = started.elapsed().as_secs_f64();
+        let out = score::Outcome {
+            excitation: plan.excitation,
+            labels: case.labels.clone(),
+            sizes: case.sizes.clone(),
+            findings: d.findings.iter().map(|f| f.effect).collect(),
+            baseline_heldout_sse: d.baseline.heldout_sse,
+            final_heldout_sse: d.final_model.heldout_sse,
+            seconds,
+        };
+        eprintln!(
+            "{:>4}/{} case {:>3} {:<13} noise {:.2} lattice {:.3} labels [{}] found [{}] gain {:>5.1} % {:.1} s",
+            k + 1,
+            plans.len(),
+            plan.index,
+            plan.excitation,
+            case.noise_pct,
+            case.lattice_pct,
+            names(&out.labels),
+            names(&out.findings),
+            100.0 * out.gain(),
+            seconds
+        );
+        if let Some(f) = jsonl.as_mut() {
+            writeln!(f, "{}", json_line(&case, &d, &out))
+                .map_err(|e| format!("--jsonl: cannot write: {e}"))?;
+        }
+        outcomes.push(out);
+    }
+    score::print_confusion(&outcomes);
+    let (precision, recall) = score::print_precision_recall(&outcomes);
+    score::print_smallest_found(&outcomes, &cases::EXCITATIONS);
+    score::print_overall(&outcomes, precision, recall);
+    Ok(())
+}
+
+fn names(v: &[Effect]) -> String {
+    v.iter().map(|e| e.name()).collect::<Vec<_>>().join(",")
+}
+
+/// One case as a JSON line: its physics, labels, findings and scores.
+fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) -> String {
+    let plan = &case.plan;
+    let findings: Vec<serde_json::Value> = d
+        .findings
+        .iter()
+        .map(|f| {
+            json!({
+                "effect": f.effect.name(),
+                "params": f.params,
+                "heldout_sse_before": f.heldout_sse_before,
+                "heldout_sse_after": f.heldout_sse_after,
+            })
+        })
+        .collect();
+    let sizes: Vec<serde_json::Value> = case
+        .sizes
+        .iter()
+        .map(|(e, s)| json!({"effect": e.name(), "size": s}))
+        .collect();
+    json!({
+        "index": plan.index,
+        "seed": plan.seed,
+        "excitation": plan.excitation,
+        "noise_pct": case.noise_pct,
+        "lattice_pct": case.lattice_pct,
+        "draws": case.draws,
+        "planned": names(&plan.effects),
+        "labels": names(&out.labels),
+        "sizes": sizes,
+        "dead_time_s": case.spec.dead_time_s,
+        "travel": [case.spec.travel.min_pct, case.spec.travel.max_pct],
+        "physical": case.spec.physical,
+        "findings": findings,
+        "baseline_heldout_sse": out.baseline_heldout_sse,
+        "final_heldout_sse": out.final_heldout_sse,
+        "gain": out.gain(),
+        "seconds": out.seconds,
+        "verdict": report::verdict(&d.outcome),
+        "notes": d.notes,
+    })
+    .to_string()
+}

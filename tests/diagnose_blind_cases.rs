@@ -1,0 +1,71 @@
+//! The blind benchmark's cases (`benches/blind/cases.rs`) on short recordings: one valve per
+//! effect and a healthy one are labelled with exactly the planned effects, only the planned
+//! physics leaves the healthy ranges, generation is deterministic, and the full plan holds
+//! every effect often enough. Diagnosis is not run here.
+
+#[path = "../benches/blind/cases.rs"]
+mod cases;
+
+use cases::{build, outside_healthy, plans, Plan, EXCITATIONS};
+use valve_bridge::diagnose::Effect;
+
+const SHORT_S: f64 = 240.0;
+
+fn plan(i: usize, effects: Vec<Effect>) -> Plan {
+    Plan {
+        index: i,
+        seed: 1000 + i as u64,
+        effects,
+        excitation: EXCITATIONS[i % EXCITATIONS.len()],
+    }
+}
+
+#[test]
+fn one_valve_per_effect_is_labelled_with_it_alone() {
+    let mut all: Vec<Vec<Effect>> = Effect::ALL.iter().map(|e| vec![*e]).collect();
+    all.push(Vec::new());
+    all.push(vec![Effect::SlewRate, Effect::Asymmetry]);
+    for (i, effects) in all.into_iter().enumerate() {
+        let case = build(&plan(i, effects.clone()), SHORT_S).unwrap();
+        let mut want = effects.clone();
+        want.sort_by_key(|e| *e as usize);
+        assert_eq!(case.labels, want, "plan {effects:?}, {} draws", case.draws);
+        let mut outside = outside_healthy(&case.spec);
+        outside.sort_by_key(|e| *e as usize);
+        assert_eq!(outside, want, "{:?}", case.spec);
+        case.spec.validate().unwrap();
+        assert_eq!(case.rec.len(), (SHORT_S / cases::DT) as usize);
+    }
+}
+
+#[test]
+fn generation_is_deterministic() {
+    let p = plan(3, vec![Effect::Backlash]);
+    let (a, b) = (build(&p, 60.0).unwrap(), build(&p, 60.0).unwrap());
+    assert_eq!(a.spec, b.spec);
+    assert_eq!((&a.rec.op, &a.rec.vp), (&b.rec.op, &b.rec.vp));
+    let other = build(&plan(4, vec![Effect::Backlash]), 60.0).unwrap();
+    assert_ne!(a.rec.vp, other.rec.vp);
+    assert_eq!(plans(5, 220), plans(5, 220));
+}
+
+#[test]
+fn the_full_plan_covers_every_effect_and_excitation() {
+    let all = plans(1, 200);
+    assert_eq!(all.len(), 200);
+    let healthy = all.iter().filter(|p| p.effects.is_empty()).count();
+    let doubles = all.iter().filter(|p| p.effects.len() == 2).count();
+    assert!(healthy >= 40, "{healthy}");
+    assert!((25..=35).contains(&doubles), "{doubles}");
+    for e in Effect::ALL {
+        let n = all.iter().filter(|p| p.effects.contains(&e)).count();
+        assert!(n >= 15, "{}: {n}", e.name());
+        for x in EXCITATIONS {
+            let m = all
+                .iter()
+                .filter(|p| p.effects.first() == Some(&e) && p.excitation == x)
+                .count();
+            assert!(m >= 1, "{} never under {x}", e.name());
+        }
+    }
+}
