@@ -9,7 +9,10 @@
 //!
 //! Run: `cargo bench --bench diagnose_blind -- [--seed N] [--cases N] [--only EFFECT|none]
 //! [--jsonl PATH]` (also `VB_BLIND_SEED`, `VB_BLIND_CASES`; defaults seed 1, 220 cases).
-//! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis.
+//! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis;
+//! `--case N` runs only the case of that index; `--csv DIR` also writes each case's recording
+//! (`case-N.csv`) and its truth (`case-N.truth.json`, the labels and the physical model file
+//! `case-N.toml`), so `valve-bridge diagnose DIR/case-N.csv` repeats it.
 
 #[path = "blind/cases.rs"]
 mod cases;
@@ -31,7 +34,9 @@ struct Options {
     seed: u64,
     cases: usize,
     only: Option<Option<Effect>>,
+    case: Option<usize>,
     jsonl: Option<PathBuf>,
+    csv: Option<PathBuf>,
 }
 
 fn env_number(name: &str) -> Result<Option<u64>, String> {
@@ -49,7 +54,9 @@ fn options() -> Result<Options, String> {
         seed: env_number("VB_BLIND_SEED")?.unwrap_or(1),
         cases: env_number("VB_BLIND_CASES")?.map_or(220, |n| n as usize),
         only: None,
+        case: None,
         jsonl: None,
+        csv: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -73,12 +80,20 @@ fn options() -> Result<Options, String> {
                     Some(v.parse::<Effect>()?)
                 });
             }
+            "--case" => {
+                o.case = Some(
+                    value("a case index")?
+                        .parse()
+                        .map_err(|_| "--case: expected a whole number".to_string())?,
+                )
+            }
             "--jsonl" => o.jsonl = Some(PathBuf::from(value("a file path")?)),
+            "--csv" => o.csv = Some(PathBuf::from(value("a directory")?)),
             // `cargo bench` passes `--bench` to every bench binary.
             "--bench" => {}
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --jsonl PATH"
+                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR"
                 ))
             }
         }
@@ -105,6 +120,13 @@ fn run() -> Result<(), String> {
             Some(e) => p.effects.contains(&e),
         });
     }
+    if let Some(index) = o.case {
+        plans.retain(|p| p.index == index);
+    }
+    if let Some(dir) = &o.csv {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("--csv {}: cannot create: {e}", dir.display()))?;
+    }
     let mut jsonl = match &o.jsonl {
         Some(path) => Some(
             std::fs::File::create(path)
@@ -122,6 +144,9 @@ fn run() -> Result<(), String> {
         let case =
             cases::build(plan, DURATION_S).map_err(|e| format!("case {}: {e}", plan.index))?;
         let rec = &case.rec;
+        if let Some(dir) = &o.csv {
+            write_case(dir, &case)?;
+        }
         let started = Instant::now();
         let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})
             .map_err(|e| format!("case {}: diagnose: {e}", plan.index))?;
@@ -159,6 +184,36 @@ fn run() -> Result<(), String> {
     score::print_smallest_found(&outcomes, &cases::EXCITATIONS);
     score::print_overall(&outcomes, precision, recall);
     Ok(())
+}
+
+/// The case's recording, model file and truth, for the command line.
+fn write_case(dir: &std::path::Path, case: &cases::Case) -> Result<(), String> {
+    let stem = dir.join(format!("case-{}", case.plan.index));
+    let csv = stem.with_extension("csv");
+    valve_bridge::recording::write(&csv, &case.rec)
+        .map_err(|e| format!("--csv: {}: {e}", csv.display()))?;
+    let write = |ext: &str, text: String| {
+        let path = stem.with_extension(ext);
+        std::fs::write(&path, text).map_err(|e| format!("--csv: {}: {e}", path.display()))
+    };
+    write("toml", case.spec.to_toml())?;
+    let sizes: Vec<serde_json::Value> = case
+        .sizes
+        .iter()
+        .map(|(e, s)| json!({"effect": e.name(), "size": s}))
+        .collect();
+    write(
+        "truth.json",
+        json!({
+            "case": format!("case-{}", case.plan.index),
+            "effects": case.labels.iter().map(|e| e.name()).collect::<Vec<_>>(),
+            "sizes": sizes,
+            "excitation": case.plan.excitation,
+            "noise_pct": case.noise_pct,
+            "lattice_pct": case.lattice_pct,
+        })
+        .to_string(),
+    )
 }
 
 fn names(v: &[Effect]) -> String {

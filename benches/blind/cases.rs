@@ -281,7 +281,8 @@ fn healthy_spec(rng: &mut ChaCha8Rng, noise: f64, lattice: f64, seed: u64) -> Mo
         sensor_offset_pct: rng.gen_range(-0.05..=0.05),
         sensor_noise_pct: noise,
         sensor_resolution_pct: lattice,
-        noise_seed: seed,
+        // A TOML integer is signed: the seed keeps 63 bits.
+        noise_seed: seed >> 1,
         internal_step_s: 0.001,
     });
     spec

@@ -1,8 +1,9 @@
 //! Candidates: for each effect of the vocabulary, which knobs of the composed valve it frees,
 //! in which boxes, from which starts; and the refit jobs of a round built from them.
 //!
-//! An effect that is already in the model, or that the data cannot identify (quantization
-//! without a sensor lattice, saturation when V_P never stops short of O_P), has no candidate.
+//! An effect that is already in the model, or that the data cannot identify (saturation when
+//! V_P never stops short of O_P), has no candidate; nor has quantization, which is named from
+//! the sensor lattice itself.
 //! Every candidate also refits the positioner gain and the dead time, so an effect is judged
 //! against the best the rest of the model can do, not against a model fitted without it.
 //!
@@ -14,6 +15,8 @@ use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 
+/// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).
+const SLOWEST_PCT_PER_S: f64 = 0.05;
 /// Longest dead time a diagnosis fits, s.
 pub const MAX_DEAD_TIME_S: f64 = 3.0;
 
@@ -82,7 +85,6 @@ pub(crate) fn variants(
     let get = |k| composed::get(spec, k);
     let f = Free::new;
     let slew = get(Knob::Slew);
-    let half_open_slew = get(Knob::HalfOpenSlew);
     let speed = facts.open_speed.max(facts.close_speed).max(0.5);
     match effect {
         Effect::DeadTime if td_max < MAX_DEAD_TIME_S => vec![vec![f(
@@ -101,21 +103,21 @@ pub(crate) fn variants(
         Effect::StateDependentDelay
             if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>
         {
-            // The slowdown lowers the stroke speed with opening too, so the speed limit is
-            // refitted with it (it may be faster near closed than the baseline's average).
-            // Until a speed limit has been found, it stays a healthy one at half travel: a
-            // valve slower than that is `slew_rate`, judged on its own.
-            let limit = if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
+            // The slowdown lowers the stroke speed with opening too, so the speed limit (at the
+            // closed end, where the valve is fastest) is refitted with it. Until a slow stroke
+            // has been found on its own, that limit stays a healthy one: a valve that is slow
+            // even when closed is `slew_rate`, judged on its own.
+            let limit = if slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
                 f(
-                    Knob::HalfOpenSlew,
+                    Knob::Slew,
                     NOMINAL_MIN_SLEW_PCT_PER_S,
                     FASTEST_PCT_PER_S,
-                    half_open_slew.min(FASTEST_PCT_PER_S),
+                    slew.min(FASTEST_PCT_PER_S),
                 )
             } else {
                 f(
                     Knob::Slew,
-                    0.5,
+                    SLOWEST_PCT_PER_S,
                     FASTEST_PCT_PER_S,
                     (1.5 * slew).min(FASTEST_PCT_PER_S),
                 )
@@ -131,12 +133,11 @@ pub(crate) fn variants(
             v
         }
         Effect::SlewRate
-            if half_open_slew >= NOMINAL_MIN_SLEW_PCT_PER_S
-                && spec.effects.closing_slew_pct_per_s == 0.0 =>
+            if slew >= NOMINAL_MIN_SLEW_PCT_PER_S && spec.effects.closing_slew_pct_per_s == 0.0 =>
         {
             vec![vec![f(
                 Knob::Slew,
-                0.5,
+                SLOWEST_PCT_PER_S,
                 slew.min(FASTEST_PCT_PER_S),
                 speed.min(slew),
             )]]
@@ -144,20 +145,24 @@ pub(crate) fn variants(
         Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => vec![vec![
             f(
                 Knob::Slew,
-                0.5,
+                SLOWEST_PCT_PER_S,
                 FASTEST_PCT_PER_S,
                 facts.open_speed.max(0.5),
             ),
             f(
                 Knob::ClosingSlew,
-                0.5,
+                SLOWEST_PCT_PER_S,
                 FASTEST_PCT_PER_S,
                 facts.close_speed.max(0.5),
             ),
         ]],
-        Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => {
-            vec![vec![f(Knob::MinSpeed, 0.01, 2.0, 0.2)]]
-        }
+        // A positioner's creep floor can be as fast as a slow stroke: up to the slew limit.
+        Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => vec![vec![f(
+            Knob::MinSpeed,
+            0.05,
+            slew.clamp(1.0, 100.0),
+            1.0_f64.min(slew),
+        )]],
         // Stick-slip either on the valve's input (Choudhury) or inside the positioner loop
         // (breakaway: sticks when slow, slips past the target, hunts).
         Effect::Stiction if get(Knob::Stickband) == 0.0 && get(Knob::Breakaway) == 0.0 => vec![
@@ -177,10 +182,7 @@ pub(crate) fn variants(
         Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
             travel_limits(rec).into_iter().collect()
         }
-        Effect::Quantization if get(Knob::Quantum) == 0.0 && facts.lattice_pct > 0.0 => {
-            let q = facts.lattice_pct;
-            vec![vec![f(Knob::Quantum, q * 0.999, q * 1.001, q)]]
-        }
+        // The sensor lattice is named from its evidence, not refitted (see `rounds`).
         Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
             let (g, o) = steady_gain_offset(facts);
             vec![vec![

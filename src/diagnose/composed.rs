@@ -64,14 +64,15 @@ impl Effect {
         match self {
             Effect::Backlash => &[Effect::Deadband, Effect::StateDependentDelay],
             Effect::Deadband => &[Effect::Backlash, Effect::Calibration],
-            Effect::Quantization => &[Effect::Stiction],
-            Effect::Stiction => &[Effect::Quantization, Effect::Deadband],
-            Effect::SlewRate => &[Effect::Asymmetry],
+            Effect::Quantization => &[],
+            Effect::Stiction => &[Effect::Deadband],
+            Effect::SlewRate => &[Effect::Asymmetry, Effect::MinSpeed],
             Effect::Asymmetry => &[Effect::SlewRate],
             Effect::Calibration => &[Effect::Deadband, Effect::Saturation],
             Effect::Saturation => &[Effect::Calibration],
             Effect::StateDependentDelay => &[Effect::Backlash],
-            Effect::DeadTime | Effect::MinSpeed => &[],
+            Effect::MinSpeed => &[Effect::SlewRate],
+            Effect::DeadTime => &[],
         }
     }
 }
@@ -106,9 +107,6 @@ pub enum Knob {
     Slowdown,
     /// dy_max, %/s.
     Slew,
-    /// Opening slew rate at half travel, %/s: dy_max slowed by the opening-dependent slowdown
-    /// (set after [`Knob::Slowdown`]; the same number as [`Knob::Slew`] without a slowdown).
-    HalfOpenSlew,
     /// Closing slew rate, %/s.
     ClosingSlew,
     /// dy_min, %/s.
@@ -136,12 +134,6 @@ pub enum Knob {
 }
 
 impl Knob {
-    /// Whether two knobs set the same number of the spec (one must not be fitted with the other).
-    pub fn same_number(self, other: Knob) -> bool {
-        let slew = |k| matches!(k, Knob::Slew | Knob::HalfOpenSlew);
-        self == other || (slew(self) && slew(other))
-    }
-
     /// The unit of the knob's value as printed.
     pub fn unit(self) -> &'static str {
         match self {
@@ -149,7 +141,7 @@ impl Knob {
             Knob::DeadTime | Knob::Crossing => "s",
             Knob::CrossingSlope => "s/%",
             Knob::Slowdown | Knob::JumpFraction | Knob::CalGain => "",
-            Knob::Slew | Knob::HalfOpenSlew | Knob::ClosingSlew | Knob::MinSpeed => "%/s",
+            Knob::Slew | Knob::ClosingSlew | Knob::MinSpeed => "%/s",
             Knob::Stickband
             | Knob::Breakaway
             | Knob::FrictionBand
@@ -170,7 +162,6 @@ impl Knob {
             Knob::CrossingSlope => "crossing_slope_s_per_pct",
             Knob::Slowdown => "open_slowdown",
             Knob::Slew => "slew_pct_per_s",
-            Knob::HalfOpenSlew => "half_open_slew_pct_per_s",
             Knob::ClosingSlew => "closing_slew_pct_per_s",
             Knob::MinSpeed => "min_speed_pct_per_s",
             Knob::Stickband => "stickband_pct",
@@ -222,7 +213,6 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
         Knob::CrossingSlope => p.b_p,
         Knob::Slowdown => e.open_slowdown,
         Knob::Slew => p.dy_max_pct_per_s,
-        Knob::HalfOpenSlew => p.dy_max_pct_per_s / half_open(spec),
         Knob::ClosingSlew => {
             if e.closing_slew_pct_per_s > 0.0 {
                 e.closing_slew_pct_per_s
@@ -253,7 +243,6 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
 /// Sets a knob on a composed spec (the caller keeps values inside their bounds).
 pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
     let mut p = pc2(spec);
-    let slow = half_open(spec);
     let e = &mut spec.effects;
     match knob {
         Knob::Gain => p.p_gain_per_s = v,
@@ -264,8 +253,7 @@ pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
         }
         Knob::CrossingSlope => p.b_p = v,
         Knob::Slowdown => e.open_slowdown = v,
-        Knob::Slew | Knob::HalfOpenSlew => {
-            let v = if knob == Knob::Slew { v } else { v * slow };
+        Knob::Slew => {
             p.dy_max_pct_per_s = v;
             p.dy_min_pct_per_s = p.dy_min_pct_per_s.min(v);
         }
@@ -383,14 +371,11 @@ mod tests {
             (Knob::Deadband, 0.3),
             (Knob::CalOffset, -1.0),
             (Knob::Slowdown, 2.0),
-            (Knob::HalfOpenSlew, 30.0),
         ] {
             set(&mut spec, knob, v);
             assert_eq!(get(&spec, knob), v, "{knob:?}");
         }
-        // Twice as slow at half travel as closed: the same speed limit, seen from closed.
-        assert_eq!(get(&spec, Knob::Slew), 60.0);
-        assert!(Knob::Slew.same_number(Knob::HalfOpenSlew));
+        assert_eq!(get(&spec, Knob::Slew), 12.0);
         spec.validate().unwrap();
     }
 }

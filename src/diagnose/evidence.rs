@@ -226,7 +226,7 @@ impl Evidence {
         windows: &[Window],
         dt: f64,
     ) -> Self {
-        let s = &facts.slips;
+        let s = &c.slips_measured;
         let (size_pct, size_sd_pct, count) = stats::mean_sd(s.iter().map(|x| x.size_pct.abs()));
         let gaps: Vec<f64> = s
             .windows(2)

@@ -1,6 +1,6 @@
 //! Facts measured straight from a recording, without any model: step delays by direction,
-//! travel speeds, steady-state offsets, the sensor lattice and the slips of V_P (sudden moves
-//! while O_P is nearly still, the mark of stick-slip; see [`slips`]).
+//! travel speeds, steady-state offsets and the sensor lattice; and the detector of slips of V_P
+//! (sudden moves a smooth valve would not make, the mark of stick-slip; see [`slips`]).
 //!
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
@@ -39,23 +39,22 @@ pub struct Hold {
 pub struct Facts {
     pub steps: Vec<StepResponse>,
     pub holds: Vec<Hold>,
-    /// 99.5th percentile of the opening and closing speed of V_P, %/s.
+    /// Fastest opening and closing speed of V_P, noise taken out (99.5th percentiles), %/s.
     pub open_speed: f64,
     pub close_speed: f64,
     /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
     pub lattice_pct: f64,
     /// Number of direction reversals of O_P.
     pub reversals: usize,
-    /// What counts as a slip in this recording, and the slips of the measured V_P.
+    /// What counts as a slip in this recording.
     pub slip_scale: SlipScale,
-    pub slips: Vec<Slip>,
 }
 
-/// Measures the facts of a recording whose V_P has noise `sigma`.
-pub fn measure(rec: &RecordingView, sigma: f64) -> Facts {
+/// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
+/// `lattice_pct` (0 = none, see [`lattice`]).
+pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
-    let (open_speed, close_speed) = speeds(vp, dt);
-    let lattice_pct = lattice(vp);
+    let (open_speed, close_speed) = speeds(vp, dt, sigma);
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     Facts {
         reversals: count_reversals(op),
@@ -64,7 +63,6 @@ pub fn measure(rec: &RecordingView, sigma: f64) -> Facts {
         open_speed,
         close_speed,
         lattice_pct,
-        slips: slips(op, vp, &slip_scale),
         slip_scale,
     }
 }
@@ -138,19 +136,31 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
     holds
 }
 
-fn speeds(vp: &[f64], dt: f64) -> (f64, f64) {
-    let h = ((0.1 / dt).round() as usize).max(1);
-    let mut up: Vec<f64> = Vec::new();
-    let mut down: Vec<f64> = Vec::new();
-    for k in (h..vp.len()).step_by(h) {
-        let s = (vp[k] - vp[k - h]) / (h as f64 * dt);
-        if s > 0.0 {
-            up.push(s);
-        } else {
-            down.push(-s);
+/// The fastest opening and closing speeds of V_P, %/s, noise taken out: over windows of 0.1,
+/// 0.3, 1 and 3 s, the 99.5th percentile of the speeds in each direction less what noise alone
+/// reaches there (2.8 sigmas of the difference of two readings, over the window); the largest
+/// over the windows. Short windows see fast strokes, long ones the slow moves that noise hides
+/// in short ones.
+fn speeds(vp: &[f64], dt: f64, sigma: f64) -> (f64, f64) {
+    let mut best = (0.0f64, 0.0f64);
+    for window_s in [0.1, 0.3, 1.0, 3.0] {
+        let h = ((window_s / dt).round() as usize).max(1);
+        let w = h as f64 * dt;
+        let noise = 2.8 * sigma * std::f64::consts::SQRT_2 / w;
+        let mut up: Vec<f64> = Vec::new();
+        let mut down: Vec<f64> = Vec::new();
+        for k in (h..vp.len()).step_by(h) {
+            let s = (vp[k] - vp[k - h]) / w;
+            if s > 0.0 {
+                up.push(s);
+            } else {
+                down.push(-s);
+            }
         }
+        best.0 = best.0.max(quantile(&mut up, 0.995) - noise);
+        best.1 = best.1.max(quantile(&mut down, 0.995) - noise);
     }
-    (quantile(&mut up, 0.995), quantile(&mut down, 0.995))
+    best
 }
 
 /// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
@@ -158,7 +168,7 @@ fn speeds(vp: &[f64], dt: f64) -> (f64, f64) {
 /// The smallest nonzero change of V_P that occurs at least three times is the candidate
 /// spacing; V_P is on a lattice when at least 95 % of its values sit within 2 % of a spacing of a
 /// multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
-fn lattice(vp: &[f64]) -> f64 {
+pub fn lattice(vp: &[f64]) -> f64 {
     let mut diffs: Vec<f64> = vp
         .windows(2)
         .map(|w| (w[1] - w[0]).abs())
@@ -213,8 +223,8 @@ pub struct SlipScale {
 /// Longest move that still counts as a slip, s: a stem that breaks loose is at its new place
 /// within a tenth of a second, much faster than a positioner follows a command.
 const SLIP_S: f64 = 0.1;
-/// How long before a slip O_P must have been nearly still, s: covers a healthy positioner's
-/// dead time and response, so a valve catching up with a command is not a slip.
+/// How long before a slip the reference must have been nearly still, s: covers a healthy
+/// positioner's dead time and response, so a valve catching up with a command is not a slip.
 const SLIP_LOOKBACK_S: f64 = 0.5;
 
 impl SlipScale {
@@ -251,7 +261,12 @@ fn step_at(s: &[f64], k: usize, h: usize) -> f64 {
     ((s[k + h] - s[k]) - (s[k] - s[k - h])) / h as f64
 }
 
-/// The slips of `y` (measured or simulated V_P) driven by `op`.
+/// The slips of `y` (a measured or simulated V_P) that `reference` does not explain.
+///
+/// `reference` is what a smooth valve would do: the V_P of a model without stick-slip driven
+/// by the same O_P (or O_P itself). Comparing with it rather than with O_P keeps a noisy
+/// command (a controller's output in closed loop) from hiding the slips: the valve filters that
+/// noise, and so does the model.
 ///
 /// With means over `span` samples, d(k) = mean(y[k..k+span]) - mean(y[k-span..k]) is a step
 /// detector: noise in it shrinks with the span, a jump of A completed within the span gives
@@ -259,17 +274,16 @@ fn step_at(s: &[f64], k: usize, h: usize) -> f64 {
 /// following a moving command, or slewing) gives the same d at all three. A slip is a local
 /// peak of |d| above the threshold, with |d| a span before and after below half of it: V_P at
 /// rest on both sides (a spike of the sensor, which comes back within the span, is not). The
-/// command must not explain it: the same step detector on O_P stays below half the slip
-/// from `lookback` samples before the move to its middle (O_P noise averages out in the means
-/// as it does in the valve, a step or a fast move of O_P does not). O(n).
-pub fn slips(op: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
+/// reference must not explain it: the same step detector on it stays below half the slip from
+/// `lookback` samples before the move to its middle. O(n).
+pub fn slips(reference: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
     let h = scale.span;
-    let n = y.len().min(op.len());
+    let n = y.len().min(reference.len());
     let mut out = Vec::new();
     if n < 4 * h + 1 {
         return out;
     }
-    let (sy, so) = (running_sums(&y[..n]), running_sums(&op[..n]));
+    let (sy, so) = (running_sums(&y[..n]), running_sums(&reference[..n]));
     let d = |k: usize| step_at(&sy, k, h);
     let mut k = 2 * h;
     while k + 2 * h <= n {
@@ -405,7 +419,7 @@ mod tests {
             vp: &vp,
             dt,
         };
-        let f = measure(&rec, 0.0);
+        let f = measure(&rec, 0.0, 0.0);
         assert_eq!(f.steps.len(), 2);
         assert!(!f.steps[0].reversal && f.steps[1].reversal);
         assert!((f.steps[0].delay_s - 0.3).abs() < 1e-9 && (f.steps[1].delay_s - 0.8).abs() < 1e-9);

@@ -22,7 +22,6 @@ use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use super::facts::Facts;
 use super::refit::{Free, NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
 use super::scorer::{Errors, Scorer};
-use crate::fit::params::Scale;
 use crate::model::ModelSpec;
 
 /// z of a held-out block's drop in error beyond which it counts as helped (or hurt).
@@ -36,6 +35,18 @@ const MAX_DELTA_BIC: f64 = -10.0;
 
 /// Smallest friction band worth naming, %: a healthy stem's is a tenth of a percent.
 const MIN_FRICTION_BAND_PCT: f64 = 0.3;
+/// The errors below which a minimum speed takes over from proportional action, for it to be
+/// worth naming, %: from a fifth of a percent to a few percent.
+const MIN_SPEED_BAND_PCT: f64 = 0.2;
+const MAX_SPEED_BAND_PCT: f64 = 5.0;
+/// Smallest positioner deadband worth naming, %: the valve then stops short by a tenth of a
+/// percent or more.
+const MIN_DEADBAND_PCT: f64 = 0.2;
+/// Smallest opening-dependent slowdown worth naming: fully open 60 % slower than closed.
+const MIN_SLOWDOWN: f64 = 0.6;
+/// Coarsest sensor lattice that is still not worth naming, %: a 10-bit position reading steps
+/// by 0.1 %; a lattice of 0.15 % or more is as coarse as the moves a controller makes.
+pub(crate) const MIN_LATTICE_PCT: f64 = 0.15;
 
 /// A refitted candidate and how it did on the held-out blocks.
 #[derive(Debug, Clone)]
@@ -132,16 +143,17 @@ pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64) -> f64 {
     }
 }
 
-/// Whether a fitted knob sits at the edge of its box: a scale-type knob (or the slowdown)
-/// within 2 % of either bound. The gain and dead time are left out (they are refitted with
-/// every effect and may rest on a bound).
+/// Whether a fitted knob sits at the edge of its box, where the effect stands in for something
+/// else rather than measuring itself: at its lower bound (within 2 % of it), or within the top
+/// 2 % of the box on its own scale. The gain and dead time are left out (they are refitted with
+/// every effect and may rest on a bound), and so is the jump fraction (a jump as large as the
+/// stickband is Choudhury's classic case).
 fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
     free.iter().any(|f| {
         let v = composed::get(spec, f.knob);
-        (f.def.scale == Scale::Log || f.knob == Knob::Slowdown)
-            && f.knob != Knob::Gain
-            && f.knob != Knob::DeadTime
-            && (v >= f.def.hi * 0.98 || v <= f.def.lo * 1.02)
+        let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs();
+        let at_high = f.def.to_unit(v) > 0.98;
+        !matches!(f.knob, Knob::Gain | Knob::DeadTime | Knob::JumpFraction) && (at_low || at_high)
     })
 }
 
@@ -171,12 +183,13 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
                 || g(Knob::FrictionBand) >= MIN_FRICTION_BAND_PCT
         }
         Effect::StateDependentDelay => {
-            g(Knob::Slowdown) >= 0.3 || g(Knob::CrossingSlope).abs() * 100.0 >= 0.1
+            g(Knob::Slowdown) >= MIN_SLOWDOWN || g(Knob::CrossingSlope).abs() * 100.0 >= 0.1
         }
+        // A slew limit even where the valve is fastest (closed), that V_P reaches.
         Effect::SlewRate => {
             let top = facts.open_speed.max(facts.close_speed);
-            let half = g(Knob::HalfOpenSlew);
-            half < NOMINAL_MIN_SLEW_PCT_PER_S && top >= 0.7 * half
+            let slew = g(Knob::Slew);
+            slew < NOMINAL_MIN_SLEW_PCT_PER_S && top >= 0.7 * slew / composed::half_open(spec)
         }
         Effect::Asymmetry => {
             let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
@@ -186,15 +199,20 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
                 && a.min(b) < 0.8 * FASTEST_PCT_PER_S
                 && oa.min(ob) >= 0.7 * a.min(b)
         }
-        Effect::MinSpeed => g(Knob::MinSpeed) >= 0.02,
+        // The floor takes over from proportional action below an error of dy_min / P_k.
+        // ... but only for small errors: a floor over several % is a constant-speed valve.
+        Effect::MinSpeed => {
+            let band = g(Knob::MinSpeed) / g(Knob::Gain);
+            g(Knob::MinSpeed) >= 0.1 && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band)
+        }
         // Stick-slip needs the slip: a stickband without a jump is a deadband on the input.
         Effect::Stiction => {
             (g(Knob::Stickband) >= 0.1 && g(Knob::Stickband) * g(Knob::JumpFraction) >= 0.1)
                 || g(Knob::Breakaway) >= 0.1
         }
-        Effect::Deadband => g(Knob::Deadband) >= 0.05,
+        Effect::Deadband => g(Knob::Deadband) >= MIN_DEADBAND_PCT,
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
-        Effect::Quantization => g(Knob::Quantum) > 0.0,
+        Effect::Quantization => g(Knob::Quantum) >= MIN_LATTICE_PCT,
         Effect::Calibration => {
             (g(Knob::CalGain) - 1.0).abs() >= 0.01 || g(Knob::CalOffset).abs() >= 0.2
         }
@@ -251,7 +269,6 @@ mod tests {
             lattice_pct: 0.0,
             reversals: 0,
             slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
-            slips: vec![],
         };
         let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
         let with = |knob, v| {
@@ -262,8 +279,8 @@ mod tests {
         let f = facts(30.0, 30.0);
         assert!(material(Effect::DeadTime, &with(Knob::DeadTime, 0.3), &f));
         assert!(!material(Effect::DeadTime, &with(Knob::DeadTime, 0.21), &f));
-        assert!(material(Effect::Deadband, &with(Knob::Deadband, 0.1), &f));
-        assert!(!material(Effect::Deadband, &with(Knob::Deadband, 0.01), &f));
+        assert!(material(Effect::Deadband, &with(Knob::Deadband, 0.3), &f));
+        assert!(!material(Effect::Deadband, &with(Knob::Deadband, 0.1), &f));
         // A slew limit of 20 %/s is material only when V_P reaches it.
         assert!(material(Effect::SlewRate, &with(Knob::Slew, 20.0), &f));
         assert!(!material(

@@ -192,8 +192,11 @@ pub fn diagnose(
     if (n as f64) * dt < 20.0 {
         return Err(DiagnoseError::TooShort(n));
     }
-    let sigma = locate::noise_floor(rec.vp);
-    let facts = facts::measure(rec, sigma);
+    // On a sensor lattice, the reading errs by up to half a step: a quiet sensor's noise is
+    // at least the rounding's (q / sqrt 12), which the differences of V_P do not show.
+    let lattice = facts::lattice(rec.vp);
+    let sigma = locate::noise_floor(rec.vp).max(lattice / 12f64.sqrt());
+    let facts = facts::measure(rec, sigma, lattice);
     let scorer = Scorer::new(rec);
     let (base_spec, base_label, td_max) = match base {
         Some(b) if !b.model.is_identifiable() => return Err(DiagnoseError::NotExtendable),

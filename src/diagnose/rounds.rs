@@ -20,7 +20,7 @@ use super::candidates::{self, MAX_DEAD_TIME_S};
 use super::composed::{self, Effect, Knob};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{bic_change, Judge, Trial};
+use super::judge::{bic_change, Judge, Trial, MIN_LATTICE_PCT};
 use super::locate::Window;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
 use super::scorer::{Errors, Scorer};
@@ -97,6 +97,7 @@ impl<'a> Search<'a> {
 
     /// Runs the rounds; `progress(done, total)` after each.
     pub fn run(&mut self, progress: &(dyn Fn(usize, usize) + Sync)) {
+        self.sensor_lattice();
         let total = Effect::ALL.len() * ROUNDS;
         // Effects worth trying this round: all at first, then those that helped enough before.
         let mut worth: Vec<Effect> = Effect::ALL.to_vec();
@@ -135,6 +136,44 @@ impl<'a> Search<'a> {
                 reversals: self.data.facts.reversals,
             });
         }
+    }
+
+    /// A coarse sensor lattice is named from its evidence (every value of V_P on it) and put in
+    /// the model before the rounds, not judged by the free-run error: rounding the model's
+    /// output changes little next to the error of its dynamics, and the rounds then compare
+    /// models that read like the sensor.
+    fn sensor_lattice(&mut self) {
+        let q = self.data.facts.lattice_pct;
+        if q < MIN_LATTICE_PCT || composed::get(&self.current, Knob::Quantum) > 0.0 {
+            return;
+        }
+        let mut spec = self.current.clone();
+        composed::set(&mut spec, Knob::Quantum, q);
+        let errors = self.data.scorer.errors(&spec);
+        let facts = Evidence::of(
+            Effect::Quantization,
+            &spec,
+            &self.current,
+            self.data.facts,
+            self.data.windows,
+            self.data.sigma,
+        );
+        self.findings.push(Finding {
+            effect: Effect::Quantization,
+            facts,
+            params: params(&spec, [Knob::Quantum].into_iter()),
+            heldout_sse_before: self.cur.held,
+            heldout_sse_after: errors.held,
+            delta_bic: bic_change(
+                &self.cur,
+                &errors,
+                0,
+                self.data.scorer.n_fit(),
+                self.corr_len,
+            ),
+        });
+        self.current = spec;
+        self.cur = errors;
     }
 
     /// Every candidate of the effects in `worth` not yet found, refitted and judged.
@@ -214,7 +253,7 @@ impl<'a> Search<'a> {
             delta_bic: winner.delta_bic,
         });
         for f in &winner.free {
-            match self.freed.iter_mut().find(|g| g.knob.same_number(f.knob)) {
+            match self.freed.iter_mut().find(|g| g.knob == f.knob) {
                 Some(g) => *g = *f,
                 None => self.freed.push(*f),
             }
@@ -265,9 +304,13 @@ impl<'a> Search<'a> {
         if stuck {
             return;
         }
-        let Some(c) =
-            stickslip::fit(self.data.scorer, &self.current, self.data.facts).filter(|c| c.passes())
-        else {
+        let Some(c) = stickslip::fit(
+            self.data.scorer,
+            &self.current,
+            self.data.facts,
+            self.data.sigma,
+        )
+        .filter(|c| c.passes()) else {
             return;
         };
         let errors = self.data.scorer.errors(&c.spec);

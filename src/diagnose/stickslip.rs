@@ -10,11 +10,11 @@
 //! depend on the phase:
 //!
 //! - **Slips** ([`facts::slips`]): moves of V_P completed within 0.1 s with V_P at rest just
-//!   before and after, while O_P's means over the same span moved less than half as much
+//!   before and after, while the current smooth model's V_P moved less than half as much
 //!   anywhere in the half second before; at least five noise sigmas of the compared means,
-//!   one and a half sensor steps (a V_P on a lattice steps by one) and 0.1 %. A smooth valve
-//!   only moves like that when its command does, so its simulation has the slips the command
-//!   explains and no others.
+//!   one and a half sensor steps (a V_P on a lattice steps by one) and 0.1 %. Simulations are
+//!   read through a sensor like the recording's (its noise, seeded, and its lattice), so the
+//!   few slips noise alone makes count alike everywhere.
 //! - **Per piece** (every fit or held-out block cut into pieces of at least 10 s, several
 //!   stick-slip periods each), a histogram of slip sizes in octaves from the threshold (soft
 //!   binning, so a size near a bin edge does not flip bins). The distance between the measured
@@ -221,7 +221,9 @@ pub(crate) struct Candidate {
     pub knobs: Vec<Knob>,
     /// The comparison on the held-out blocks.
     pub held: Match,
-    /// Slips of the current model's and of the candidate's simulated V_P, whole recording.
+    /// Slips of the measured V_P, and of the current model's and the candidate's simulated
+    /// V_P read by a sensor like the recording's, whole recording.
+    pub slips_measured: Vec<Slip>,
     pub slips_before: Vec<Slip>,
     pub slips_after: Vec<Slip>,
 }
@@ -284,15 +286,27 @@ fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
 /// Fits stick-slip to the measured slips and compares it with `current` on the held-out
 /// blocks; `None` when the current model misses too few slips to fit anything.
 ///
-/// The grid point whose slips are closest to the measured ones on the fit blocks wins (the
-/// free-run error only breaks ties: it cannot judge a limit cycle).
-pub(crate) fn fit(scorer: &Scorer, current: &ModelSpec, facts: &Facts) -> Option<Candidate> {
-    let threshold = facts.slip_scale.threshold_pct;
+/// Slips are counted against the current (smooth) model's V_P. Every simulation gets the same
+/// seeded sensor noise (and lattice) the recording has, so the slips that noise alone makes
+/// count alike in the measurement and in every model. The grid point whose slips are closest
+/// to the measured ones on the fit blocks wins (the free-run error only breaks ties: it cannot
+/// judge a limit cycle).
+pub(crate) fn fit(
+    scorer: &Scorer,
+    current: &ModelSpec,
+    facts: &Facts,
+    sigma: f64,
+) -> Option<Candidate> {
+    let scale = &facts.slip_scale;
+    let threshold = scale.threshold_pct;
     let pieces = Pieces::new(scorer);
-    let measured = histograms(&facts.slips, threshold, &pieces);
+    let reference = scorer.simulate(current);
+    let measured_slips = facts::slips(&reference, scorer.vp, scale);
+    let measured = histograms(&measured_slips, threshold, &pieces);
+    let sensor = Sensor::new(scorer.vp.len(), sigma, facts.lattice_pct);
     let run = |spec: &ModelSpec| {
         let y = scorer.simulate(spec);
-        let slips = facts::slips(scorer.op, &y, &facts.slip_scale);
+        let slips = facts::slips(&reference, &sensor.read(&y), scale);
         let d = distances(&measured, &histograms(&slips, threshold, &pieces));
         (slips, d, scorer.errors_of(&y).fit)
     };
@@ -300,7 +314,7 @@ pub(crate) fn fit(scorer: &Scorer, current: &ModelSpec, facts: &Facts) -> Option
     if total(&before, &pieces, false) < MIN_MISSED || total(&before, &pieces, true) < MIN_MISSED {
         return None;
     }
-    let (_, size) = count_and_size(&facts.slips, scorer, false);
+    let (_, size) = count_and_size(&measured_slips, scorer, false);
     let gain = composed::get(current, Knob::Gain);
     let (spec, knobs, _, _) = grid(size, gain)
         .par_iter()
@@ -320,10 +334,11 @@ pub(crate) fn fit(scorer: &Scorer, current: &ModelSpec, facts: &Facts) -> Option
             &pieces,
             scorer,
             (&before, &after),
-            (&facts.slips, &slips_after),
+            (&measured_slips, &slips_after),
         ),
         spec,
         knobs,
+        slips_measured: measured_slips,
         slips_before,
         slips_after,
     };
@@ -334,6 +349,43 @@ pub(crate) fn fit(scorer: &Scorer, current: &ModelSpec, facts: &Facts) -> Option
         "stick-slip by slip statistics"
     );
     Some(candidate)
+}
+
+/// The recording's sensor, for simulations: seeded Gaussian noise of the noise floor, then the
+/// sensor lattice.
+struct Sensor {
+    noise: Vec<f64>,
+    lattice: f64,
+}
+
+impl Sensor {
+    fn new(n: usize, sigma: f64, lattice: f64) -> Self {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51_1b5);
+        let noise = (0..n)
+            .map(|_| {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                sigma * e
+            })
+            .collect();
+        Sensor { noise, lattice }
+    }
+
+    /// What the sensor would have read of the positions `y`.
+    fn read(&self, y: &[f64]) -> Vec<f64> {
+        y.iter()
+            .zip(&self.noise)
+            .map(|(v, e)| {
+                let r = v + e;
+                if self.lattice > 0.0 {
+                    (r / self.lattice).round() * self.lattice
+                } else {
+                    r
+                }
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]

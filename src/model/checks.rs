@@ -265,6 +265,13 @@ fn physical(c: &mut Checks, p: &PhysicalParams) {
         p.positioner_gain_per_s,
         &format!("at most damping_ratio * 2 pi * natural_freq_hz = {damped:.3} 1/s, or the positioner oscillates with the stem: lower the gain or raise natural_freq_hz or damping_ratio"),
     );
+    c.need(
+        p.noise_seed <= i64::MAX as u64,
+        Some("physical"),
+        "noise_seed",
+        p.noise_seed as f64,
+        "a seed from 0 to 9223372036854775807 (a TOML integer)",
+    );
     let stable = 0.08 / p.natural_freq_hz;
     c.need(
         p.internal_step_s <= stable,

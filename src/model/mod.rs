@@ -251,8 +251,10 @@ impl ModelSpec {
 
     /// The spec as TOML text, loadable by [`ModelSpec::load`].
     pub fn to_toml(&self) -> String {
-        // A ModelSpec holds only numbers, enums and tables, which TOML always represents.
-        toml::to_string_pretty(self).unwrap_or_default()
+        // A ModelSpec holds only numbers, enums and tables, which TOML represents once the
+        // checks hold (a seed fits a TOML integer); an unchecked one is said to be so.
+        toml::to_string_pretty(self)
+            .unwrap_or_else(|e| format!("# not representable in TOML: {e}\n"))
     }
 
     /// Checks every parameter against its allowed range.

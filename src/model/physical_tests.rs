@@ -289,7 +289,7 @@ fn any_params() -> impl Strategy<Value = PhysicalParams> {
         -10.0f64..10.0,
         0.0f64..5.0,
         0.0f64..10.0,
-        any::<u64>(),
+        0u64..=i64::MAX as u64,
     );
     (positioner, stem, sensor).prop_map(|((k, db, fill, vent, floor, g), stem, sensor)| {
         let (f_n, z, c, s_share, step_share) = stem;
