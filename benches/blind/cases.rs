@@ -34,8 +34,11 @@ pub const DEAD_TIME_S: f64 = 0.25;
 pub const BACKLASH_PCT: f64 = 0.6;
 /// Static band above the Coulomb band, %: slips of about this size stand above the noise.
 pub const STICTION_PCT: f64 = 0.4;
-/// Chamber volume growth g: the open valve is at least twice as slow as the closed one.
+/// Chamber volume growth g: the open valve is at least twice as slow as the closed one...
 pub const GROWTH: f64 = 1.0;
+/// ...and between the openings the recording visits (5th to 95th percentile of V_P) the
+/// response slows by at least half: a valve kept near one opening shows no dependence on it.
+pub const GROWTH_EXPOSED_RATIO: f64 = 1.5;
 /// Both flow limits at most this, %/s: a full stroke takes at least 4 s, well below the 40 %/s
 /// a healthy positioner strokes at...
 pub const SLEW_PCT_PER_S: f64 = 25.0;
@@ -388,7 +391,12 @@ pub fn labels(
         p.static_band_pct - p.coulomb_band_pct >= STICTION_PCT,
         Effect::Stiction,
     );
-    add(p.volume_growth >= GROWTH, Effect::StateDependentDelay);
+    let (lo, hi) = (quantile(&rec.vp, 0.05), quantile(&rec.vp, 0.95));
+    let slower = (1.0 + p.volume_growth * hi / 100.0) / (1.0 + p.volume_growth * lo / 100.0);
+    add(
+        p.volume_growth >= GROWTH && slower >= GROWTH_EXPOSED_RATIO,
+        Effect::StateDependentDelay,
+    );
     let (fast, slow) = (
         p.fill_rate_pct_per_s.max(p.vent_rate_pct_per_s),
         p.fill_rate_pct_per_s.min(p.vent_rate_pct_per_s),

@@ -13,7 +13,6 @@ use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use super::facts::Facts;
 use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
 use crate::model::ModelSpec;
-use crate::recording::RecordingView;
 
 /// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).
 const SLOWEST_PCT_PER_S: f64 = 0.05;
@@ -34,15 +33,15 @@ pub(crate) fn jobs(
     effects: &[Effect],
     current: &ModelSpec,
     facts: &Facts,
-    rec: &RecordingView,
+    dt: f64,
     td_max: f64,
 ) -> Vec<Job> {
     let mut jobs: Vec<Job> = Vec::new();
     let td = composed::get(current, Knob::DeadTime);
     for &effect in effects {
-        for variant in variants(effect, current, facts, rec, td_max) {
+        for variant in variants(effect, current, facts, td_max) {
             for mut free in spread_starts(variant) {
-                free.push(free_gain(current, rec.dt));
+                free.push(free_gain(current, dt));
                 let hi = if effect == Effect::DeadTime {
                     MAX_DEAD_TIME_S
                 } else {
@@ -79,7 +78,6 @@ pub(crate) fn variants(
     effect: Effect,
     spec: &ModelSpec,
     facts: &Facts,
-    rec: &RecordingView,
     td_max: f64,
 ) -> Vec<Vec<Free>> {
     let get = |k| composed::get(spec, k);
@@ -94,11 +92,14 @@ pub(crate) fn variants(
             get(Knob::DeadTime).max(0.3),
         )]],
         // Lost motion either as pin-cart II's crossing time (eq. 7) or as a friction band the
-        // positioner crosses at its own speed (the lost time then depends on the move).
+        // positioner crosses at its own speed (the lost time then depends on the move); the
+        // error surface of either has many valleys, so each starts from several sizes.
         Effect::Backlash if get(Knob::Crossing) == 0.0 && get(Knob::FrictionBand) == 0.0 => vec![
             vec![f(Knob::Crossing, 0.02, 5.0, 0.2)],
             vec![f(Knob::Crossing, 0.02, 5.0, 0.8)],
+            vec![f(Knob::FrictionBand, 0.05, 20.0, 0.3)],
             vec![f(Knob::FrictionBand, 0.05, 20.0, 1.0)],
+            vec![f(Knob::FrictionBand, 0.05, 20.0, 3.0)],
         ],
         Effect::StateDependentDelay
             if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>
@@ -180,7 +181,7 @@ pub(crate) fn variants(
             vec![vec![f(Knob::Deadband, 0.02, 10.0, 0.5)]]
         }
         Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
-            travel_limits(rec).into_iter().collect()
+            travel_limits(facts).into_iter().collect()
         }
         // The sensor lattice is named from its evidence, not refitted (see `rounds`).
         Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
@@ -194,32 +195,28 @@ pub(crate) fn variants(
     }
 }
 
-/// The travel limits to fit: a stop below the highest O_P (or above the lowest) where V_P
-/// never went, when O_P asked for at least half a percent more.
-fn travel_limits(rec: &RecordingView) -> Option<Vec<Free>> {
-    let range = |x: &[f64]| {
-        x.iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            })
-    };
-    let ((vmin, vmax), (omin, omax)) = (range(rec.vp), range(rec.op));
+/// The travel stops to fit, in a box of ±2 % around where the recording shows them.
+fn travel_limits(facts: &Facts) -> Option<Vec<Free>> {
     let mut free = Vec::new();
-    if omax > vmax + 0.5 && vmax < 99.5 {
+    if let Some(hi) = facts.stop_high_pct {
         free.push(Free::new(
             Knob::TravelMax,
-            (vmax - 2.0).max(50.0),
-            100.0,
-            vmax,
+            (hi - 2.0).max(1.0),
+            (hi + 2.0).min(100.0),
+            hi,
         ));
     }
-    if omin < vmin - 0.5 && vmin > 0.5 {
+    if let Some(lo) = facts.stop_low_pct {
         free.push(Free::new(
             Knob::TravelMin,
-            0.0,
-            (vmin + 2.0).min(50.0),
-            vmin,
+            (lo - 2.0).max(0.0),
+            (lo + 2.0).min(99.0),
+            lo,
         ));
+    }
+    // The drive winds up past the stop while O_P asks for more, and must come back first.
+    if !free.is_empty() {
+        free.push(Free::new(Knob::Windup, 0.0, 50.0, 10.0));
     }
     (!free.is_empty()).then_some(free)
 }

@@ -119,6 +119,8 @@ pub enum Knob {
     Breakaway,
     /// Friction band crossed at the positioner's speed, %.
     FrictionBand,
+    /// Wind-up of the drive past a travel stop, %.
+    Windup,
     /// Deadband width, %.
     Deadband,
     /// Lowest travel, %.
@@ -145,6 +147,7 @@ impl Knob {
             Knob::Stickband
             | Knob::Breakaway
             | Knob::FrictionBand
+            | Knob::Windup
             | Knob::Deadband
             | Knob::TravelMin
             | Knob::TravelMax
@@ -168,6 +171,7 @@ impl Knob {
             Knob::JumpFraction => "jump_fraction",
             Knob::Breakaway => "breakaway_pct",
             Knob::FrictionBand => "friction_band_pct",
+            Knob::Windup => "stop_windup_pct",
             Knob::Deadband => "deadband_pct",
             Knob::TravelMin => "travel_min_pct",
             Knob::TravelMax => "travel_max_pct",
@@ -231,6 +235,7 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
         }
         Knob::Breakaway => e.breakaway_pct,
         Knob::FrictionBand => e.friction_band_pct,
+        Knob::Windup => e.stop_windup_pct,
         Knob::Deadband => e.deadband_pct,
         Knob::TravelMin => spec.travel.min_pct,
         Knob::TravelMax => spec.travel.max_pct,
@@ -271,6 +276,7 @@ pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
         Knob::JumpFraction => e.jumpband_pct = v.clamp(0.0, 1.0) * e.stickband_pct,
         Knob::Breakaway => e.breakaway_pct = v,
         Knob::FrictionBand => e.friction_band_pct = v,
+        Knob::Windup => e.stop_windup_pct = v,
         Knob::Deadband => e.deadband_pct = v,
         Knob::TravelMin => spec.travel.min_pct = v,
         Knob::TravelMax => spec.travel.max_pct = v,

@@ -181,6 +181,8 @@ pub enum Detail {
     Saturation {
         travel_min_pct: f64,
         travel_max_pct: f64,
+        /// How far the drive winds up past the stop, %.
+        windup_pct: f64,
     },
     Quantization {
         lattice_pct: f64,
@@ -396,6 +398,7 @@ fn detail(
         Effect::Saturation => Detail::Saturation {
             travel_min_pct: spec.travel.min_pct,
             travel_max_pct: spec.travel.max_pct,
+            windup_pct: g(Knob::Windup),
         },
         Effect::Quantization => Detail::Quantization {
             lattice_pct: g(Knob::Quantum),

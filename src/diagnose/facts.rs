@@ -39,7 +39,7 @@ pub struct Hold {
 pub struct Facts {
     pub steps: Vec<StepResponse>,
     pub holds: Vec<Hold>,
-    /// Fastest opening and closing speed of V_P, noise taken out (99.5th percentiles), %/s.
+    /// Fastest opening and closing speed of V_P, noise taken out (99.9th percentiles), %/s.
     pub open_speed: f64,
     pub close_speed: f64,
     /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
@@ -48,6 +48,9 @@ pub struct Facts {
     pub reversals: usize,
     /// What counts as a slip in this recording.
     pub slip_scale: SlipScale,
+    /// Levels V_P stops at while O_P asks to go beyond (travel stops short of 100 or 0 %).
+    pub stop_high_pct: Option<f64>,
+    pub stop_low_pct: Option<f64>,
 }
 
 /// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
@@ -64,7 +67,38 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         close_speed,
         lattice_pct,
         slip_scale,
+        stop_high_pct: stop(op, vp, dt, true),
+        stop_low_pct: stop(op, vp, dt, false),
     }
+}
+
+/// How far O_P must ask beyond a stop, %, and for how long in total, s, for it to count.
+const STOP_MARGIN_PCT: f64 = 0.5;
+const STOP_ASKED_S: f64 = 5.0;
+
+/// The level V_P stops at while O_P asks to go beyond it: V_P's 99.9th percentile (the 0.1th
+/// for the lower stop), when O_P, averaged over half a second (a controller's noise averages
+/// out), stands at least [`STOP_MARGIN_PCT`] beyond it for [`STOP_ASKED_S`] in total, and the
+/// level is short of the end of travel (99.5 %, or 0.5 % for the lower stop).
+fn stop(op: &[f64], vp: &[f64], dt: f64, high: bool) -> Option<f64> {
+    let mut sorted = vp.to_vec();
+    let level = quantile(&mut sorted, if high { 0.999 } else { 0.001 });
+    if (high && level >= 99.5) || (!high && level <= 0.5) {
+        return None;
+    }
+    let h = ((0.25 / dt).round() as usize).max(1);
+    let s = running_sums(op);
+    let beyond = (h..op.len().saturating_sub(h))
+        .filter(|&k| {
+            let mean = (s[k + h] - s[k - h]) / (2 * h) as f64;
+            if high {
+                mean >= level + STOP_MARGIN_PCT
+            } else {
+                mean <= level - STOP_MARGIN_PCT
+            }
+        })
+        .count();
+    (beyond as f64 * dt >= STOP_ASKED_S).then_some(level)
 }
 
 fn count_reversals(op: &[f64]) -> usize {
@@ -137,7 +171,7 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
 }
 
 /// The fastest opening and closing speeds of V_P, %/s, noise taken out: over windows of 0.1,
-/// 0.3, 1 and 3 s, the 99.5th percentile of the speeds in each direction less what noise alone
+/// 0.3, 1 and 3 s, the 99.9th percentile of the speeds in each direction less what noise alone
 /// reaches there (2.8 sigmas of the difference of two readings, over the window); the largest
 /// over the windows. Short windows see fast strokes, long ones the slow moves that noise hides
 /// in short ones.
@@ -157,8 +191,8 @@ fn speeds(vp: &[f64], dt: f64, sigma: f64) -> (f64, f64) {
                 down.push(-s);
             }
         }
-        best.0 = best.0.max(quantile(&mut up, 0.995) - noise);
-        best.1 = best.1.max(quantile(&mut down, 0.995) - noise);
+        best.0 = best.0.max(quantile(&mut up, 0.999) - noise);
+        best.1 = best.1.max(quantile(&mut down, 0.999) - noise);
     }
     best
 }

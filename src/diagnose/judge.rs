@@ -146,14 +146,17 @@ pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64) -> f64 {
 /// Whether a fitted knob sits at the edge of its box, where the effect stands in for something
 /// else rather than measuring itself: at its lower bound (within 2 % of it), or within the top
 /// 2 % of the box on its own scale. The gain and dead time are left out (they are refitted with
-/// every effect and may rest on a bound), and so is the jump fraction (a jump as large as the
-/// stickband is Choudhury's classic case).
+/// every effect and may rest on a bound), and so are the jump fraction (a jump as large as the
+/// stickband is Choudhury's classic case) and the wind-up at a stop (none is a plain stop).
 fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
     free.iter().any(|f| {
         let v = composed::get(spec, f.knob);
         let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs();
         let at_high = f.def.to_unit(v) > 0.98;
-        !matches!(f.knob, Knob::Gain | Knob::DeadTime | Knob::JumpFraction) && (at_low || at_high)
+        !matches!(
+            f.knob,
+            Knob::Gain | Knob::DeadTime | Knob::JumpFraction | Knob::Windup
+        ) && (at_low || at_high)
     })
 }
 
@@ -197,7 +200,7 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
             let seen = oa.max(ob) / oa.min(ob).max(1e-9) >= 1.2 && (a > b) == (oa > ob);
             seen && a.max(b) / a.min(b) >= 1.3
                 && a.min(b) < 0.8 * FASTEST_PCT_PER_S
-                && oa.min(ob) >= 0.7 * a.min(b)
+                && oa.min(ob) >= 0.5 * a.min(b)
         }
         // The floor takes over from proportional action below an error of dy_min / P_k.
         // ... but only for small errors: a floor over several % is a constant-speed valve.
@@ -269,6 +272,8 @@ mod tests {
             lattice_pct: 0.0,
             reversals: 0,
             slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
+            stop_high_pct: None,
+            stop_low_pct: None,
         };
         let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
         let with = |knob, v| {

@@ -187,7 +187,7 @@ impl<'a> Search<'a> {
             &effects,
             &self.current,
             self.data.facts,
-            self.data.rec,
+            self.data.rec.dt,
             self.td_max,
         );
         tracing::debug!(

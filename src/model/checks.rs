@@ -355,9 +355,17 @@ fn effects_friction_and_sensor(c: &mut Checks, e: &Effects) {
         e.friction_band_pct,
         "a friction band in %, 0-20 (0 = none)",
     );
+    c.need(
+        (0.0..=100.0).contains(&e.stop_windup_pct),
+        t,
+        "stop_windup_pct",
+        e.stop_windup_pct,
+        "a wind-up past a travel stop in %, 0-100 (0 = none)",
+    );
 }
 
-/// Asymmetry, slowdown, breakaway and the friction band live in pin-cart II's core only.
+/// Asymmetry, slowdown, breakaway, the friction band and the stop wind-up live in pin-cart
+/// II's core only.
 fn effects_need_pincart2(c: &mut Checks, kind: ModelKind, e: &Effects) {
     if kind == ModelKind::Pincart2 {
         return;
@@ -390,5 +398,12 @@ fn effects_need_pincart2(c: &mut Checks, kind: ModelKind, e: &Effects) {
         "friction_band_pct",
         e.friction_band_pct,
         "a friction band needs model = \"pincart2\" (pin-cart I's backlash_pct is one crossed at the positioner's speed)",
+    );
+    c.need(
+        e.stop_windup_pct == 0.0,
+        t,
+        "stop_windup_pct",
+        e.stop_windup_pct,
+        "a wind-up at the travel stops needs model = \"pincart2\" (the only core with a pin)",
     );
 }

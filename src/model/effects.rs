@@ -4,8 +4,8 @@
 //! deadband" means setting `deadband_pct`, not writing a new model. Effects that live inside
 //! the pin-cart II core (backlash, state-dependent delay, slew rate, minimum speed) are
 //! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s`, `open_slowdown` and
-//! `breakaway_pct` and `friction_band_pct` here, which only pin-cart II uses); the others wrap
-//! any core:
+//! `breakaway_pct`, `friction_band_pct` and `stop_windup_pct` here, which only pin-cart II
+//! uses); the others wrap any core:
 //!
 //! ```text
 //! O_P ─▶ T_d ─▶ calibration ─▶ deadband ─▶ stiction ─▶ core ─▶ travel clamp ─▶ quantization ─▶ V_P
@@ -63,6 +63,11 @@ pub struct Effects {
     /// friction band before the stem moves.
     #[serde(skip_serializing_if = "is_zero")]
     pub friction_band_pct: f64,
+    /// Wind-up of pin-cart II at a travel stop, % (0 = none): while the valve sits on a stop
+    /// and O_P asks for more, the pin (the positioner's drive, a chamber's pressure) goes on
+    /// this far beyond the stop, and must come back before the valve leaves it.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub stop_windup_pct: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -86,6 +91,7 @@ impl Default for Effects {
             open_slowdown: 0.0,
             breakaway_pct: 0.0,
             friction_band_pct: 0.0,
+            stop_windup_pct: 0.0,
         }
     }
 }

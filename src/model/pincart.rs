@@ -92,6 +92,8 @@ pub(crate) struct PinCart {
     half: f64,
     /// Stick-slip: how far beyond a side the pin must push a cart that has stopped, %.
     breakaway: f64,
+    /// How far beyond the cart the pin may go on while a travel stop holds the cart, %.
+    windup: f64,
     /// The cart stopped or crawled in the last sample (only tracked with a breakaway).
     stuck: bool,
     dt: f64,
@@ -136,6 +138,7 @@ impl PinCart {
         };
         PinCart {
             breakaway: fx.breakaway_pct,
+            windup: fx.stop_windup_pct,
             ..Self::with_law(law, width, dt)
         }
     }
@@ -145,6 +148,7 @@ impl PinCart {
             law,
             half: backlash / 2.0,
             breakaway: 0.0,
+            windup: 0.0,
             stuck: false,
             dt,
             y: 0.0,
@@ -250,12 +254,18 @@ impl PinCart {
         }
     }
 
-    /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart.
+    /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart,
+    /// or wound up to `windup` beyond it on the side of the stop.
     #[inline]
     pub(crate) fn set_position(&mut self, v: f64) {
         self.v = v;
         let reach = self.half + self.breakaway;
-        self.y = self.y.clamp(v - reach, v + reach);
+        let (below, above) = if self.y > v {
+            (reach, reach + self.windup)
+        } else {
+            (reach + self.windup, reach)
+        };
+        self.y = self.y.clamp(v - below, v + above);
     }
 
     /// Pin position relative to the cart centre (for invariant tests).

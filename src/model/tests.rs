@@ -574,6 +574,36 @@ fn a_friction_band_is_crossed_at_the_positioners_speed() {
 }
 
 #[test]
+fn a_wound_up_drive_holds_the_valve_on_its_stop_after_o_p_comes_back() {
+    // Stop at 80 %, O_P asks for 95 % for 10 s, then 70 %. Without wind-up the valve leaves the
+    // stop at once; with 15 % of wind-up the drive must first come back from 95 %.
+    let mut spec = bundled(ModelKind::Pincart2);
+    if let Some(p) = spec.pincart2.as_mut() {
+        (p.p_gain_per_s, p.dy_max_pct_per_s) = (5.0, 50.0);
+        (p.a_p, p.b_p, p.c_p) = (0.0, 0.0, 0.0);
+    }
+    spec.dead_time_s = 0.0;
+    spec.travel.max_pct = 80.0;
+    let leave = |windup: f64| {
+        let mut s = spec.clone();
+        s.effects.stop_windup_pct = windup;
+        let mut v = Valve::new(&s, DT).unwrap();
+        v.reset(70.0, 70.0);
+        let held = run(&mut v, 95.0, 1000);
+        assert!((held[999] - 80.0).abs() < 1e-9);
+        let out = run(&mut v, 70.0, 1000);
+        out.iter().position(|y| *y < 80.0 - 1e-6).unwrap_or(1000) as f64 * DT
+    };
+    let (free, wound) = (leave(0.0), leave(15.0));
+    assert!(free <= 0.02, "{free} s without wind-up");
+    // 15 % back at up to 50 %/s (the error is 10-25 %, so 5 * e caps at 50): about 0.3-0.4 s.
+    assert!(
+        (0.25..0.5).contains(&wound),
+        "{wound} s with 15 % of wind-up"
+    );
+}
+
+#[test]
 fn slow_sampling_keeps_every_model_stable() {
     // At 1 Hz, P_k dt exceeds 1 for the bundled pin-cart gains: no model may overshoot a step.
     for kind in ModelKind::ALL {

@@ -239,8 +239,10 @@ pub fn evidence(f: &Finding) -> String {
         Detail::Saturation {
             travel_min_pct,
             travel_max_pct,
+            windup_pct,
         } => format!(
-            "{limit}V_P stays within {travel_min_pct:.1}-{travel_max_pct:.1} % while O_P goes beyond: travel limited"
+            "{limit}V_P stays within {travel_min_pct:.1}-{travel_max_pct:.1} % while O_P goes beyond: travel limited \
+             (the positioner's drive winds up {windup_pct:.1} % past the stop and must come back before the valve leaves it)"
         ),
         Detail::Quantization { lattice_pct } => format!(
             "every V_P value lies on a lattice of {lattice_pct:.3} %: the position sensor's resolution"
