@@ -13,7 +13,8 @@
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`report`]: self-contained HTML reports with SVG charts.
 //! - [`signal`]: time-only O_P generators (random steps, steps, ramp, sine, PRBS, replay, constant).
-//! - [`synth`]: synthetic recordings (random steps or a closed level loop) for demos and tests.
+//! - [`synth`]: synthetic recordings (random steps, small steps, ramps, a mix, or a closed level
+//!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
 pub mod daemon;

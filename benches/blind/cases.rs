@@ -29,8 +29,8 @@ pub const DT: f64 = 0.01;
 /// Transport delay, s: more than twice the slowest healthy one and above the 0.2 s a healthy
 /// positioner may have.
 pub const DEAD_TIME_S: f64 = 0.25;
-/// Coulomb band, %: a reversal loses at least 0.6 % of travel, four times the largest healthy
-/// band and above the noisiest sensor (0.25 %).
+/// Coulomb band, %: a reversal loses at least 0.6 % of travel, several times the largest
+/// healthy band and above the noisiest sensor (0.25 %).
 pub const BACKLASH_PCT: f64 = 0.6;
 /// Static band above the Coulomb band, %: slips of about this size stand above the noise.
 pub const STICTION_PCT: f64 = 0.4;
@@ -64,7 +64,10 @@ pub const QUANTIZATION_PCT: f64 = 0.15;
 /// Largest sensor error |(a - 1) x + b| over the openings O_P visits (5th-95th percentile), %.
 pub const CALIBRATION_PCT: f64 = 0.5;
 
-// Healthy ranges (every case's physics starts inside all of them).
+// Healthy ranges (every case's physics starts inside all of them): the imperfections of a
+// valve in good order, as large as the shared healthy case's (0.1 % friction band, 0.05 s
+// transport delay) and a little more. They may be visible at the lowest sensor noise; they are
+// not what a valve engineer would call a fault.
 /// Transport delay, s.
 pub const HEALTHY_DEAD_TIME_S: (f64, f64) = (0.02, 0.1);
 /// Coulomb band, %.
@@ -76,7 +79,7 @@ pub const HEALTHY_GROWTH: (f64, f64) = (0.0, 0.2);
 /// Fill limit, %/s (the vent limit is within 10 % of it).
 pub const HEALTHY_FILL_PCT_PER_S: (f64, f64) = (50.0, 100.0);
 /// Positioner deadband, %.
-pub const HEALTHY_DEADBAND_PCT: (f64, f64) = (0.0, 0.12);
+pub const HEALTHY_DEADBAND_PCT: (f64, f64) = (0.0, 0.1);
 /// Sensor lattice when there is one, %.
 pub const HEALTHY_LATTICE_PCT: (f64, f64) = (0.005, 0.05);
 /// Sensor noise levels, %.
@@ -236,18 +239,21 @@ fn draw_case(
     };
     let healthy = healthy_spec(rng, noise, lattice, plan.seed);
     let excitation = excitation(plan.excitation, rng);
+    // Each draw its own O_P sequence, so a redraw is not stuck with one that never exercises
+    // the planned effect.
+    let op_seed: u64 = rng.gen();
     let mut spec = healthy.clone();
     let mut sizes = Vec::new();
     for &effect in &plan.effects {
         let size = if effect == Effect::Saturation {
-            saturation_size(&spec, excitation, duration_s, plan.seed, rng)?
+            saturation_size(&spec, excitation, duration_s, op_seed, rng)?
         } else {
             log_uniform(rng, size_range(effect, noise, plan.excitation))
         };
         build_effect(&mut spec, effect, size, rng);
         sizes.push((effect, size));
     }
-    let rec = synth::generate(&spec, excitation, duration_s, DT, 0.0, plan.seed)?;
+    let rec = synth::generate(&spec, excitation, duration_s, DT, 0.0, op_seed)?;
     let labels = labels(&spec, &healthy, &rec)?;
     Ok(Case {
         plan: plan.clone(),
@@ -323,16 +329,21 @@ fn build_effect(spec: &mut ModelSpec, effect: Effect, size: f64, rng: &mut ChaCh
         Effect::MinSpeed => {
             if let Some(p) = spec.physical.as_mut() {
                 let floor = (size * p.positioner_gain_per_s)
+                    .min(16.0)
                     .min(p.fill_rate_pct_per_s.min(p.vent_rate_pct_per_s));
                 p.min_rate_pct_per_s = floor;
                 // A floor makes the stem overshoot by about 2 z q_min / w after the positioner
-                // stops; a stiffer stem and a deadband at the top of the healthy range keep
-                // that inside the band, so the valve settles instead of hunting.
-                let needed = 2.0 * p.damping_ratio * floor / (std::f64::consts::TAU * 0.06);
-                p.natural_freq_hz = p.natural_freq_hz.max(needed).min(80.0);
+                // stops; a stiff stem (overshoot <= 0.05 %) with a deadband and a friction band
+                // in the upper half of their healthy ranges lets the valve settle instead of
+                // hunting.
+                let needed = 2.0 * p.damping_ratio * floor / (std::f64::consts::TAU * 0.05);
+                p.natural_freq_hz = p.natural_freq_hz.max(needed).min(100.0);
                 p.internal_step_s = p.internal_step_s.min(0.07 / p.natural_freq_hz);
-                let band = rng.gen_range(0.1..=HEALTHY_DEADBAND_PCT.1);
-                p.deadband_pct = p.deadband_pct.max(band);
+                let (db, c) = (HEALTHY_DEADBAND_PCT.1, HEALTHY_COULOMB_PCT.1);
+                p.deadband_pct = p.deadband_pct.max(rng.gen_range(0.6 * db..=db));
+                let excess = p.static_band_pct - p.coulomb_band_pct;
+                p.coulomb_band_pct = p.coulomb_band_pct.max(rng.gen_range(0.4 * c..=c));
+                p.static_band_pct = p.coulomb_band_pct + excess;
             }
         }
         Effect::Calibration => {

@@ -10,8 +10,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::signal::{RandomSteps, RandomStepsParams};
 
-/// Small steps: 0.2-2 % each, held 2-10 s, around a level that wanders within ±10 % of
-/// `around_pct` (a new one every 1-3 min); a step heads for that level seven times out of ten
+/// Small steps: 0.2-2 % each, held 2-10 s, around a level that wanders within ±30 % of
+/// `around_pct` (10-90 %, a new one every 1-3 min); a step heads for that level nine times out of ten
 /// when it is more than 1 % away, else either way, so reversals are frequent.
 #[derive(Debug, Clone)]
 pub struct SmallSteps {
@@ -40,7 +40,7 @@ impl SmallSteps {
     /// The O_P at `t_s`.
     pub fn op_at(&mut self, t_s: f64) -> f64 {
         while t_s >= self.next_target_s {
-            self.target = self.around + self.rng.gen_range(-10.0..=10.0);
+            self.target = (self.around + self.rng.gen_range(-30.0..=30.0)).clamp(10.0, 90.0);
             self.next_target_s += self.rng.gen_range(60.0..=180.0);
         }
         while t_s >= self.next_step_s {
@@ -48,7 +48,7 @@ impl SmallSteps {
                 let size = self.rng.gen_range(0.2..=2.0);
                 let gap = self.target - self.level;
                 let toward = if gap.abs() > 1.0 {
-                    self.rng.gen_bool(0.7)
+                    self.rng.gen_bool(0.9)
                 } else {
                     self.rng.gen_bool(0.5)
                 };
