@@ -44,6 +44,8 @@ pub struct Facts {
     pub close_speed: f64,
     /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
     pub lattice_pct: f64,
+    /// Noise of the V_P reading (standard deviation), %.
+    pub noise_pct: f64,
     /// Number of direction reversals of O_P.
     pub reversals: usize,
     /// What counts as a slip in this recording.
@@ -66,6 +68,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         open_speed,
         close_speed,
         lattice_pct,
+        noise_pct: sigma,
         slip_scale,
         stop_high_pct: stop(op, vp, dt, true),
         stop_low_pct: stop(op, vp, dt, false),

@@ -39,6 +39,8 @@ const MIN_FRICTION_BAND_PCT: f64 = 0.3;
 /// worth naming, %: from a fifth of a percent to a few percent.
 const MIN_SPEED_BAND_PCT: f64 = 0.2;
 const MAX_SPEED_BAND_PCT: f64 = 5.0;
+/// Smallest slip worth naming, %.
+const MIN_SLIP_PCT: f64 = 0.2;
 /// Smallest positioner deadband worth naming, %: the valve then stops short by a tenth of a
 /// percent or more.
 const MIN_DEADBAND_PCT: f64 = 0.2;
@@ -209,9 +211,11 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
             g(Knob::MinSpeed) >= 0.1 && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band)
         }
         // Stick-slip needs the slip: a stickband without a jump is a deadband on the input.
+        // A slip smaller than the reading's noise cannot be told from it.
         Effect::Stiction => {
-            (g(Knob::Stickband) >= 0.1 && g(Knob::Stickband) * g(Knob::JumpFraction) >= 0.1)
-                || g(Knob::Breakaway) >= 0.1
+            let least = MIN_SLIP_PCT.max(1.5 * facts.noise_pct);
+            (g(Knob::Stickband) >= least && g(Knob::Stickband) * g(Knob::JumpFraction) >= least)
+                || g(Knob::Breakaway) >= least
         }
         Effect::Deadband => g(Knob::Deadband) >= MIN_DEADBAND_PCT,
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
@@ -270,6 +274,7 @@ mod tests {
             open_speed: open,
             close_speed: close,
             lattice_pct: 0.0,
+            noise_pct: 0.1,
             reversals: 0,
             slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
             stop_high_pct: None,

@@ -31,7 +31,7 @@
 //!   slips there. A real share of it is explained: the distance falls by at least a quarter
 //!   (with a few slips per piece, counting noise alone keeps even a perfect model's distance
 //!   near half of a slip-free model's). The candidate slips like the valve: as often within a
-//!   factor of two, by the same size within a factor of 1.5.
+//!   factor of 2.5, by the same size within a factor of 1.5.
 //!
 //! Quantization (a lattice step is not a slip), sensor spikes (no level change), O_P steps and
 //! smooth moves or slewing (no rest before and after) cannot produce slips, so they cannot be
@@ -209,7 +209,7 @@ impl Match {
         self.p_value < MAX_P
             && self.distance_before >= MIN_MISSED
             && self.distance_after <= 0.75 * self.distance_before
-            && ratio(nm as f64, ns as f64) <= 2.0
+            && ratio(nm as f64, ns as f64) <= 2.5
             && ratio(sm, ss) <= 1.5
     }
 }
@@ -267,7 +267,7 @@ fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
 fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
     let sizes = || (0..=8).map(move |i| size * 2f64.powf(i as f64 / 4.0 - 1.0));
     let breakaway = sizes().flat_map(|b| {
-        (-4..=1).map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
+        (-4..=3).map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
     });
     let input = sizes().flat_map(|jump| {
         [1.0, 0.5, 0.25].into_iter().flat_map(move |fraction| {
