@@ -232,6 +232,8 @@ fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) 
                 "params": f.params,
                 "heldout_sse_before": f.heldout_sse_before,
                 "heldout_sse_after": f.heldout_sse_after,
+                "support": f.support,
+                "alternatives": f.alternatives,
             })
         })
         .collect();

@@ -70,9 +70,24 @@ pub struct Finding {
     pub facts: Evidence,
     /// The fitted values of the knobs the effect freed, by label.
     pub params: serde_json::Map<String, serde_json::Value>,
+    /// Look-alikes that explain the recording nearly as well (within a fifth of the held-out
+    /// error this effect removes): the recording cannot tell them apart (see the notes for the
+    /// experiment that would).
+    pub alternatives: Vec<Effect>,
     pub heldout_sse_before: f64,
     pub heldout_sse_after: f64,
     pub delta_bic: f64,
+    /// How strongly the held-out blocks support it: the share of the error above the noise
+    /// floor it removes, and the number of blocks it helps beyond noise (see `judge`); `None`
+    /// for effects named from their evidence rather than the free-run error.
+    pub support: Option<Support>,
+}
+
+/// How strongly the held-out blocks support a finding.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Support {
+    pub excess_share: f64,
+    pub blocks_helped: f64,
 }
 
 /// The model diagnosis ends with.

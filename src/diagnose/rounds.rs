@@ -25,7 +25,7 @@ use super::locate::Window;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
 use super::scorer::{Errors, Scorer};
 use super::stickslip;
-use super::{Finding, Note};
+use super::{Finding, Note, Support};
 use crate::metrics::stats;
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
@@ -128,8 +128,8 @@ impl<'a> Search<'a> {
                 .filter(|t| self.cur.held - t.errors.held >= RETRY_SHARE * winner.errors.held)
                 .map(|t| t.effect)
                 .collect();
-            self.note_look_alikes(winner, &best);
-            self.keep(winner, round > 0);
+            let alternatives = self.look_alikes(winner, &best);
+            self.keep(winner, &alternatives, round > 0);
         }
         if self.findings.is_empty() && self.data.facts.reversals < 10 {
             self.notes.push(Note::FewReversals {
@@ -162,6 +162,7 @@ impl<'a> Search<'a> {
             effect: Effect::Quantization,
             facts,
             params: params(&spec, [Knob::Quantum].into_iter()),
+            alternatives: Vec::new(),
             heldout_sse_before: self.cur.held,
             heldout_sse_after: errors.held,
             delta_bic: bic_change(
@@ -171,6 +172,7 @@ impl<'a> Search<'a> {
                 self.data.scorer.n_fit(),
                 self.corr_len,
             ),
+            support: None,
         });
         self.current = spec;
         self.cur = errors;
@@ -212,30 +214,34 @@ impl<'a> Search<'a> {
             .collect()
     }
 
-    /// Notes a look-alike that explains nearly as much as the winner.
-    fn note_look_alikes(&mut self, winner: &Trial, best: &[&Trial]) {
+    /// The look-alikes of the winner that pass too and remove nearly as much held-out error,
+    /// each with the share of it that it removes.
+    fn look_alikes(&self, winner: &Trial, best: &[&Trial]) -> Vec<(Effect, f64)> {
         let gain = self.cur.held - winner.errors.held;
-        for other in best
-            .iter()
-            .filter(|o| o.effect != winner.effect && o.passes())
-        {
-            let g = self.cur.held - other.errors.held;
-            if winner.effect.look_alikes().contains(&other.effect) && g >= LOOK_ALIKE_SHARE * gain {
-                self.notes.push(Note::LookAlike {
-                    effect: winner.effect,
-                    other: other.effect,
-                    removed_share: gain / self.cur.held,
-                    other_removed_share: g / self.cur.held,
-                });
-            }
-        }
+        best.iter()
+            .filter(|o| {
+                o.effect != winner.effect
+                    && o.passes()
+                    && winner.effect.look_alikes().contains(&o.effect)
+                    && self.cur.held - o.errors.held >= LOOK_ALIKE_SHARE * gain
+            })
+            .map(|o| (o.effect, (self.cur.held - o.errors.held) / self.cur.held))
+            .collect()
     }
 
-    /// Keeps the round's winner, then (after the first round) refits everything kept so far
-    /// together.
-    fn keep(&mut self, winner: &Trial, joint: bool) {
+    /// Keeps the round's winner (with the look-alikes the data cannot tell from it), then
+    /// (after the first round) refits everything kept so far together.
+    fn keep(&mut self, winner: &Trial, alternatives: &[(Effect, f64)], joint: bool) {
         if winner.effect == Effect::DeadTime {
             self.td_max = MAX_DEAD_TIME_S;
+        }
+        for &(other, other_removed_share) in alternatives {
+            self.notes.push(Note::LookAlike {
+                effect: winner.effect,
+                other,
+                removed_share: (self.cur.held - winner.errors.held) / self.cur.held,
+                other_removed_share,
+            });
         }
         self.findings.push(Finding {
             effect: winner.effect,
@@ -248,9 +254,14 @@ impl<'a> Search<'a> {
                 self.data.sigma,
             ),
             params: params(&winner.spec, winner.free.iter().map(|f| f.knob)),
+            alternatives: alternatives.iter().map(|a| a.0).collect(),
             heldout_sse_before: self.cur.held,
             heldout_sse_after: winner.errors.held,
             delta_bic: winner.delta_bic,
+            support: Some(Support {
+                excess_share: winner.excess_share,
+                blocks_helped: winner.t_stat,
+            }),
         });
         for f in &winner.free {
             match self.freed.iter_mut().find(|g| g.knob == f.knob) {
@@ -319,6 +330,7 @@ impl<'a> Search<'a> {
             effect: Effect::Stiction,
             facts: Evidence::of_slips(&c, self.data.facts, self.data.windows, self.data.scorer.dt),
             params: params(&c.spec, c.knobs.iter().copied()),
+            alternatives: Vec::new(),
             heldout_sse_before: self.cur.held,
             heldout_sse_after: errors.held,
             delta_bic: bic_change(
@@ -328,6 +340,7 @@ impl<'a> Search<'a> {
                 self.data.scorer.n_fit(),
                 self.corr_len,
             ),
+            support: None,
         });
         self.notes.push(Note::JudgedBySlips {
             heldout_sse_before: self.cur.held,

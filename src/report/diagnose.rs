@@ -18,8 +18,12 @@ use crate::diagnose::{Diagnosis, Effect, Finding, Note, Outcome};
 use crate::metrics;
 use crate::recording::RecordingView;
 
-/// What experiment separates `effect` from its look-alikes.
-pub fn experiment(effect: Effect) -> &'static str {
+/// What experiment separates `effect` from its look-alike `other` (or from its look-alikes).
+pub fn experiment(effect: Effect, other: Option<Effect>) -> &'static str {
+    let pair = |a, b| (effect == a && other == Some(b)) || (effect == b && other == Some(a));
+    if pair(Effect::SlewRate, Effect::MinSpeed) {
+        return "steps of several sizes, 0.5 to 20 % (`[source] kind = \"steps\"`): a slew limit caps only the large moves, a minimum speed shows in the small ones";
+    }
     match effect {
         Effect::Backlash | Effect::Deadband | Effect::StateDependentDelay => {
             "random steps with many reversals over the whole travel (`[source] kind = \"random-steps\"`)"
@@ -33,7 +37,10 @@ pub fn experiment(effect: Effect) -> &'static str {
         Effect::Calibration | Effect::Saturation => {
             "steps held to steady state across the whole travel, up to 0 and 100 % (`[source] kind = \"steps\"`)"
         }
-        Effect::DeadTime | Effect::MinSpeed => "small steps (<= 1 %) held for several seconds",
+        Effect::DeadTime => "small steps (<= 1 %) held for several seconds",
+        Effect::MinSpeed => {
+            "steps of several sizes, 0.5 to 20 % (`[source] kind = \"steps\"`): a minimum speed shows in the small ones"
+        }
     }
 }
 
@@ -312,7 +319,7 @@ pub fn note(n: &Note) -> String {
             other.name(),
             100.0 * removed_share,
             100.0 * other_removed_share,
-            experiment(effect)
+            experiment(effect, Some(other))
         ),
         Note::JudgedBySlips {
             heldout_sse_before,
@@ -322,11 +329,11 @@ pub fn note(n: &Note) -> String {
              not by the free-run error: a stick-slip limit cycle's phase is not set by O_P, so a simulated one \
              slips at other moments than the valve, and the held-out SSE cannot show that it slips like the \
              valve ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²); to confirm it, run {}",
-            experiment(Effect::Stiction)
+            experiment(Effect::Stiction, None)
         ),
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
-            experiment(Effect::Backlash)
+            experiment(Effect::Backlash, None)
         ),
     }
 }
@@ -388,6 +395,10 @@ pub fn text(d: &Diagnosis) -> String {
     }
     for f in &d.findings {
         let _ = writeln!(o, "\nfinding: {}", f.effect.name());
+        if !f.alternatives.is_empty() {
+            let names: Vec<&str> = f.alternatives.iter().map(|e| e.name()).collect();
+            let _ = writeln!(o, "  or, as well: {} (see the notes)", names.join(", "));
+        }
         let _ = writeln!(o, "  evidence: {}", evidence(f));
         let _ = writeln!(o, "  parameters: {}", Value::Object(f.params.clone()));
         let _ = writeln!(
@@ -459,9 +470,15 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
         h.push_str("<p>None.</p>");
     }
     for f in &d.findings {
+        let alternatives = if f.alternatives.is_empty() {
+            String::new()
+        } else {
+            let names: Vec<&str> = f.alternatives.iter().map(|e| e.name()).collect();
+            format!(" <small>(or, as well: {})</small>", names.join(", "))
+        };
         let _ = write!(
             h,
-            "<h3>{}</h3><p>{}</p><p>Parameters: <code>{}</code><br>Held-out SSE {:.2} → {:.2} %², ΔBIC {:.0}</p>",
+            "<h3>{}{alternatives}</h3><p>{}</p><p>Parameters: <code>{}</code><br>Held-out SSE {:.2} → {:.2} %², ΔBIC {:.0}</p>",
             f.effect.name(),
             esc(&evidence(f)),
             esc(&Value::Object(f.params.clone()).to_string()),
