@@ -32,8 +32,11 @@ pub const DEAD_TIME_S: f64 = 0.25;
 /// Coulomb band, %: a reversal loses at least 0.6 % of travel, several times the largest
 /// healthy band and above the noisiest sensor (0.25 %).
 pub const BACKLASH_PCT: f64 = 0.6;
-/// Static band above the Coulomb band, %: slips of about this size stand above the noise.
+/// Static band above the Coulomb band, %: slips of about this size stand above the noise...
 pub const STICTION_PCT: f64 = 0.4;
+/// ...and the excitation makes the stem stick and slip at least this often (a stem that only
+/// breaks away at the start of large moves, and settles smoothly, shows no stick-slip).
+pub const STICK_SLIPS: usize = 10;
 /// Chamber volume growth g: the open valve is at least twice as slow as the closed one...
 pub const GROWTH: f64 = 1.0;
 /// ...and between the openings the recording visits (5th to 95th percentile of V_P) the
@@ -50,8 +53,11 @@ pub const EXPOSED_SPEED_RATIO: f64 = 1.5;
 /// ...for this long in total, s: the limit then shapes the recording.
 pub const EXPOSED_S: f64 = 3.0;
 /// Error below which the minimum flow takes over from proportional action (q_min / K), %:
-/// small moves are visibly constant-rate at this size.
+/// small moves are visibly constant-rate at this size...
 pub const MIN_SPEED_BAND_PCT: f64 = 0.4;
+/// ...and the floor moves V_P (noise-free) away from where the same valve without it would
+/// be, by three sensor-noise sigmas (at least 0.1 %) for this long in total, s.
+pub const MIN_SPEED_SHOWN_S: f64 = 3.0;
 /// Positioner deadband, %: the valve stops short by 0.15 % or more.
 pub const DEADBAND_PCT: f64 = 0.3;
 /// A stop below 100 % counts when O_P asks to pass it by at least this much, %...
@@ -399,7 +405,8 @@ pub fn labels(
     add(spec.dead_time_s >= DEAD_TIME_S, Effect::DeadTime);
     add(p.coulomb_band_pct >= BACKLASH_PCT, Effect::Backlash);
     add(
-        p.static_band_pct - p.coulomb_band_pct >= STICTION_PCT,
+        p.static_band_pct - p.coulomb_band_pct >= STICTION_PCT
+            && stick_slips(spec, rec)? >= STICK_SLIPS,
         Effect::Stiction,
     );
     let (lo, hi) = (quantile(&rec.vp, 0.05), quantile(&rec.vp, 0.95));
@@ -424,7 +431,8 @@ pub fn labels(
         Effect::Asymmetry,
     );
     add(
-        p.min_rate_pct_per_s / p.positioner_gain_per_s >= MIN_SPEED_BAND_PCT,
+        p.min_rate_pct_per_s / p.positioner_gain_per_s >= MIN_SPEED_BAND_PCT
+            && floor_shown(spec, rec)?,
         Effect::MinSpeed,
     );
     add(p.deadband_pct >= DEADBAND_PCT, Effect::Deadband);
@@ -496,6 +504,67 @@ fn limit_exercised(
         })
         .count();
     Ok(fast as f64 * DT >= EXPOSED_S)
+}
+
+/// `spec` with a noise-free, continuous sensor, run on the recorded O_P: the true position.
+fn true_position(spec: &ModelSpec, rec: &Recording) -> Result<Vec<f64>, SynthError> {
+    let mut quiet = spec.clone();
+    if let Some(p) = quiet.physical.as_mut() {
+        (p.sensor_noise_pct, p.sensor_resolution_pct) = (0.0, 0.0);
+        (p.sensor_gain, p.sensor_offset_pct) = (1.0, 0.0);
+    }
+    let vp0 = rec.vp.first().copied().unwrap_or(0.0);
+    Ok(Valve::new(&quiet, DT)?.simulate(&rec.op, vp0))
+}
+
+/// How often the stem sticks and slips: moves of at least half the static excess within 0.1 s
+/// after it stood still (within 0.01 %) for 0.2 s, while the same stem without the excess
+/// (static band = Coulomb band) moved less than half as much (a move a command starts is no
+/// slip).
+fn stick_slips(spec: &ModelSpec, rec: &Recording) -> Result<usize, SynthError> {
+    let Some(p) = spec.physical else {
+        return Ok(0);
+    };
+    let mut smooth = spec.clone();
+    if let Some(q) = smooth.physical.as_mut() {
+        q.static_band_pct = q.coulomb_band_pct;
+    }
+    let (x, y) = (true_position(spec, rec)?, true_position(&smooth, rec)?);
+    let jump = (p.static_band_pct - p.coulomb_band_pct) / 2.0;
+    let (still, within) = (20, 10);
+    let mut count = 0;
+    let mut k = still;
+    while k + within < x.len() {
+        let (lo, hi) = x[k - still..=k]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let moved = (x[k + within] - x[k]).abs();
+        if hi - lo <= 0.01 && moved >= jump && (y[k + within] - y[k]).abs() < moved / 2.0 {
+            count += 1;
+            k += within + still;
+        } else {
+            k += 1;
+        }
+    }
+    Ok(count)
+}
+
+/// Whether the minimum flow shows: the noise-free position with it stands away from the same
+/// valve's without it by three sensor-noise sigmas (at least 0.1 %) for [`MIN_SPEED_SHOWN_S`].
+fn floor_shown(spec: &ModelSpec, rec: &Recording) -> Result<bool, SynthError> {
+    let Some(p) = spec.physical else {
+        return Ok(false);
+    };
+    let mut without = spec.clone();
+    if let Some(q) = without.physical.as_mut() {
+        q.min_rate_pct_per_s = 0.0;
+    }
+    let (a, b) = (true_position(spec, rec)?, true_position(&without, rec)?);
+    let least = (3.0 * p.sensor_noise_pct).max(0.1);
+    let apart = a.iter().zip(&b).filter(|(x, y)| (*x - *y).abs() >= least).count();
+    Ok(apart as f64 * DT >= MIN_SPEED_SHOWN_S)
 }
 
 /// The effects whose physics in `spec` lies outside the healthy ranges (whatever the

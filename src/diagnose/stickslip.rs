@@ -311,7 +311,15 @@ pub(crate) fn fit(
         (slips, d, scorer.errors_of(&y).fit)
     };
     let (slips_before, before, _) = run(current);
-    if total(&before, &pieces, false) < MIN_MISSED || total(&before, &pieces, true) < MIN_MISSED {
+    let missed = (total(&before, &pieces, false), total(&before, &pieces, true));
+    tracing::debug!(
+        measured = measured_slips.len(),
+        model = slips_before.len(),
+        missed_fit = missed.0,
+        missed_held = missed.1,
+        "slips of V_P"
+    );
+    if missed.0 < MIN_MISSED || missed.1 < MIN_MISSED {
         return None;
     }
     let (_, size) = count_and_size(&measured_slips, scorer, false);
