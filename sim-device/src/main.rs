@@ -35,9 +35,10 @@ use serde::Deserialize;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
 use tokio_modbus::{ExceptionCode, Request, Response};
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
-use valve_bridge::modbus::link::Parity;
+use tokio_serial::{SerialPort, SerialStream};
+use valve_bridge::modbus::link::{Parity, RtuLink};
 use valve_bridge::modbus::map::RegisterMap;
+use valve_bridge::modbus::serial;
 use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
 use valve_bridge::model::{self, ModelKind, ModelSpec, Valve};
 use valve_bridge::toml_file;
@@ -194,7 +195,8 @@ fn announce(line: &str) {
     let _ = writeln!(out, "{line}").and_then(|()| out.flush());
 }
 
-async fn run(args: Args) -> anyhow::Result<()> {
+/// Refuses option combinations that cannot work, with the option to change.
+fn check(args: &Args) -> anyhow::Result<()> {
     if args.tcp.is_none() && !args.pty && args.serial.is_none() {
         bail!("nothing to serve: give --tcp ADDR, --pty or --serial PATH");
     }
@@ -223,6 +225,21 @@ async fn run(args: Args) -> anyhow::Result<()> {
             args.turnaround_ms
         );
     }
+    Ok(())
+}
+
+/// The serial line settings of the command line (the port is set where it is opened).
+fn line(args: &Args, port: &str) -> RtuLink {
+    RtuLink {
+        baud: args.baud,
+        parity: args.parity,
+        stop_bits: args.stop_bits,
+        ..RtuLink::new(port)
+    }
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
+    check(&args)?;
     let (map, config_unit) = match &args.config {
         Some(path) => load_config(path)?,
         None => (RegisterMap::default(), None),
@@ -264,56 +281,18 @@ async fn run(args: Args) -> anyhow::Result<()> {
         announce(&format!("tcp: {}", listener.local_addr()?));
         servers.spawn(serve_tcp(listener, Arc::clone(&bank), Arc::clone(&faults)));
     }
-    if rtu {
-        let bits = 1 + 8 + u32::from(args.parity != Parity::None) + u32::from(args.stop_bits);
+    if args.pty || args.serial.is_some() {
         let device = RtuDevice {
             bank: Arc::clone(&bank),
             faults: Arc::clone(&faults),
             slave: unit,
             line: args.baud_emulation.map(|baud| LineSpeed {
                 baud,
-                bits_per_char: bits,
+                bits_per_char: line(&args, "").bits_per_char(),
                 turnaround: Duration::from_secs_f64(args.turnaround_ms / 1000.0),
             }),
         };
-        if args.pty {
-            let (server_end, client_end) =
-                SerialStream::pair().context("cannot open a pseudo-terminal (--pty)")?;
-            let path = client_end
-                .name()
-                .context("the pseudo-terminal has no path")?;
-            if let Some(link) = &args.pty_link {
-                // Replace a link left by an earlier run; a missing one is fine.
-                let _ = std::fs::remove_file(link);
-                std::os::unix::fs::symlink(&path, link).with_context(|| {
-                    format!("cannot create the link {} (--pty-link)", link.display())
-                })?;
-            }
-            announce(&format!("pty: {path}"));
-            servers.spawn(async move {
-                // The client end stays open for the device's life: without it, the server end
-                // reads EIO whenever a client closes its handle.
-                let _client_end = client_end;
-                device.serve(server_end).await.context("pseudo-terminal")
-            });
-        } else if let Some(path) = &args.serial {
-            let name = path.display().to_string();
-            let port = tokio_serial::new(&name, args.baud)
-                .parity(match args.parity {
-                    Parity::None => tokio_serial::Parity::None,
-                    Parity::Even => tokio_serial::Parity::Even,
-                    Parity::Odd => tokio_serial::Parity::Odd,
-                })
-                .stop_bits(if args.stop_bits == 2 {
-                    tokio_serial::StopBits::Two
-                } else {
-                    tokio_serial::StopBits::One
-                })
-                .open_native_async()
-                .with_context(|| format!("cannot open serial port {name} (--serial)"))?;
-            announce(&format!("serial: {name}"));
-            servers.spawn(async move { device.serve(port).await.with_context(|| name) });
-        }
+        spawn_rtu(&mut servers, &args, device)?;
     }
     // Serve until the first server ends (an error, or a serial port that closed).
     let result = match servers.join_next().await {
@@ -323,6 +302,43 @@ async fn run(args: Args) -> anyhow::Result<()> {
     };
     stepping.abort();
     result
+}
+
+/// Opens the pseudo-terminal (`--pty`) or the serial device (`--serial`), announces it and
+/// serves `device` on it.
+fn spawn_rtu(
+    servers: &mut tokio::task::JoinSet<anyhow::Result<()>>,
+    args: &Args,
+    device: RtuDevice,
+) -> anyhow::Result<()> {
+    if args.pty {
+        let (server_end, client_end) =
+            SerialStream::pair().context("cannot open a pseudo-terminal (--pty)")?;
+        let path = client_end
+            .name()
+            .context("the pseudo-terminal has no path")?;
+        if let Some(link) = &args.pty_link {
+            // Replace a link left by an earlier run; a missing one is fine.
+            let _ = std::fs::remove_file(link);
+            std::os::unix::fs::symlink(&path, link).with_context(|| {
+                format!("cannot create the link {} (--pty-link)", link.display())
+            })?;
+        }
+        announce(&format!("pty: {path}"));
+        servers.spawn(async move {
+            // The client end stays open for the device's life: without it, the server end
+            // reads EIO whenever a client closes its handle.
+            let _client_end = client_end;
+            device.serve(server_end).await.context("pseudo-terminal")
+        });
+    } else if let Some(path) = &args.serial {
+        let name = path.display().to_string();
+        let port = serial::open(&line(args, &name))
+            .with_context(|| format!("cannot open serial port {name} (--serial)"))?;
+        announce(&format!("serial: {name}"));
+        servers.spawn(async move { device.serve(port).await.with_context(|| name) });
+    }
+    Ok(())
 }
 
 /// Steps the valve at 100 Hz in real time from the bank's set-point and reports its position.

@@ -29,7 +29,7 @@ use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::time::Instant;
 use tokio_modbus::client::{rtu, tcp, Context, Reader, Writer};
 use tokio_modbus::Slave;
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+use tokio_serial::SerialStream;
 
 use super::budget::{Budget, BudgetError};
 use super::link::{Parity, RtuLink, TcpLink};
@@ -282,27 +282,8 @@ impl ModbusValve {
                 tcp::connect_slave(addr, Slave(l.unit_id)).await
             }
             Link::Rtu(l) => {
-                let builder = tokio_serial::new(&l.port, l.baud)
-                    .parity(match l.parity {
-                        Parity::None => tokio_serial::Parity::None,
-                        Parity::Even => tokio_serial::Parity::Even,
-                        Parity::Odd => tokio_serial::Parity::Odd,
-                    })
-                    .data_bits(if l.data_bits == 7 {
-                        tokio_serial::DataBits::Seven
-                    } else {
-                        tokio_serial::DataBits::Eight
-                    })
-                    .stop_bits(if l.stop_bits == 2 {
-                        tokio_serial::StopBits::Two
-                    } else {
-                        tokio_serial::StopBits::One
-                    });
-                let stream = builder.open_native_async().map_err(io::Error::from)?;
-                // Whatever a previous context left unread (a late reply) must not be taken as the next answer.
-                stream
-                    .clear(tokio_serial::ClearBuffer::All)
-                    .map_err(io::Error::from)?;
+                // Whatever a previous context left unread (a late reply) is discarded on opening.
+                let stream = super::serial::open(l).map_err(io::Error::from)?;
                 let tap = Tap {
                     inner: stream,
                     rx: Arc::clone(&self.rx),

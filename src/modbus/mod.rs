@@ -8,6 +8,7 @@
 //! - [`budget`]: a cycle's wire time on a serial line, and the verdict on the loop rate.
 //! - [`client`]: [`client::ModbusValve`], one cycle `transact(O_P) -> V_P` with a deadline,
 //!   fault kinds and reconnection.
+//! - [`serial`]: opening a serial port with a link's settings (the client and sim-device).
 //! - [`server`]: [`server::RegisterBank`], the device side (used by `sim-device`, and by a
 //!   Modbus server that the loop can offer to a process controller).
 //!
@@ -18,4 +19,5 @@ pub mod client;
 pub mod link;
 pub mod map;
 pub mod plan;
+pub mod serial;
 pub mod server;
