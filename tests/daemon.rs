@@ -360,3 +360,17 @@ fn bad_configs_fail_with_one_line_naming_the_key() {
         );
     }
 }
+
+#[test]
+fn a_missing_config_file_names_each_cause_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--config", "no-such.toml", "--duration", "1"], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = text(&out.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("valve-bridge: error: no-such.toml: cannot read: No such file"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
+}

@@ -181,8 +181,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-            eprintln!("sim-device: error: {}", chain.join(": "));
+            eprintln!("sim-device: error: {}", valve_bridge::error_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
