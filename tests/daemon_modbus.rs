@@ -31,6 +31,8 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use valve_bridge::model::{bundled, ModelKind, Valve};
+
+mod common;
 use valve_bridge::recording;
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
@@ -437,6 +439,8 @@ fn fault_run(device_args: &[&str], edits: &[(&str, &str)]) -> FaultRun {
         !stderr.contains('\u{1b}'),
         "colour codes in a log that is not a terminal:\n{stderr}"
     );
+    common::assert_for_people(&stderr);
+    common::assert_for_people(&summary);
     FaultRun {
         rows,
         summary,

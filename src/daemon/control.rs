@@ -196,10 +196,10 @@ impl Loop {
                     Some(status),
                 );
                 tracing::info!(
-                    action = status.as_str(),
-                    op_pct = op,
-                    vp_pct = row.vp_pct,
-                    "stop action applied"
+                    "stop action applied: {}, O_P {op:.2} %, V_P {}",
+                    status.as_str(),
+                    row.vp_pct
+                        .map_or("not read".into(), |v| format!("{v:.2} %"))
                 );
                 self.source.feedback(&row);
                 self.emit(row, Some(lateness_end))?;

@@ -99,9 +99,8 @@ impl Controller {
             if self.tripped {
                 self.tripped = false;
                 tracing::warn!(
-                    t_s,
-                    op_pct = setpoint,
-                    "watchdog: set-point writes resumed, following the process controller again"
+                    "watchdog: set-point writes resumed at t = {t_s:.2} s, following the process \
+                     controller again (O_P {setpoint:.2} %)"
                 );
             }
         } else if !self.tripped && t_s - self.last_write_t_s >= self.watchdog_s {
@@ -111,10 +110,10 @@ impl Controller {
                 self.op_pct = safe;
             }
             tracing::warn!(
-                t_s,
-                op_pct = self.op_pct,
-                "watchdog: no set-point from the process controller for {} s, sending the safe O_P",
-                self.watchdog_s
+                "watchdog: no set-point from the process controller for {:.2} s at t = {t_s:.2} s, \
+                 sending the safe O_P {:.2} %",
+                self.watchdog_s,
+                self.op_pct
             );
         }
         self.op_pct

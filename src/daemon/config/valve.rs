@@ -143,7 +143,7 @@ impl ValveConfig {
                 "timeout_ms",
                 format!(
                     "{t} is not allowed: a deadline in ms, above 0 and below the loop \
-                     period ({period_ms} ms at rate_hz = {}); leave it out for 80 % of the period",
+                     period ({period_ms:.3} ms at rate_hz = {}); leave it out for 80 % of the period",
                     timing.rate_hz
                 ),
             )),
