@@ -9,6 +9,7 @@
 //! - [`recording`]: the CSV recording format (read with helpful errors, write, column mapping).
 //! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
 //! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
+//! - [`net`]: TCP servers that stay up (accept errors retried, connections capped).
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`report`]: self-contained HTML reports with SVG charts.
@@ -21,6 +22,7 @@ pub mod fit;
 pub mod metrics;
 pub mod modbus;
 pub mod model;
+pub mod net;
 pub mod recording;
 pub mod report;
 pub mod synth;

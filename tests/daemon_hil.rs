@@ -518,17 +518,22 @@ fn metrics_endpoint_answers_get_metrics() {
     std::thread::sleep(Duration::from_millis(300));
     let body = http_get(&addr, "/metrics");
     for name in [
-        "valve_bridge_timing_error_us_bucket",
-        "valve_bridge_timing_error_us_count",
+        "valve_bridge_timing_error_seconds_bucket",
+        "valve_bridge_timing_error_seconds_count",
         "valve_bridge_cycles_total",
         "valve_bridge_cycle_failures_total{kind=\"timeout\"}",
         "valve_bridge_cycle_failures_total{kind=\"error\"}",
         "valve_bridge_cycle_failures_total{kind=\"disconnected\"}",
         "valve_bridge_missed_cycles_total",
-        "valve_bridge_op_pct",
-        "valve_bridge_vp_pct",
+        "valve_bridge_op_ratio",
+        "valve_bridge_vp_ratio",
         "valve_bridge_reconnects_total",
         "valve_bridge_watchdog_trips_total",
+        "valve_bridge_server_up{server=\"metrics\"} 1",
+        "valve_bridge_server_connections{server=\"metrics\"} 1",
+        "valve_bridge_server_connections_accepted_total{server=\"metrics\"}",
+        "valve_bridge_server_connections_refused_total{server=\"metrics\"} 0",
+        "valve_bridge_server_accept_errors_total{server=\"metrics\"} 0",
     ] {
         assert!(body.lines().any(|l| l.starts_with(name)), "{name}: {body}");
     }

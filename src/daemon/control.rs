@@ -9,11 +9,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 use super::config::{ClockKind, OnStop, ValveConfig};
 use super::exporter::LoopMetrics;
-use super::logger::{Sample, Status};
+use super::logger::{round_pct, Sample, Status};
 use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
 use super::stats::{Live, Stats, StopReason};
@@ -62,8 +62,13 @@ pub(super) struct Spawned {
 }
 
 /// Starts the loop thread and opens the valve `[valve]` describes on it, for a loop of period
-/// `period_s`; the error of a valve that cannot be opened is returned here.
-pub(super) fn spawn(valve: ValveConfig, period_s: f64) -> Result<Spawned, DaemonError> {
+/// `period_s`; the error of a valve that cannot be opened (or, with `require_device`, reached)
+/// is returned here.
+pub(super) fn spawn(
+    valve: ValveConfig,
+    period_s: f64,
+    require_device: bool,
+) -> Result<Spawned, DaemonError> {
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let (parts, parts_rx): (Sender<Build>, Receiver<Build>) = std::sync::mpsc::channel();
     let handle = std::thread::Builder::new()
@@ -71,7 +76,7 @@ pub(super) fn spawn(valve: ValveConfig, period_s: f64) -> Result<Spawned, Daemon
         .spawn(move || {
             // On an error here `ready_tx` is dropped unsent and spawn() reads the error from the join.
             let rt = current_thread_runtime("loop runtime")?;
-            let backend = rt.block_on(Backend::open(&valve, period_s))?;
+            let backend = rt.block_on(Backend::open(&valve, period_s, require_device))?;
             ready_tx
                 .send(backend.describe())
                 .map_err(|_| DaemonError::Panicked("calling"))?;
@@ -148,6 +153,8 @@ impl Loop {
                         status: Status::Skipped,
                         lateness_us: None,
                         latency_us: None,
+                        op_sent_pct: None,
+                        utc: schedule.wall(k),
                     };
                     // One warning per run of consecutive missed slots, not one per slot.
                     if self.last_skipped_k.is_none_or(|last| last + 1 != k) {
@@ -168,10 +175,11 @@ impl Loop {
                 break (reason, k, lateness);
             }
             let t_s = schedule.t_s(k);
-            let Some(op) = self.source.op_at(t_s) else {
+            // Rounded to the log's precision: the O_P sent is the O_P logged.
+            let Some(op) = self.source.op_at(t_s).map(round_pct) else {
                 break (StopReason::SourceEnded, k, lateness);
             };
-            let mut row = self.transact(&rt, op, (k, t_s), lateness, None);
+            let mut row = self.transact(&rt, op, (k, t_s, schedule.wall(k)), lateness, None);
             // A failed transaction keeps its failure status; the O_P column shows the safe O_P.
             if row.status == Status::Ok && self.source.watchdog_tripped() {
                 row.status = Status::Watchdog;
@@ -191,7 +199,7 @@ impl Loop {
                 let row = self.transact(
                     &rt,
                     op,
-                    (k_end, schedule.t_s(k_end)),
+                    (k_end, schedule.t_s(k_end), schedule.wall(k_end)),
                     lateness_end,
                     Some(status),
                 );
@@ -222,7 +230,7 @@ impl Loop {
         &mut self,
         rt: &tokio::runtime::Runtime,
         op: f64,
-        (k, t_s): (u64, f64),
+        (k, t_s, utc): (u64, f64, SystemTime),
         lateness: Duration,
         safe: Option<Status>,
     ) -> Sample {
@@ -248,6 +256,9 @@ impl Loop {
             }
             self.last_status = status;
         }
+        if let Err(fault) = result {
+            self.stats.note_fault(fault);
+        }
         Sample {
             t_s,
             op_pct: Some(op),
@@ -255,6 +266,8 @@ impl Loop {
             status: safe.unwrap_or(status),
             lateness_us: Some(micros(lateness)),
             latency_us: Some(micros(latency)),
+            op_sent_pct: self.backend.sent_pct(),
+            utc,
         }
     }
 

@@ -129,6 +129,9 @@ pub struct RunOptions {
     pub virtual_clock: bool,
     /// Show the one-line progress display (only drawn on a terminal).
     pub progress: bool,
+    /// Refuse to start when a Modbus device cannot be reached (otherwise the loop starts and
+    /// retries the link).
+    pub require_device: bool,
 }
 
 /// Runs until SIGINT/SIGTERM, `--duration` or the end of the source, showing progress.

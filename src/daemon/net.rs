@@ -2,7 +2,9 @@
 //! the Prometheus endpoint ([`super::exporter`]), on a current-thread runtime of their own.
 //!
 //! [`Listeners`] binds the sockets at start-up (before the valve is opened, so a taken port stops
-//! the start first); [`Net`] serves them until stopped. Not here: what is served.
+//! the start first); [`Net`] serves them until stopped, each as a [`crate::net`] server that
+//! survives accept errors and caps its connections; their [`Health`] goes into the summary and
+//! the metrics. Not here: what is served.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -15,11 +17,21 @@ use super::hil;
 use super::source::Source;
 use super::DaemonError;
 use crate::modbus::server::RegisterBank;
+use crate::net::{Health, Limits};
+
+/// One bound listening socket, what it serves, its limits and its health.
+struct Served<T> {
+    listener: std::net::TcpListener,
+    addr: SocketAddr,
+    limits: Limits,
+    health: Arc<Health>,
+    what: T,
+}
 
 /// The listening sockets of a daemon, bound, with what each serves.
 pub(super) struct Listeners {
-    modbus: Option<(std::net::TcpListener, SocketAddr, Arc<RegisterBank>)>,
-    exporter: Option<(std::net::TcpListener, SocketAddr, prometheus::Registry)>,
+    modbus: Option<Served<Arc<RegisterBank>>>,
+    exporter: Option<Served<LoopMetrics>>,
 }
 
 impl Listeners {
@@ -32,16 +44,31 @@ impl Listeners {
     ) -> Result<Listeners, DaemonError> {
         let modbus = match source.served_bank() {
             Some(bank) => {
-                let key = "[source.modbus-server] listen";
-                let (listener, addr) = bind(key, config.source.modbus_server.listen.0)?;
-                Some((listener, addr, Arc::clone(bank)))
+                let cfg = &config.source.modbus_server;
+                let (listener, addr) = bind("[source.modbus-server] listen", cfg.listen.0)?;
+                Some(Served {
+                    listener,
+                    addr,
+                    limits: cfg.limits(),
+                    health: Arc::default(),
+                    what: Arc::clone(bank),
+                })
             }
             None => None,
         };
         let exporter = match (&config.metrics, metrics) {
             (Some(cfg), Some(m)) => {
                 let (listener, addr) = bind("[metrics] listen", cfg.listen.0)?;
-                Some((listener, addr, m.registry().clone()))
+                Some(Served {
+                    listener,
+                    addr,
+                    limits: Limits {
+                        max_connections: cfg.max_connections,
+                        idle_timeout: exporter::HEAD_TIMEOUT,
+                    },
+                    health: Arc::default(),
+                    what: m.clone(),
+                })
             }
             _ => None,
         };
@@ -50,8 +77,15 @@ impl Listeners {
 
     /// What is served, by name (`modbus-server`, `metrics`), with the bound addresses.
     pub(super) fn endpoints(&self) -> Vec<(&'static str, SocketAddr)> {
-        let modbus = self.modbus.as_ref().map(|m| ("modbus-server", m.1));
-        let metrics = self.exporter.as_ref().map(|m| ("metrics", m.1));
+        let modbus = self.modbus.as_ref().map(|m| ("modbus-server", m.addr));
+        let metrics = self.exporter.as_ref().map(|m| ("metrics", m.addr));
+        modbus.into_iter().chain(metrics).collect()
+    }
+
+    /// The health of each server, by the same names.
+    pub(super) fn health(&self) -> Vec<(&'static str, Arc<Health>)> {
+        let modbus = (self.modbus.as_ref()).map(|m| ("modbus-server", Arc::clone(&m.health)));
+        let metrics = (self.exporter.as_ref()).map(|m| ("metrics", Arc::clone(&m.health)));
         modbus.into_iter().chain(metrics).collect()
     }
 }
@@ -89,23 +123,38 @@ pub(super) struct Net {
 impl Net {
     /// Starts serving `listeners` on a thread of its own; None when there is nothing to serve.
     pub(super) fn start(listeners: Listeners) -> Result<Option<Net>, DaemonError> {
+        let servers = listeners.health();
         let Listeners { modbus, exporter } = listeners;
         if modbus.is_none() && exporter.is_none() {
             return Ok(None);
         }
         let rt = current_thread_runtime("network runtime")?;
+        let tokio_listener = |l: std::net::TcpListener| {
+            // Registered with the network runtime's reactor, which drives it.
+            let _in_runtime = rt.enter();
+            tokio::net::TcpListener::from_std(l).map_err(|source| DaemonError::Thread {
+                what: "network listener",
+                source,
+            })
+        };
+        let modbus = match modbus {
+            Some(m) => Some((tokio_listener(m.listener)?, m.limits, m.health, m.what)),
+            None => None,
+        };
+        let exporter = match exporter {
+            Some(m) => Some((tokio_listener(m.listener)?, m.limits, m.health, m.what)),
+            None => None,
+        };
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let serve = async move {
             let modbus = async {
-                if let Some((listener, _, bank)) = modbus {
-                    let serve = |l| hil::serve(l, bank);
-                    serve_logged("Modbus server for the process controller", listener, serve).await;
+                if let Some((listener, limits, health, bank)) = modbus {
+                    hil::serve(listener, bank, limits, health).await;
                 }
             };
             let metrics = async {
-                if let Some((listener, _, registry)) = exporter {
-                    let serve = |l| exporter::serve(l, registry);
-                    serve_logged("metrics endpoint", listener, serve).await;
+                if let Some((listener, limits, health, metrics)) = exporter {
+                    exporter::serve(listener, metrics, servers, limits, health).await;
                 }
             };
             tokio::select! {
@@ -131,20 +180,5 @@ impl Net {
         self.handle
             .join()
             .map_err(|_| DaemonError::Panicked("network"))
-    }
-}
-
-/// Serves `listener` with `serve` (on the network thread's runtime) and logs why it stopped.
-async fn serve_logged<F, Fut>(what: &str, listener: std::net::TcpListener, serve: F)
-where
-    F: FnOnce(tokio::net::TcpListener) -> Fut,
-    Fut: std::future::Future<Output = std::io::Result<()>>,
-{
-    let served = match tokio::net::TcpListener::from_std(listener) {
-        Ok(l) => serve(l).await,
-        Err(e) => Err(e),
-    };
-    if let Err(e) = served {
-        tracing::error!("the {what} stopped: {e}");
     }
 }

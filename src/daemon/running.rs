@@ -18,6 +18,7 @@ use super::net::{Listeners, Net};
 use super::source::Source;
 use super::stats::{Live, Stats, Summary};
 use super::{DaemonError, RunOptions};
+use crate::net::Health;
 
 /// A started daemon: its threads and the stop flag.
 pub struct Running {
@@ -28,6 +29,7 @@ pub struct Running {
     logger: JoinHandle<Result<LogReport, DaemonError>>,
     net: Option<Net>,
     endpoints: Vec<(&'static str, SocketAddr)>,
+    servers: Vec<(&'static str, Arc<Health>)>,
 }
 
 /// Starts the loop and logger threads; the loop runs until stopped, the duration or the source ends.
@@ -46,8 +48,13 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     // The backend is opened on the loop thread, inside the runtime that will drive its I/O; the
     // rest of the loop is handed over once it is open, so a valve that cannot be reached stops
     // the start before any log file is created.
-    let spawned = control::spawn(config.valve.clone(), period.as_secs_f64())?;
+    let spawned = control::spawn(
+        config.valve.clone(),
+        period.as_secs_f64(),
+        opts.require_device,
+    )?;
     let endpoints = listeners.endpoints();
+    let servers = listeners.health();
     let net = Net::start(listeners)?;
     for (name, addr) in &endpoints {
         tracing::info!(%addr, "serving {name}");
@@ -97,6 +104,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         logger: logger.handle,
         net,
         endpoints,
+        servers,
     })
 }
 
@@ -169,6 +177,9 @@ impl Running {
             rate_hz: self.rate_hz,
             safe: end.safe,
             reconnects: end.reconnects,
+            servers: (self.servers.iter())
+                .map(|(name, h)| (*name, h.view()))
+                .collect(),
             log,
         })
     }

@@ -1,49 +1,54 @@
 //! The Modbus valve client: one cycle = write O_P, read V_P (and status), with a deadline.
 //!
-//! [`ModbusValve`] owns at most one tokio-modbus client context, over TCP or RTU. Each
-//! [`ModbusValve::transact`] runs the cycle's [`Plan`] under one deadline (`timeout_ms`, by
-//! default 80 % of the loop period), because tokio-modbus's async client has no timeout of its
-//! own. After a timeout or a transport/framing error the context is dropped, never reused: a late
-//! reply would otherwise be taken as the answer to the next request (tokio-modbus issue #324). The
-//! link is reopened on a later cycle, with a backoff that starts at one timeout and doubles up to
-//! [`MAX_BACKOFF`]; a cycle never waits for a reconnect beyond its own deadline, so the loop keeps
-//! its rhythm. Exception replies keep the link (the device answered cleanly).
+//! [`ModbusValve`] owns at most one tokio-modbus client context, over TCP or RTU: never more
+//! than one connection per device. Each [`ModbusValve::transact`] runs the cycle's [`Plan`]
+//! under one deadline (`timeout_ms`, by default 80 % of the loop period), because
+//! tokio-modbus's async client has no timeout of its own.
+//!
+//! A late or lost reply costs its own cycle only. The link is kept after a timeout, a CRC error
+//! or an exception while the transport is healthy: on TCP the wire under the context drops any
+//! reply that does not carry the latest request's transaction id, on RTU it empties the input
+//! before each request ([`super::wire`]). The link is dropped when the transport breaks (the
+//! device closed or reset the connection, the serial port failed) and, on TCP, when the device
+//! has answered nothing for [`SILENT_LINK`] on an open connection. It is then reopened on a
+//! later cycle: at once after a connection that had answered, otherwise after a backoff that
+//! starts at [`FIRST_BACKOFF`] and doubles up to [`MAX_BACKOFF`] with each further failure (a
+//! device that accepts connections and then never answers is not flooded with new ones). A
+//! cycle never waits for a reconnect beyond its own deadline, so the loop keeps its rhythm.
 //!
 //! Faults come back as [`Fault`]: `timeout` (no complete reply in time), `error` (exception,
 //! CRC or framing error, unusable value, set-point refused by the device) and `disconnected`
-//! (link down or reconnecting). An RTU link is tapped (a thin byte recorder around the serial
-//! stream) so that a reply with a bad CRC, which tokio-modbus silently discards and then waits
-//! on, is reported as the CRC error it is instead of a timeout.
+//! (link down or reconnecting), each saying what happened in words.
 //!
 //! Not here: retries within a cycle (the next cycle is the retry), fault counting (the loop
 //! counts what it receives), and any notion of the loop's clock.
 
 use std::io;
 use std::net::{SocketAddr, ToSocketAddrs};
-use std::pin::Pin;
-use std::sync::{Arc, Mutex};
-use std::task::{Context as TaskContext, Poll};
+use std::sync::Arc;
 use std::time::Duration;
 
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::time::Instant;
 use tokio_modbus::client::{rtu, tcp, Context, Reader, Writer};
 use tokio_modbus::Slave;
-use tokio_serial::SerialStream;
 
 use super::budget::{Budget, BudgetError};
+use super::exception;
 use super::link::{Parity, RtuLink, TcpLink};
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction};
+use super::wire::{rtu_frame_fault, RtuWire, TcpWire, WireState};
 
-/// Longest wait between reconnect attempts.
-pub const MAX_BACKOFF: Duration = Duration::from_secs(1);
+/// Wait after a failed connection attempt; doubles with each further one, up to [`MAX_BACKOFF`].
+pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+/// Longest wait between connection attempts.
+pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
+/// A TCP connection on which the device has answered nothing for this long is reopened.
+pub const SILENT_LINK: Duration = Duration::from_secs(3);
 /// How long the first connection at start-up may take.
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(3);
 /// Default deadline of a cycle, as a share of the loop period.
 pub const DEFAULT_TIMEOUT_SHARE: f64 = 0.8;
-
-const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
 
 /// Where the valve is.
 #[derive(Debug, Clone, PartialEq)]
@@ -118,10 +123,9 @@ pub struct Reading {
     pub vp_pct: f64,
     /// The status word, when the map has a status register.
     pub status: Option<u16>,
+    /// The set-point as the device received it: O_P after the register's scaling and rounding, %.
+    pub sent_pct: f64,
 }
-
-/// Bytes received on an RTU link since the current request, for classifying bad replies.
-type RxLog = Arc<Mutex<Vec<u8>>>;
 
 /// A Modbus positioner driven one cycle at a time (see the module documentation).
 pub struct ModbusValve {
@@ -132,10 +136,18 @@ pub struct ModbusValve {
     timeout: Duration,
     budget: Option<Budget>,
     ctx: Option<Context>,
-    rx: RxLog,
+    wire: Arc<WireState>,
+    /// The current connection has answered at least once.
+    answered: bool,
+    /// When the device last answered (or the connection opened).
+    last_answer: Instant,
+    /// Why the link is down, for the cycles that find it so.
+    down_because: String,
     next_attempt: Instant,
     backoff: Duration,
     reconnects: u64,
+    attempts: u64,
+    sent_pct: Option<f64>,
 }
 
 impl std::fmt::Debug for ModbusValve {
@@ -152,12 +164,9 @@ impl std::fmt::Debug for ModbusValve {
 }
 
 impl ModbusValve {
-    /// Checks the settings and the bus budget for a loop of period `period_s`, and connects.
-    pub async fn open(
-        link: Link,
-        map: RegisterMap,
-        period_s: f64,
-    ) -> Result<ModbusValve, OpenError> {
+    /// Checks the settings and the map for a loop of period `period_s`, and works out the
+    /// cycle's transactions and (RTU) its bus budget; connects nothing yet.
+    pub fn new(link: Link, map: RegisterMap, period_s: f64) -> Result<ModbusValve, OpenError> {
         let section = link.section();
         let violation = match &link {
             Link::Tcp(l) => l.violation(),
@@ -177,24 +186,10 @@ impl ModbusValve {
         });
         let plan = Plan::new(&map);
         let (tcp_addr, budget) = match &link {
-            Link::Tcp(l) => {
-                let addr = l
-                    .address
-                    .to_socket_addrs()
-                    .map_err(|e| OpenError::Address {
-                        address: l.address.clone(),
-                        reason: e.to_string(),
-                    })?
-                    .next()
-                    .ok_or_else(|| OpenError::Address {
-                        address: l.address.clone(),
-                        reason: "no address found".into(),
-                    })?;
-                (Some(addr), None)
-            }
-            Link::Rtu(l) => (None, Some(Budget::rtu(l, &plan, period_s).check()?)),
+            Link::Tcp(l) => (Some(resolve(&l.address)?), None),
+            Link::Rtu(l) => (None, Some(Budget::rtu(l, &plan, period_s))),
         };
-        let mut valve = ModbusValve {
+        Ok(ModbusValve {
             link,
             tcp_addr,
             map,
@@ -202,35 +197,55 @@ impl ModbusValve {
             timeout,
             budget,
             ctx: None,
-            rx: RxLog::default(),
+            wire: Arc::default(),
+            answered: false,
+            last_answer: Instant::now(),
+            down_because: "not connected yet".into(),
             next_attempt: Instant::now(),
-            backoff: timeout,
+            backoff: FIRST_BACKOFF,
             reconnects: 0,
-        };
-        match tokio::time::timeout(OPEN_TIMEOUT, valve.connect()).await {
-            Ok(Ok(ctx)) => valve.ctx = Some(ctx),
-            Ok(Err(e)) => return Err(valve.open_error(e.to_string())),
-            Err(_) => {
-                return Err(valve.open_error(format!(
-                    "no answer within {:.1} s",
-                    OPEN_TIMEOUT.as_secs_f64()
-                )));
-            }
-        }
-        Ok(valve)
+            attempts: 0,
+            sent_pct: None,
+        })
     }
 
-    fn open_error(&self, reason: String) -> OpenError {
-        match &self.link {
-            Link::Tcp(l) => OpenError::TcpConnect {
-                address: l.address.clone(),
-                reason,
-            },
-            Link::Rtu(l) => OpenError::Serial {
-                port: l.port.clone(),
-                reason,
-            },
+    /// Refuses (RTU) a serial line that cannot carry the loop rate; logs the budget once.
+    pub fn check_budget(&mut self) -> Result<(), OpenError> {
+        if let Some(b) = self.budget.take() {
+            self.budget = Some(b.check()?);
         }
+        Ok(())
+    }
+
+    /// Connects (or opens the serial port) now, allowing [`OPEN_TIMEOUT`]. On failure the
+    /// valve stays usable: its cycles report `disconnected` and retry with backoff.
+    pub async fn connect_now(&mut self) -> Result<(), OpenError> {
+        let deadline = Instant::now() + OPEN_TIMEOUT;
+        match self.attempt(deadline).await {
+            Ok(()) => Ok(()),
+            Err(reason) => Err(match &self.link {
+                Link::Tcp(l) => OpenError::TcpConnect {
+                    address: l.address.clone(),
+                    reason,
+                },
+                Link::Rtu(l) => OpenError::Serial {
+                    port: l.port.clone(),
+                    reason,
+                },
+            }),
+        }
+    }
+
+    /// [`ModbusValve::new`], the budget check and a first connection that must succeed.
+    pub async fn open(
+        link: Link,
+        map: RegisterMap,
+        period_s: f64,
+    ) -> Result<ModbusValve, OpenError> {
+        let mut valve = ModbusValve::new(link, map, period_s)?;
+        valve.check_budget()?;
+        valve.connect_now().await?;
+        Ok(valve)
     }
 
     /// The deadline of one cycle.
@@ -238,19 +253,39 @@ impl ModbusValve {
         self.timeout
     }
 
-    /// The bus budget computed at start-up (RTU only).
+    /// Sets the deadline of one cycle (or one probe request).
+    pub fn set_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
+
+    /// The register map.
+    pub fn map(&self) -> &RegisterMap {
+        &self.map
+    }
+
+    /// The bus budget (RTU only).
     pub fn budget(&self) -> Option<&Budget> {
         self.budget.as_ref()
     }
 
-    /// How many times the link was reopened after a fault.
+    /// How many times a cycle (re)opened the link (not counting a connection made at start).
     pub fn reconnects(&self) -> u64 {
         self.reconnects
+    }
+
+    /// Connection attempts so far (the first one included).
+    pub fn attempts(&self) -> u64 {
+        self.attempts
     }
 
     /// True while a context is open.
     pub fn is_connected(&self) -> bool {
         self.ctx.is_some()
+    }
+
+    /// The set-point the device acknowledged in the last cycle, as it received it, %.
+    pub fn sent_pct(&self) -> Option<f64> {
+        self.sent_pct
     }
 
     /// A short description for the log.
@@ -273,30 +308,64 @@ impl ModbusValve {
         }
     }
 
-    async fn connect(&self) -> io::Result<Context> {
-        match &self.link {
-            Link::Tcp(l) => {
-                let addr = self
-                    .tcp_addr
-                    .ok_or_else(|| io::Error::other("no resolved address"))?;
-                tcp::connect_slave(addr, Slave(l.unit_id)).await
+    /// One connection attempt within `deadline`; on failure, the reason, and the next attempt
+    /// waits the backoff (which doubles).
+    async fn attempt(&mut self, deadline: Instant) -> Result<(), String> {
+        self.ctx = None;
+        self.attempts += 1;
+        let allowed = deadline.saturating_duration_since(Instant::now());
+        let wire = Arc::new(WireState::default());
+        let connecting = async {
+            match &self.link {
+                Link::Tcp(l) => {
+                    let addr = self
+                        .tcp_addr
+                        .ok_or_else(|| io::Error::other("no resolved address"))?;
+                    let stream = tokio::net::TcpStream::connect(addr).await?;
+                    // One small request per cycle: latency matters more than throughput.
+                    stream.set_nodelay(true)?;
+                    let wire = TcpWire::new(stream, Arc::clone(&wire));
+                    Ok::<_, io::Error>(tcp::attach_slave(wire, Slave(l.unit_id)))
+                }
+                Link::Rtu(l) => {
+                    let port = super::serial::open(l).map_err(io::Error::from)?;
+                    let wire = RtuWire::new(port, Arc::clone(&wire));
+                    Ok(rtu::attach_slave(wire, Slave(l.slave_id)))
+                }
             }
-            Link::Rtu(l) => {
-                // Whatever a previous context left unread (a late reply) is discarded on opening.
-                let stream = super::serial::open(l).map_err(io::Error::from)?;
-                let tap = Tap {
-                    inner: stream,
-                    rx: Arc::clone(&self.rx),
-                };
-                Ok(rtu::attach_slave(tap, Slave(l.slave_id)))
+        };
+        match tokio::time::timeout_at(deadline, connecting).await {
+            Ok(Ok(ctx)) => {
+                self.ctx = Some(ctx);
+                self.wire = wire;
+                self.answered = false;
+                self.last_answer = Instant::now();
+                Ok(())
+            }
+            failed => {
+                self.next_attempt = Instant::now() + self.backoff;
+                self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
+                Err(match failed {
+                    Ok(Err(e)) => e.to_string(),
+                    _ => format!("no connection within {} ms", allowed.as_millis()),
+                })
             }
         }
     }
 
-    /// Drops the context after a fault and schedules the next reconnect attempt.
-    fn drop_link(&mut self) {
+    /// Drops the link because `why`. It is reopened at once if it had answered (a device that
+    /// restarted), otherwise after the backoff (a device that takes connections but never
+    /// answers on them).
+    fn drop_link(&mut self, why: String) {
         self.ctx = None;
-        self.next_attempt = Instant::now() + self.backoff;
+        if self.answered {
+            self.next_attempt = Instant::now();
+            self.backoff = FIRST_BACKOFF;
+        } else {
+            self.next_attempt = Instant::now() + self.backoff;
+            self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
+        }
+        self.down_because = why;
     }
 
     /// Reopens the link if the backoff allows, within `deadline`.
@@ -304,30 +373,25 @@ impl ModbusValve {
         let now = Instant::now();
         if now < self.next_attempt {
             return Err(Fault::Disconnected(format!(
-                "{}: link down, next reconnect attempt in {} ms",
+                "{}: {}; next connection attempt in {} ms",
                 self.describe(),
+                self.down_because,
                 (self.next_attempt - now).as_millis()
             )));
         }
-        let result = tokio::time::timeout_at(deadline, self.connect()).await;
-        match result {
-            Ok(Ok(ctx)) => {
-                self.ctx = Some(ctx);
+        match self.attempt(deadline).await {
+            Ok(()) => {
                 self.reconnects += 1;
-                tracing::info!("{}: reconnected", self.describe());
+                tracing::info!("{}: connected", self.describe());
                 Ok(())
             }
-            other => {
-                let why = match other {
-                    Ok(Err(e)) => e.to_string(),
-                    _ => format!("no connection within {} ms", self.timeout.as_millis()),
-                };
-                self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
-                self.next_attempt = Instant::now() + self.backoff;
+            Err(why) => {
+                self.down_because = format!("cannot connect: {why}");
                 Err(Fault::Disconnected(format!(
-                    "{}: reconnect failed: {why}; next attempt in {} ms",
+                    "{}: {}; next attempt in {} ms",
                     self.describe(),
-                    self.backoff.as_millis()
+                    self.down_because,
+                    (self.next_attempt - Instant::now()).as_millis()
                 )))
             }
         }
@@ -335,9 +399,16 @@ impl ModbusValve {
 
     /// Writes `op_pct` as the set-point and returns the position (and status).
     pub async fn transact(&mut self, op_pct: f64) -> Result<Reading, Fault> {
+        self.sent_pct = None;
         let setpoint = self
             .map
             .encode_setpoint(op_pct)
+            .map_err(|e| Fault::Error(e.to_string()))?;
+        // What the device makes of the words: the O_P after scaling and rounding.
+        let sent = self
+            .map
+            .setpoint
+            .decode("set-point", &setpoint, self.map.word_order)
             .map_err(|e| Fault::Error(e.to_string()))?;
         let deadline = Instant::now() + self.timeout;
         if self.ctx.is_none() {
@@ -346,37 +417,128 @@ impl ModbusValve {
         let mut replies: Vec<Vec<u16>> = Vec::with_capacity(self.plan.transactions.len());
         for i in 0..self.plan.transactions.len() {
             let t = self.plan.transactions[i];
-            let Some(ctx) = self.ctx.as_mut() else {
-                return Err(Fault::Disconnected("link closed".into()));
-            };
-            clear(&self.rx);
-            let result = tokio::time::timeout_at(deadline, call(ctx, t, &setpoint)).await;
-            let fault = match result {
-                Ok(Ok(Ok(words))) => {
-                    replies.push(words);
-                    continue;
-                }
-                Ok(Ok(Err(code))) => {
-                    return Err(Fault::Error(format!(
-                        "device answered FC {} with exception {code:?}",
-                        t.function_code()
-                    )));
-                }
-                Err(_) => self.classify_silence(t),
-                Ok(Err(tokio_modbus::Error::Transport(e))) => self.classify_transport(t, e),
-                Ok(Err(tokio_modbus::Error::Protocol(e))) => {
-                    Fault::Error(format!("FC {}: {e}", t.function_code()))
-                }
-            };
-            self.drop_link();
-            return Err(fault);
+            replies.push(self.exchange(t, &setpoint, deadline).await?);
+            if !matches!(t, Transaction::Read { .. }) {
+                self.sent_pct = Some(sent);
+            }
         }
-        let reading = self.decode(&replies, op_pct)?;
-        self.backoff = self.timeout;
-        Ok(reading)
+        let reading = self.decode(&replies, op_pct, sent);
+        if reading.is_err() {
+            self.sent_pct = None;
+        }
+        reading
     }
 
-    fn decode(&self, replies: &[Vec<u16>], op_pct: f64) -> Result<Reading, Fault> {
+    /// Reads `count` registers of `table` from `address` once (`valve-bridge probe`).
+    pub async fn read_registers(
+        &mut self,
+        table: Table,
+        address: u16,
+        count: u16,
+    ) -> Result<Vec<u16>, Fault> {
+        let deadline = Instant::now() + self.timeout;
+        if self.ctx.is_none() {
+            self.reconnect(deadline).await?;
+        }
+        let t = Transaction::Read {
+            table,
+            address,
+            count,
+        };
+        self.exchange(t, &[], deadline).await
+    }
+
+    /// Writes `pct` into the set-point register once (`valve-bridge probe --write-test`) and
+    /// returns the value the device received, %.
+    pub async fn write_setpoint(&mut self, pct: f64) -> Result<f64, Fault> {
+        let words = self
+            .map
+            .encode_setpoint(pct)
+            .map_err(|e| Fault::Error(e.to_string()))?;
+        let deadline = Instant::now() + self.timeout;
+        if self.ctx.is_none() {
+            self.reconnect(deadline).await?;
+        }
+        let t = Transaction::Write {
+            address: self.map.setpoint.address,
+            count: words.len() as u16,
+        };
+        self.exchange(t, &words, deadline).await?;
+        self.map
+            .setpoint
+            .decode("set-point", &words, self.map.word_order)
+            .map_err(|e| Fault::Error(e.to_string()))
+    }
+
+    /// Runs one transaction until `deadline`; decides from its outcome whether the link stays.
+    async fn exchange(
+        &mut self,
+        t: Transaction,
+        setpoint: &[u16],
+        deadline: Instant,
+    ) -> Result<Vec<u16>, Fault> {
+        let Some(ctx) = self.ctx.as_mut() else {
+            return Err(Fault::Disconnected(format!(
+                "{}: {}",
+                self.describe(),
+                self.down_because
+            )));
+        };
+        let fc = t.function_code();
+        match tokio::time::timeout_at(deadline, call(ctx, t, setpoint)).await {
+            Ok(Ok(Ok(words))) => {
+                self.heard();
+                Ok(words)
+            }
+            Ok(Ok(Err(code))) => {
+                self.heard();
+                Err(Fault::Error(format!(
+                    "device answered FC {fc} with {}",
+                    exception::explain(code)
+                )))
+            }
+            Err(_) => {
+                let fault = self.classify_silence(t);
+                let silent = Instant::now() - self.last_answer;
+                if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
+                    let why = format!(
+                        "no answer for {:.1} s on an open connection, reopening it",
+                        silent.as_secs_f64()
+                    );
+                    tracing::warn!("{}: {why}", self.describe());
+                    self.drop_link(why);
+                }
+                Err(fault)
+            }
+            Ok(Err(tokio_modbus::Error::Transport(e))) => {
+                let (fault, broken) = self.classify_transport(t, e);
+                if broken {
+                    let why = match &fault {
+                        Fault::Disconnected(m) | Fault::Error(m) | Fault::Timeout(m) => m.clone(),
+                    };
+                    self.drop_link(why);
+                }
+                Err(fault)
+            }
+            Ok(Err(tokio_modbus::Error::Protocol(e))) => {
+                // With the wire's transaction filter a mismatch means the stream is out of
+                // step: on TCP it is reopened. RTU has nothing to resynchronise.
+                if matches!(self.link, Link::Tcp(_)) {
+                    self.drop_link(format!("FC {fc}: {e}"));
+                }
+                Err(Fault::Error(format!("FC {fc}: {e}")))
+            }
+        }
+    }
+
+    /// The device answered: the connection is proven and the backoff starts afresh.
+    fn heard(&mut self) {
+        self.answered = true;
+        self.last_answer = Instant::now();
+        self.backoff = FIRST_BACKOFF;
+    }
+
+    fn decode(&self, replies: &[Vec<u16>], op_pct: f64, sent: f64) -> Result<Reading, Fault> {
         for (t, words) in self.plan.transactions.iter().zip(replies) {
             let want = match *t {
                 Transaction::Write { .. } => 0,
@@ -405,12 +567,16 @@ impl ModbusValve {
         if let (Some(word), Some(reg)) = (status, self.map.status) {
             if word & reg.error_mask() != 0 {
                 return Err(Fault::Error(format!(
-                    "device flags the set-point as refused (status 0x{word:04X}, bit {}) after O_P {op_pct} %",
+                    "device flags the set-point as refused (status 0x{word:04X}, bit {}) after O_P {op_pct:.2} %",
                     reg.setpoint_error_bit
                 )));
             }
         }
-        Ok(Reading { vp_pct, status })
+        Ok(Reading {
+            vp_pct,
+            status,
+            sent_pct: sent,
+        })
     }
 
     /// What a missed deadline means: silence, a partial reply, or a reply with a bad CRC.
@@ -420,7 +586,7 @@ impl ModbusValve {
         if !matches!(self.link, Link::Rtu(_)) {
             return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
         }
-        let rx = snapshot(&self.rx);
+        let rx = self.wire.received();
         if rx.is_empty() {
             return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
         }
@@ -434,18 +600,49 @@ impl ModbusValve {
         }
     }
 
-    fn classify_transport(&self, t: Transaction, e: io::Error) -> Fault {
+    /// The fault of a transport error, and whether it broke the link. A bad RTU frame leaves
+    /// the line usable (the input is emptied before the next request); anything else on RTU,
+    /// and any transport error on TCP, breaks it.
+    fn classify_transport(&self, t: Transaction, e: io::Error) -> (Fault, bool) {
         let fc = t.function_code();
+        let rtu = matches!(self.link, Link::Rtu(_));
         if e.kind() == io::ErrorKind::InvalidData {
-            if matches!(self.link, Link::Rtu(_)) {
-                if let Some(message) = rtu_frame_fault(&snapshot(&self.rx), &t) {
-                    return Fault::Error(message);
+            if rtu {
+                if let Some(message) = rtu_frame_fault(&self.wire.received(), &t) {
+                    return (Fault::Error(message), false);
                 }
             }
-            return Fault::Error(format!("FC {fc}: unusable reply: {e}"));
+            return (Fault::Error(format!("FC {fc}: unusable reply: {e}")), !rtu);
         }
-        Fault::Disconnected(format!("{}: FC {fc}: {e}", self.describe()))
+        // tokio-modbus reports a stream that ended with the thread's last errno, which says
+        // nothing about it (`Operation now in progress`): the wire knows what happened.
+        let what = if self.wire.closed() {
+            "the device closed the connection".to_string()
+        } else {
+            match e.kind() {
+                io::ErrorKind::ConnectionReset => format!("the device reset the connection ({e})"),
+                io::ErrorKind::BrokenPipe => format!("the connection is broken ({e})"),
+                _ => e.to_string(),
+            }
+        };
+        (
+            Fault::Disconnected(format!("{}: FC {fc}: {what}", self.describe())),
+            true,
+        )
     }
+}
+
+/// The socket address of `address` (`host:port`).
+fn resolve(address: &str) -> Result<SocketAddr, OpenError> {
+    let bad = |reason: String| OpenError::Address {
+        address: address.to_string(),
+        reason,
+    };
+    address
+        .to_socket_addrs()
+        .map_err(|e| bad(e.to_string()))?
+        .next()
+        .ok_or_else(|| bad("no address found".into()))
 }
 
 /// Runs one transaction; a write returns no words.
@@ -481,105 +678,10 @@ async fn call(
     }
 }
 
-/// The fault of a complete but unusable RTU reply in `rx`, or None if the reply is incomplete.
-fn rtu_frame_fault(rx: &[u8], t: &Transaction) -> Option<String> {
-    let fc = t.function_code();
-    let len = match rx.get(1) {
-        Some(&f) if f == fc | 0x80 => 5,
-        _ => t.rtu_response_bytes(),
-    };
-    let frame = rx.get(..len)?;
-    let (body, crc) = frame.split_at(len - 2);
-    let got = u16::from_le_bytes([crc[0], crc[1]]);
-    let want = MODBUS_CRC.checksum(body);
-    Some(if got != want {
-        format!("CRC error in reply to FC {fc}: received 0x{got:04X}, computed 0x{want:04X} over {:02X?}", body)
-    } else {
-        format!("unexpected reply to FC {fc}: {:02X?}", frame)
-    })
-}
-
-fn clear(rx: &RxLog) {
-    rx.lock().unwrap_or_else(|p| p.into_inner()).clear();
-}
-
-fn snapshot(rx: &RxLog) -> Vec<u8> {
-    rx.lock().unwrap_or_else(|p| p.into_inner()).clone()
-}
-
-/// A serial stream that records what it receives (up to one RTU frame's worth beyond the
-/// largest reply) into a log shared with the valve. Written by hand because it is only a
-/// pass-through with a side copy; no crate offers that for tokio's I/O traits.
-#[derive(Debug)]
-struct Tap {
-    inner: SerialStream,
-    rx: RxLog,
-}
-
-const TAP_LIMIT: usize = 512;
-
-impl AsyncRead for Tap {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut TaskContext<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<io::Result<()>> {
-        let before = buf.filled().len();
-        let result = Pin::new(&mut self.inner).poll_read(cx, buf);
-        if let Poll::Ready(Ok(())) = result {
-            let mut log = self.rx.lock().unwrap_or_else(|p| p.into_inner());
-            let new = &buf.filled()[before..];
-            let room = TAP_LIMIT.saturating_sub(log.len());
-            log.extend_from_slice(&new[..new.len().min(room)]);
-        }
-        result
-    }
-}
-
-impl AsyncWrite for Tap {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut TaskContext<'_>,
-        buf: &[u8],
-    ) -> Poll<io::Result<usize>> {
-        Pin::new(&mut self.inner).poll_write(cx, buf)
-    }
-
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut TaskContext<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
-    }
-
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut TaskContext<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::modbus::map::RegisterMap;
-
-    #[test]
-    fn crc_errors_are_told_from_incomplete_replies() {
-        let t = Transaction::Read {
-            table: Table::Holding,
-            address: 1,
-            count: 1,
-        };
-        let mut frame = vec![1u8, 3, 2, 0x01, 0xF4];
-        let crc = MODBUS_CRC.checksum(&frame).to_le_bytes();
-        frame.extend_from_slice(&crc);
-        assert!(rtu_frame_fault(&frame[..5], &t).is_none(), "incomplete");
-        let ok = rtu_frame_fault(&frame, &t).unwrap();
-        assert!(ok.starts_with("unexpected reply"), "{ok}");
-        frame[6] ^= 0xFF;
-        let bad = rtu_frame_fault(&frame, &t).unwrap();
-        assert!(bad.starts_with("CRC error in reply to FC 3"), "{bad}");
-        // An exception reply is 5 bytes.
-        let mut exc = vec![1u8, 0x83, 2];
-        exc.extend_from_slice(&(MODBUS_CRC.checksum(&exc) ^ 1).to_le_bytes());
-        assert!(rtu_frame_fault(&exc, &t).unwrap().starts_with("CRC error"));
-    }
 
     #[tokio::test]
     async fn unreachable_devices_give_one_line_errors() {

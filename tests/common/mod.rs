@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests of `valve-bridge` (each test file uses a part).
 #![allow(dead_code)]
 
+pub mod sim;
 pub mod tools;
 
 /// Panics if `text`, meant for people, holds a number with a float artefact: seven or more

@@ -36,6 +36,9 @@ pub use valve::{EmulatedConfig, ValveConfig, ValveKind};
 /// The default configuration, `config/emulated.toml`, embedded so default == file by construction.
 pub const DEFAULT_TOML: &str = include_str!("../../../config/emulated.toml");
 
+/// The most connections a server may be allowed (each is a file descriptor).
+pub const MAX_CONNECTIONS: usize = 1000;
+
 /// The name the embedded default goes by in messages.
 pub const DEFAULT_LABEL: &str = "config/emulated.toml (embedded default)";
 
@@ -115,12 +118,15 @@ pub enum ClockKind {
 pub struct MetricsConfig {
     /// Address of the HTTP endpoint (`GET /metrics`).
     pub listen: ListenAddr,
+    /// Connections open at once; more are closed as they arrive.
+    pub max_connections: usize,
 }
 
 impl Default for MetricsConfig {
     fn default() -> Self {
         MetricsConfig {
             listen: ListenAddr(SocketAddr::from(([127, 0, 0, 1], 9100))),
+            max_connections: 8,
         }
     }
 }
@@ -200,6 +206,18 @@ impl Check<'_> {
         toml_file::invalid(self.text, self.path, Some(table), key, message)
     }
 
+    /// `max_connections` of `table`: 1 to [`MAX_CONNECTIONS`].
+    fn max_connections(&self, table: &str, n: usize) -> Result<(), TomlError> {
+        self.range(
+            table,
+            "max_connections",
+            n as f64,
+            1.0,
+            MAX_CONNECTIONS as f64,
+            "connections open at once",
+        )
+    }
+
     /// `value` of `table.key` must be finite and within `lo..=hi`; `what` says what it is.
     fn range(
         &self,
@@ -254,6 +272,9 @@ impl Config {
         self.source.check_in(&c, &self.loop_)?;
         self.safety.check_in(&c)?;
         self.log.check_in(&c)?;
+        if let Some(m) = &self.metrics {
+            c.max_connections("metrics", m.max_connections)?;
+        }
         if let (Some(m), SourceKind::ModbusServer) = (&self.metrics, self.source.kind) {
             let hil = self.source.modbus_server.listen.0;
             if m.listen.0 == hil && hil.port() != 0 {

@@ -7,12 +7,14 @@
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::Duration;
 
 use serde::Deserialize;
 
 use super::{Check, ClockKind, ListenAddr, LoopConfig};
 use crate::daemon::hil;
-use crate::modbus::map::{RegisterMap, StatusRegister, Table};
+use crate::modbus::map::RegisterMap;
+use crate::net::Limits;
 use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
 use crate::toml_file::{self, TomlError};
 
@@ -252,6 +254,20 @@ pub struct ModbusServerConfig {
     /// `[source.modbus-server.registers]`: the map served (default: per-mille set-point in
     /// holding 0, position in holding 1, status in holding 2).
     pub registers: RegisterMap,
+    /// Connections open at once; more are closed as they arrive.
+    pub max_connections: usize,
+    /// A connection without a request for this long is closed, s.
+    pub idle_timeout_s: f64,
+}
+
+impl ModbusServerConfig {
+    /// The connection limits of the server.
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_connections: self.max_connections,
+            idle_timeout: Duration::from_secs_f64(self.idle_timeout_s),
+        }
+    }
 }
 
 impl Default for ModbusServerConfig {
@@ -260,14 +276,9 @@ impl Default for ModbusServerConfig {
             listen: ListenAddr(SocketAddr::from(([127, 0, 0, 1], 5020))),
             watchdog_s: 1.0,
             initial_pct: None,
-            registers: RegisterMap {
-                status: Some(StatusRegister {
-                    table: Table::Holding,
-                    address: 2,
-                    setpoint_error_bit: 0,
-                }),
-                ..RegisterMap::default()
-            },
+            registers: RegisterMap::device_default(),
+            max_connections: 8,
+            idle_timeout_s: 60.0,
         }
     }
 }
@@ -498,6 +509,15 @@ impl ModbusServerConfig {
                 ));
             }
         }
+        c.max_connections(t, self.max_connections)?;
+        c.range(
+            t,
+            "idle_timeout_s",
+            self.idle_timeout_s,
+            0.1,
+            DAY_S,
+            "the time after which a connection without requests is closed, in s",
+        )?;
         let section = "source.modbus-server.registers";
         self.registers.check_in(c.text, c.path, section)?;
         if let Some(st) = self.registers.status {
