@@ -27,6 +27,7 @@ pub(super) struct LoopEnd {
     pub(super) slots: u64,
     pub(super) safe: Option<Sample>,
     pub(super) reconnects: Option<u64>,
+    pub(super) attempts: Option<u64>,
 }
 
 /// Everything the loop thread owns.
@@ -222,6 +223,7 @@ impl Loop {
             slots: k_end,
             safe,
             reconnects: self.backend.reconnects(),
+            attempts: self.backend.connection_attempts(),
         })
     }
 

@@ -177,6 +177,7 @@ impl Running {
             rate_hz: self.rate_hz,
             safe: end.safe,
             reconnects: end.reconnects,
+            connection_attempts: end.attempts,
             servers: (self.servers.iter())
                 .map(|(name, h)| (*name, h.view()))
                 .collect(),

@@ -196,6 +196,8 @@ pub struct Summary {
     pub safe: Option<Sample>,
     /// Times a Modbus link was reopened after a fault (None: not a Modbus valve).
     pub reconnects: Option<u64>,
+    /// Connection attempts of a Modbus link, the first one included.
+    pub connection_attempts: Option<u64>,
     /// What each server (`modbus-server`, `metrics`) went through.
     pub servers: Vec<(&'static str, HealthView)>,
     /// What the logger wrote.
@@ -291,7 +293,8 @@ impl fmt::Display for Summary {
         }
         writeln!(f, "missed cycles: {}", self.missed())?;
         if let Some(n) = self.reconnects {
-            writeln!(f, "reconnects: {n}")?;
+            let attempts = self.connection_attempts.unwrap_or(0);
+            writeln!(f, "reconnects: {n} ({attempts} connection attempts)")?;
         }
         for (name, health) in &self.servers {
             writeln!(f, "{name}: {health}")?;

@@ -141,6 +141,14 @@ impl Backend {
         }
     }
 
+    /// How many connection attempts a Modbus link made, the first one included.
+    pub fn connection_attempts(&self) -> Option<u64> {
+        match self {
+            Backend::Emulated(_) => None,
+            Backend::Modbus(m) => Some(m.attempts()),
+        }
+    }
+
     /// A short description for the log.
     pub fn describe(&self) -> String {
         match self {

@@ -143,6 +143,8 @@ pub struct ModbusValve {
     last_answer: Instant,
     /// Why the link is down, for the cycles that find it so.
     down_because: String,
+    /// Late replies (TCP) counted so far on this connection.
+    late_seen: u64,
     next_attempt: Instant,
     backoff: Duration,
     reconnects: u64,
@@ -201,6 +203,7 @@ impl ModbusValve {
             answered: false,
             last_answer: Instant::now(),
             down_because: "not connected yet".into(),
+            late_seen: 0,
             next_attempt: Instant::now(),
             backoff: FIRST_BACKOFF,
             reconnects: 0,
@@ -338,6 +341,7 @@ impl ModbusValve {
             Ok(Ok(ctx)) => {
                 self.ctx = Some(ctx);
                 self.wire = wire;
+                self.late_seen = 0;
                 self.answered = false;
                 self.last_answer = Instant::now();
                 Ok(())
@@ -498,7 +502,19 @@ impl ModbusValve {
                 )))
             }
             Err(_) => {
-                let fault = self.classify_silence(t);
+                let mut fault = self.classify_silence(t);
+                // Late replies show the device is there, only slow: no reason to reopen.
+                let late = self.wire.stale_replies();
+                if late > self.late_seen {
+                    self.late_seen = late;
+                    self.last_answer = Instant::now();
+                    if let Fault::Timeout(m) = &mut fault {
+                        m.push_str(&format!(
+                            " (the device does answer, later: {late} replies came after their \
+                             deadline; a longer timeout_ms may fit the loop period)"
+                        ));
+                    }
+                }
                 let silent = Instant::now() - self.last_answer;
                 if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
                     let why = format!(
