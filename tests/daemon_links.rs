@@ -196,11 +196,16 @@ fn replies_always_too_late_keep_one_connection() {
     let (summary, _, sockets, device_log) = watch(device, 5.0, |_| {});
     assert_eq!(summary_count(&summary, "reconnects: "), 0, "{summary}");
     let accepted = connections(&device_log);
+    println!(
+        "replies 12 ms late, 8 ms deadline, 5 s: {accepted} connection(s), at most {sockets} \
+         TCP socket(s) open"
+    );
     assert_eq!(sockets, 1, "{summary}");
-    // Silence on an open connection is worth a new one after 3 s, not after every reply.
+    // The device answers, only late: the one connection is kept throughout.
+    assert_eq!(accepted, 1, "{device_log}");
     assert!(
-        (1..=2).contains(&accepted),
-        "{accepted} connections\n{device_log}"
+        summary.contains("came after their deadline; a longer timeout_ms may fit"),
+        "{summary}"
     );
 }
 
