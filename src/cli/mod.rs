@@ -4,6 +4,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod identify;
 pub mod input;
+pub mod probe;
 pub mod run;
 pub mod simulate;
 pub mod steps;

@@ -9,6 +9,7 @@
 //! - [`client`]: [`client::ModbusValve`], one cycle `transact(O_P) -> V_P` with a deadline,
 //!   fault kinds and reconnection.
 //! - [`serial`]: opening a serial port with a link's settings (the client and sim-device).
+//! - [`probe`]: one read of every mapped register, and an optional set-point write, as a table.
 //! - [`wire`]: the byte streams under the client (late TCP replies dropped by transaction id,
 //!   RTU input emptied before each request).
 //! - [`exception`]: Modbus exception codes in words.
@@ -24,6 +25,7 @@ pub mod exception;
 pub mod link;
 pub mod map;
 pub mod plan;
+pub mod probe;
 pub mod serial;
 pub mod server;
 pub mod tcp_server;
