@@ -14,9 +14,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::sim::{
-    config, real_time_turn, run_cmd, summary_count, SimDevice, CONSTANT, TCP_CONFIG,
-};
+use common::sim::{real_time_turn, run_cmd, summary_count, SimDevice, CONSTANT};
 
 #[derive(Debug, serde::Deserialize)]
 struct Row {
@@ -78,13 +76,7 @@ fn spawn(cfg: &Path, logs: &Path, duration_s: f64) -> Child {
 fn a_device_down_at_start_is_picked_up_when_it_appears() {
     let _turn = real_time_turn();
     let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
-    let cfg = config(dir.path(), TCP_CONFIG.0, &[(TCP_CONFIG.1, &addr)], CONSTANT);
+    let (addr, cfg) = common::sim::nobody_listening(dir.path(), CONSTANT);
     let logs = dir.path().join("logs");
     let daemon = spawn(&cfg, &logs, 4.0);
     std::thread::sleep(Duration::from_millis(1500));

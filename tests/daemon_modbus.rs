@@ -509,14 +509,7 @@ fn startup_error(cfg: &Path, options: &[&str]) -> String {
 #[test]
 fn no_device_on_the_tcp_port_with_require_device_is_one_line_naming_the_address() {
     let dir = tempfile::tempdir().unwrap();
-    // A port nobody listens on (bound, then released).
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
-    let cfg = config(dir.path(), TCP_CONFIG.0, &[(TCP_CONFIG.1, &addr)], CONSTANT);
+    let (addr, cfg) = common::sim::nobody_listening(dir.path(), CONSTANT);
     let e = startup_error(&cfg, &["--require-device"]);
     assert!(
         e.starts_with(&format!(

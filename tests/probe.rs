@@ -7,7 +7,7 @@ use std::process::{Command, Output};
 
 mod common;
 
-use common::sim::{SimDevice, BIN, RTU_CONFIG, TCP_CONFIG};
+use common::sim::{SimDevice, BIN, RTU_CONFIG};
 
 fn probe(cfg: &Path, extra: &[&str]) -> Output {
     Command::new(BIN)
@@ -129,13 +129,7 @@ fn an_address_the_device_lacks_is_exception_02_with_what_to_check() {
 #[test]
 fn no_device_or_no_modbus_valve_is_one_line() {
     let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
-    let cfg = common::sim::config(dir.path(), TCP_CONFIG.0, &[(TCP_CONFIG.1, &addr)], "");
+    let (addr, cfg) = common::sim::nobody_listening(dir.path(), "");
     let (out, err) = text(&probe(&cfg, &[]));
     assert!(out.is_empty(), "{out}");
     assert_eq!(err.lines().count(), 1, "{err}");

@@ -124,6 +124,18 @@ impl Drop for SimDevice {
     }
 }
 
+/// `127.0.0.1:PORT` with a port nobody listens on (bound, then released), and a daemon config
+/// for the shipped TCP config pointed at it (in `dir`, with `source` appended).
+pub fn nobody_listening(dir: &Path, source: &str) -> (String, PathBuf) {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .unwrap();
+    let addr = format!("127.0.0.1:{port}");
+    let cfg = config(dir, TCP_CONFIG.0, &[(TCP_CONFIG.1, &addr)], source);
+    (addr, cfg)
+}
+
 /// A daemon config `daemon.toml`: the shipped config with each `(from, to)` replaced (each must
 /// occur) and `source` appended.
 pub fn config(dir: &Path, shipped: &str, edits: &[(&str, &str)], source: &str) -> PathBuf {
