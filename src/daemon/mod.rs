@@ -14,7 +14,7 @@
 //! process controller's Modbus server ([`hil`]) and the Prometheus endpoint ([`exporter`]) on a
 //! runtime of its own: the loop shares only a register bank and atomic metric handles with it and
 //! never waits on a socket. The calling thread waits for signals (tokio), drives the progress
-//! display and joins.
+//! display, talks to systemd when run as a service ([`service`]) and joins.
 //!
 //! Sample convention (as [`crate::model::Valve::simulate_into`]): in slot `k` the valve gets
 //! `op_k` and the V_P it returns is sample `k`. The emulated valve starts at rest at the first
@@ -34,6 +34,7 @@ pub mod logger;
 mod net;
 mod running;
 pub mod schedule;
+pub mod service;
 pub mod source;
 pub mod stats;
 pub mod valve;
@@ -147,23 +148,31 @@ pub fn run(config: Config, opts: RunOptions) -> Result<Summary, DaemonError> {
         // Handlers first, so a signal during start-up already stops cleanly.
         let mut sigint = signal(SignalKind::interrupt()).map_err(thread_err("SIGINT handler"))?;
         let mut sigterm = signal(SignalKind::terminate()).map_err(thread_err("SIGTERM handler"))?;
+        let mut service = service::Service::new();
         let running = start(config, opts)?;
         announce(running.endpoints());
+        service.ready(&format!("running at {} Hz", running.rate_hz()));
         let bar = progress_bar(progress);
         let mut tick = tokio::time::interval(Duration::from_millis(50));
         while !running.is_finished() {
             tokio::select! {
                 _ = sigint.recv() => {
                     tracing::info!("SIGINT: stopping");
+                    service.stopping();
                     running.stop();
                 }
                 _ = sigterm.recv() => {
                     tracing::info!("SIGTERM: stopping");
+                    service.stopping();
                     running.stop();
                 }
-                _ = tick.tick() => show(&bar, &running),
+                _ = tick.tick() => {
+                    service.tick(running.live().view().samples);
+                    show(&bar, &running);
+                }
             }
         }
+        service.stopping();
         bar.finish_and_clear();
         Ok::<_, DaemonError>(running)
     })?;
