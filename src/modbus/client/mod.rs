@@ -24,7 +24,7 @@
 //! counts what it receives), and any notion of the loop's clock.
 
 use std::io;
-use std::net::{SocketAddr, ToSocketAddrs};
+use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -34,7 +34,7 @@ use tokio_modbus::Slave;
 
 use super::budget::{Budget, BudgetError};
 use super::exception;
-use super::link::{Parity, RtuLink, TcpLink};
+pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction};
 use super::wire::{rtu_frame_fault, RtuWire, TcpWire, WireState};
@@ -49,31 +49,6 @@ pub const SILENT_LINK: Duration = Duration::from_secs(3);
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(3);
 /// Default deadline of a cycle, as a share of the loop period.
 pub const DEFAULT_TIMEOUT_SHARE: f64 = 0.8;
-
-/// Where the valve is.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Link {
-    /// `[valve] kind = "modbus-tcp"`.
-    Tcp(TcpLink),
-    /// `[valve] kind = "modbus-rtu"`.
-    Rtu(RtuLink),
-}
-
-impl Link {
-    fn section(&self) -> &'static str {
-        match self {
-            Link::Tcp(_) => "valve.modbus-tcp",
-            Link::Rtu(_) => "valve.modbus-rtu",
-        }
-    }
-
-    fn timeout_ms(&self) -> Option<f64> {
-        match self {
-            Link::Tcp(l) => l.timeout_ms,
-            Link::Rtu(l) => l.timeout_ms,
-        }
-    }
-}
 
 /// Why a cycle gave no V_P.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -188,7 +163,13 @@ impl ModbusValve {
         });
         let plan = Plan::new(&map);
         let (tcp_addr, budget) = match &link {
-            Link::Tcp(l) => (Some(resolve(&l.address)?), None),
+            Link::Tcp(l) => {
+                let addr = l.resolve().map_err(|reason| OpenError::Address {
+                    address: l.address.clone(),
+                    reason,
+                })?;
+                (Some(addr), None)
+            }
             Link::Rtu(l) => (None, Some(Budget::rtu(l, &plan, period_s))),
         };
         Ok(ModbusValve {
@@ -293,22 +274,7 @@ impl ModbusValve {
 
     /// A short description for the log.
     pub fn describe(&self) -> String {
-        match &self.link {
-            Link::Tcp(l) => format!("Modbus TCP {} unit {}", l.address, l.unit_id),
-            Link::Rtu(l) => format!(
-                "Modbus RTU {} {} baud {}{}{} slave {}",
-                l.port,
-                l.baud,
-                l.data_bits,
-                match l.parity {
-                    Parity::None => 'N',
-                    Parity::Even => 'E',
-                    Parity::Odd => 'O',
-                },
-                l.stop_bits,
-                l.slave_id
-            ),
-        }
+        self.link.describe()
     }
 
     /// One connection attempt within `deadline`; on failure, the reason, and the next attempt
@@ -648,19 +614,6 @@ impl ModbusValve {
     }
 }
 
-/// The socket address of `address` (`host:port`).
-fn resolve(address: &str) -> Result<SocketAddr, OpenError> {
-    let bad = |reason: String| OpenError::Address {
-        address: address.to_string(),
-        reason,
-    };
-    address
-        .to_socket_addrs()
-        .map_err(|e| bad(e.to_string()))?
-        .next()
-        .ok_or_else(|| bad("no address found".into()))
-}
-
 /// Runs one transaction; a write returns no words.
 async fn call(
     ctx: &mut Context,
@@ -695,90 +648,4 @@ async fn call(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::modbus::map::RegisterMap;
-
-    #[tokio::test]
-    async fn unreachable_devices_give_one_line_errors() {
-        let rtu = RtuLink {
-            baud: 115200,
-            ..RtuLink::new("/dev/ttyUSB-missing-7")
-        };
-        let map = RegisterMap {
-            fc23: true,
-            ..RegisterMap::default()
-        };
-        let err = ModbusValve::open(Link::Rtu(rtu), map, 0.01)
-            .await
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with("cannot open serial port /dev/ttyUSB-missing-7: "),
-            "{err}"
-        );
-        assert!(
-            err.ends_with("(check [valve.modbus-rtu] port)") && !err.contains('\n'),
-            "{err}"
-        );
-
-        // A port nobody listens on (bound then released).
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
-        let tcp = TcpLink {
-            address: format!("127.0.0.1:{port}"),
-            unit_id: 1,
-            timeout_ms: None,
-        };
-        let err = ModbusValve::open(Link::Tcp(tcp), RegisterMap::default(), 0.01)
-            .await
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with(&format!("cannot connect to Modbus TCP 127.0.0.1:{port}: ")),
-            "{err}"
-        );
-
-        let tcp = TcpLink {
-            address: "no-port-here".into(),
-            unit_id: 1,
-            timeout_ms: None,
-        };
-        let err = ModbusValve::open(Link::Tcp(tcp), RegisterMap::default(), 0.01)
-            .await
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with("valve.modbus-tcp.address: \"no-port-here\""),
-            "{err}"
-        );
-    }
-
-    #[tokio::test]
-    async fn settings_and_budget_are_checked_before_connecting() {
-        let rtu = RtuLink::new("/dev/ttyUSB-missing-7"); // 19200 baud
-        let err = ModbusValve::open(Link::Rtu(rtu.clone()), RegisterMap::default(), 0.01)
-            .await
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with("bus budget: one cycle takes 29.5 ms"),
-            "{err}"
-        );
-        let bad = RtuLink {
-            stop_bits: 3,
-            ..rtu
-        };
-        let err = ModbusValve::open(Link::Rtu(bad), RegisterMap::default(), 0.01)
-            .await
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.starts_with("valve.modbus-rtu.stop_bits: 3 is not allowed"),
-            "{err}"
-        );
-    }
-}
+mod tests;
