@@ -109,6 +109,14 @@ fn daemon(config: &str, dir: &std::path::Path) -> Command {
     cmd
 }
 
+/// The summary's line about the Modbus server.
+fn server_line(summary: &str) -> &str {
+    summary
+        .lines()
+        .find(|l| l.starts_with("modbus-server: "))
+        .unwrap_or_else(|| panic!("{summary}"))
+}
+
 const HIL: &str = "[source]\nkind = \"modbus-server\"\n[source.modbus-server]\nlisten = \"127.0.0.1:0\"\nwatchdog_s = 60.0\n";
 
 #[test]
@@ -142,10 +150,7 @@ fn daemon_servers_survive_running_out_of_file_descriptors() {
         "{text}"
     );
     let (summary, stderr) = stop(child, rest);
-    let line = summary
-        .lines()
-        .find(|l| l.starts_with("modbus-server: "))
-        .unwrap_or_else(|| panic!("{summary}"));
+    let line = server_line(&summary);
     assert!(
         line.contains("accept errors (the last: Too many open files (os error 24))")
             && line.contains("unable to accept for"),
@@ -184,10 +189,7 @@ fn connections_beyond_the_limit_and_idle_ones_are_closed() {
     assert_eq!(write_register(&modbus, 300).unwrap(), 300);
     drop(idle);
     let (summary, stderr) = stop(child, rest);
-    let line = summary
-        .lines()
-        .find(|l| l.starts_with("modbus-server: "))
-        .unwrap_or_else(|| panic!("{summary}"));
+    let line = server_line(&summary);
     assert!(
         line.contains("refused at the limit") && line.contains("closed idle"),
         "{line}"

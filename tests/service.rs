@@ -12,6 +12,16 @@ mod common;
 
 use common::sim::BIN;
 
+/// Runs `cmd`, which must exit 0.
+fn succeeds(mut cmd: Command) {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn run_notifies_ready_watchdog_and_stopping() {
     let dir = tempfile::tempdir().unwrap();
@@ -34,18 +44,12 @@ fn run_notifies_ready_watchdog_and_stopping() {
         }
         messages
     });
-    let out = Command::new(BIN)
-        .args(["run", "--duration", "2", "--log-dir"])
+    let mut cmd = Command::new(BIN);
+    cmd.args(["run", "--duration", "2", "--log-dir"])
         .arg(dir.path().join("logs"))
         .env("NOTIFY_SOCKET", &socket_path)
-        .env("WATCHDOG_USEC", "200000")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .env("WATCHDOG_USEC", "200000");
+    succeeds(cmd);
     let messages = reader.join().unwrap();
     assert!(
         messages[0].contains("READY=1\n") && messages[0].contains("STATUS=running at 100 Hz"),
@@ -99,17 +103,11 @@ fn the_shipped_unit_is_a_notify_service_the_daemon_accepts() {
         &config,
     )
     .unwrap();
-    let out = Command::new(BIN)
-        .args(["run", "--config"])
+    let mut cmd = Command::new(BIN);
+    cmd.args(["run", "--config"])
         .arg(&config)
         .arg("--log-dir")
         .arg(dir.path().join("logs"))
-        .args(["--duration", "0.2"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .args(["--duration", "0.2"]);
+    succeeds(cmd);
 }
