@@ -476,6 +476,57 @@ fn exception_replies_are_error_rows_and_keep_the_link() {
     );
 }
 
+#[test]
+fn runs_where_no_cycle_reads_a_v_p_fail_naming_the_cause() {
+    let _turn = real_time_turn();
+    let dir = tempfile::tempdir().unwrap();
+    // The map asks for a status register the device does not have: every cycle an exception.
+    let dev = SimDevice::start_bare(&["--tcp", "127.0.0.1:0"], TCP_CONFIG);
+    let cfg = dev.config(
+        dir.path(),
+        &[(
+            "address = 2, setpoint_error_bit",
+            "address = 9, setpoint_error_bit",
+        )],
+        CONSTANT,
+    );
+    let out = run_cmd(&cfg, &dir.path().join("logs"), 0.5)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let last = stderr.lines().last().unwrap_or("");
+    assert!(
+        last.starts_with("valve-bridge: error: no cycle read a V_P: all ")
+            && last.contains(
+                " error); the last was error: device answered FC 23 with exception 02 (illegal \
+                 data address: the device has no such register; check the addresses and tables \
+                 in [valve.registers]"
+            ),
+        "{stderr}"
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(" (0 ok, 0 timeout, "),
+        "the summary is printed first"
+    );
+    // Nobody listening: every cycle disconnected, the refused connection named.
+    let (addr, cfg) = common::sim::nobody_listening(dir.path(), CONSTANT);
+    let out = run_cmd(&cfg, &dir.path().join("logs2"), 0.5)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let last = stderr.lines().last().unwrap_or("");
+    assert!(
+        last.starts_with(
+            "valve-bridge: error: no cycle read a V_P: all 50 failed (50 disconnected)"
+        ) && last.contains(&format!(
+            "Modbus TCP {addr} unit 1: cannot connect: Connection refused"
+        )),
+        "{stderr}"
+    );
+}
+
 /// Runs the daemon on `cfg` with `options`, which must fail to start; returns its error message, after checking
 /// it is the one line on stderr (`RUST_LOG=warn`), without a panic or a debug dump, and that no
 /// log was created.
