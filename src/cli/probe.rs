@@ -1,5 +1,6 @@
 //! `valve-bridge probe`: reads every register of a config's map once from the device (see
-//! `valve_bridge::modbus::probe`) and prints a table; writes only with `--write-test`.
+//! `valve_bridge::modbus::probe`) and prints a table; writes only with `--write-test`. Argument
+//! checks and printing only: the probe itself is the library's.
 
 use std::path::PathBuf;
 use std::time::Duration;

@@ -18,7 +18,8 @@
 //!
 //! Sample convention (as [`crate::model::Valve::simulate_into`]): in slot `k` the valve gets
 //! `op_k` and the V_P it returns is sample `k`. The emulated valve starts at rest at the first
-//! O_P, so a log replays exactly through `Valve::simulate(op, op[0])`.
+//! O_P, so a log replays through `Valve::simulate(op, op[0])`: O_P exactly (the loop rounds it to
+//! the log's 0.0001 % before sending), V_P to the log's precision.
 //!
 //! Files: [`running`] starts the threads ([`start`], [`Running`]), [`control`] is the loop
 //! thread's body, [`net`] the network thread; this file holds the errors, the options and [`run`]

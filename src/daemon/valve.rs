@@ -20,8 +20,8 @@
 //!
 //! The `emulated` backend steps a [`crate::model::Valve`] once per slot, in real time: slots the
 //! loop skipped are stepped with the O_P the valve was holding, so the emulated valve never falls
-//! behind the clock, and the log (which shows that held O_P in skipped rows) replays exactly
-//! through [`crate::model::Valve::simulate`]. It starts at rest at its first O_P
+//! behind the clock, and the log (which shows that held O_P in skipped rows) replays through
+//! [`crate::model::Valve::simulate`] to the log's precision. It starts at rest at its first O_P
 //! (`reset(op0, op0)`). Optional Gaussian measurement noise is added to the reported V_P only.
 
 use rand::SeedableRng;
