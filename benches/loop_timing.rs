@@ -35,6 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             log_dir: Some(dir.path().to_path_buf()),
             virtual_clock: false,
             progress: false,
+            require_device: false,
         },
     )?
     .finish()?;

@@ -9,6 +9,7 @@
 //! - [`recording`]: the CSV recording format (read with helpful errors, write, column mapping).
 //! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
 //! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
+//! - [`net`]: TCP servers that stay up (accept errors retried, connections capped).
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`report`]: self-contained HTML reports with SVG charts.
@@ -23,6 +24,7 @@ pub mod fit;
 pub mod metrics;
 pub mod modbus;
 pub mod model;
+pub mod net;
 pub mod recording;
 pub mod report;
 pub mod signal;
@@ -47,4 +49,44 @@ pub fn init_tracing() {
         .with_target(false)
         .compact()
         .init();
+}
+
+/// An error and its causes on one line, `what: cause: cause`, for both binaries. A cause whose
+/// text the previous message already contains is left out: many errors print their source in
+/// their own message (`cannot read x.toml: No such file or directory (os error 2)`), and the
+/// source would otherwise appear twice.
+pub fn error_line(err: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in err.chain().map(|c| c.to_string()) {
+        let repeated = parts.last().is_some_and(|last| last.contains(&cause));
+        if !repeated && !cause.is_empty() {
+            parts.push(cause);
+        }
+    }
+    parts.join(": ").replace('\n', " ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("x.toml: cannot read: {source}")]
+    struct Outer {
+        #[source]
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn error_line_prints_each_cause_once() {
+        let io = std::io::Error::from_raw_os_error(2);
+        let text = io.to_string();
+        let e = anyhow::Error::new(Outer { source: io });
+        assert_eq!(error_line(&e), format!("x.toml: cannot read: {text}"));
+        assert_eq!(text.matches("os error 2").count(), 1);
+        // A context that does not repeat its cause keeps it.
+        let e =
+            anyhow::Error::new(std::io::Error::from_raw_os_error(2)).context("cannot open port");
+        assert_eq!(error_line(&e), format!("cannot open port: {text}"));
+    }
 }

@@ -22,6 +22,8 @@ enum Command {
     Simulate(cli::simulate::Args),
     /// Run the valve loop (100 Hz by default): source -> valve -> CSV log, until stopped.
     Run(cli::run::Args),
+    /// Read every register of a config's map once from the device (writes only with --write-test).
+    Probe(cli::probe::Args),
     /// Find where a model and a recording differ, name the missing physics, add it, show the gain.
     Diagnose(cli::diagnose::Args),
     /// Fit every model of the paper to a recording: Table 1 (with held-out scores), Table 2, model files.
@@ -37,6 +39,7 @@ fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Run(a) => cli::run::run(a),
+        Command::Probe(a) => cli::probe::run(a),
         Command::Diagnose(a) => cli::diagnose::run(a),
         Command::Demo(a) => cli::demo::run(a),
         Command::Identify(a) => cli::identify::run(a),

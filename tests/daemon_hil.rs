@@ -13,7 +13,7 @@
 //!
 //! Every daemon listens on port 0 and the test reads the bound addresses from the lines it prints
 //! on start (`modbus-server: ADDR`, `metrics: ADDR`), so tests never race for ports. The pymodbus
-//! and mbpoll tests print SKIPPED and pass only when the tool is missing (.ci/run installs both).
+//! and mbpoll tests need those tools: see `tests/common/tools.rs` for what happens without them.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -21,6 +21,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::thread::JoinHandle;
 use std::time::Duration;
+
+mod common;
+
+use common::tools::{have_mbpoll, have_pymodbus};
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 
@@ -150,35 +154,6 @@ fn hil_config(watchdog_s: f64, extra: &str) -> String {
         "[source]\nkind = \"modbus-server\"\nop_min_pct = 0.0\nop_max_pct = 80.0\n\
          [source.modbus-server]\nlisten = \"127.0.0.1:0\"\nwatchdog_s = {watchdog_s}\n\
          [safety]\non_stop = \"go-to\"\ngo_to_pct = 5.0\n{extra}"
-    )
-}
-
-fn have(program: &str, probe: &[&str], install: &str) -> bool {
-    let ok = Command::new(program)
-        .args(probe)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        println!("SKIPPED: `{program}` is not available ({install})");
-    }
-    ok
-}
-
-fn have_pymodbus() -> bool {
-    have(
-        "python3",
-        &["-c", "import pymodbus"],
-        "python3 -m pip install 'pymodbus[serial]>=3.6,<4'",
-    )
-}
-
-fn have_mbpoll() -> bool {
-    have(
-        "mbpoll",
-        &["-V"],
-        "apt-get update && apt-get install -y mbpoll",
     )
 }
 
@@ -509,6 +484,9 @@ fn watchdog_sends_the_safe_o_p_while_the_controller_is_quiet() {
         resumed
     );
     assert!(out.stdout.contains("watchdog: "), "{}", out.stdout);
+    // The watchdog's and the stop action's messages carry rounded numbers.
+    common::assert_for_people(&out.stderr);
+    common::assert_for_people(&out.stdout);
 }
 
 /// The body of an HTTP GET on `addr`, asserting status 200.
@@ -540,17 +518,22 @@ fn metrics_endpoint_answers_get_metrics() {
     std::thread::sleep(Duration::from_millis(300));
     let body = http_get(&addr, "/metrics");
     for name in [
-        "valve_bridge_timing_error_us_bucket",
-        "valve_bridge_timing_error_us_count",
+        "valve_bridge_timing_error_seconds_bucket",
+        "valve_bridge_timing_error_seconds_count",
         "valve_bridge_cycles_total",
         "valve_bridge_cycle_failures_total{kind=\"timeout\"}",
         "valve_bridge_cycle_failures_total{kind=\"error\"}",
         "valve_bridge_cycle_failures_total{kind=\"disconnected\"}",
         "valve_bridge_missed_cycles_total",
-        "valve_bridge_op_pct",
-        "valve_bridge_vp_pct",
+        "valve_bridge_op_ratio",
+        "valve_bridge_vp_ratio",
         "valve_bridge_reconnects_total",
         "valve_bridge_watchdog_trips_total",
+        "valve_bridge_server_up{server=\"metrics\"} 1",
+        "valve_bridge_server_connections{server=\"metrics\"} 1",
+        "valve_bridge_server_connections_accepted_total{server=\"metrics\"}",
+        "valve_bridge_server_connections_refused_total{server=\"metrics\"} 0",
+        "valve_bridge_server_accept_errors_total{server=\"metrics\"} 0",
     ] {
         assert!(body.lines().any(|l| l.starts_with(name)), "{name}: {body}");
     }

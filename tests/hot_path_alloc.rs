@@ -82,6 +82,8 @@ fn per_cycle_calls_do_not_allocate() {
                 status,
                 lateness_us: None,
                 latency_us: None,
+                op_sent_pct: op,
+                utc: std::time::SystemTime::UNIX_EPOCH,
             };
             source.feedback(&row);
             let lateness = (status != Status::Skipped).then(|| Duration::from_micros(k));

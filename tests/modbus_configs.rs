@@ -84,3 +84,24 @@ fn rtu_configs_fit_their_loop_rate() {
         );
     }
 }
+
+#[test]
+fn sim_device_configs_use_the_map_sim_device_serves_by_default() {
+    // `sim-device --tcp ...` without --config and these configs must agree, as README runs them.
+    for name in ["sim-device-tcp.toml", "sim-device-rtu.toml"] {
+        let (f, _) = load(name);
+        assert_eq!(
+            f.valve.registers.setpoint,
+            RegisterMap::device_default().setpoint
+        );
+        assert_eq!(
+            f.valve.registers.position,
+            RegisterMap::device_default().position
+        );
+        assert_eq!(
+            f.valve.registers.status,
+            RegisterMap::device_default().status,
+            "{name}"
+        );
+    }
+}

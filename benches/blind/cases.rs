@@ -563,7 +563,11 @@ fn floor_shown(spec: &ModelSpec, rec: &Recording) -> Result<bool, SynthError> {
     }
     let (a, b) = (true_position(spec, rec)?, true_position(&without, rec)?);
     let least = (3.0 * p.sensor_noise_pct).max(0.1);
-    let apart = a.iter().zip(&b).filter(|(x, y)| (*x - *y).abs() >= least).count();
+    let apart = a
+        .iter()
+        .zip(&b)
+        .filter(|(x, y)| (*x - *y).abs() >= least)
+        .count();
     Ok(apart as f64 * DT >= MIN_SPEED_SHOWN_S)
 }
 

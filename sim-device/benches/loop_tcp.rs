@@ -171,6 +171,7 @@ fn run(config: Config, secs: f64) -> Result<Run, Box<dyn Error>> {
             log_dir: Some(dir.path().to_path_buf()),
             virtual_clock: false,
             progress: false,
+            require_device: true,
         },
     )?
     .finish()?;

@@ -14,8 +14,10 @@ use rand_chacha::ChaCha8Rng;
 /// The fault options of the command line.
 #[derive(Debug, Clone, Default)]
 pub struct FaultConfig {
-    /// Extra delay before every response.
+    /// Extra delay before a response (every one, or those of `delay_every`).
     pub delay: Duration,
+    /// Delay only the responses to requests whose number is a multiple of this.
+    pub delay_every: Option<u64>,
     /// Answer no request whose number is a multiple of this.
     pub drop_every: Option<u64>,
     /// Answer no request with this probability.
@@ -28,6 +30,15 @@ pub struct FaultConfig {
     pub disconnect_after: Option<u64>,
     /// Seed of `drop_prob`.
     pub seed: u64,
+}
+
+/// The fate of one request: what to answer, and how late.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Decision {
+    /// What to answer.
+    pub action: Action,
+    /// Extra delay before answering.
+    pub delay: Duration,
 }
 
 /// What to do with one request.
@@ -66,19 +77,23 @@ impl Faults {
         }
     }
 
-    /// The extra response delay.
-    pub fn delay(&self) -> Duration {
-        self.cfg.delay
-    }
-
     /// The request count after which a TCP connection is closed.
     pub fn disconnect_after(&self) -> Option<u64> {
         self.cfg.disconnect_after
     }
 
     /// Numbers the next request and decides its fate.
-    pub fn next(&self) -> Action {
+    pub fn next(&self) -> Decision {
         let n = self.count.fetch_add(1, Ordering::Relaxed) + 1;
+        let late = self.cfg.delay_every.is_none() || hits(self.cfg.delay_every, n);
+        Decision {
+            action: self.action(n),
+            delay: if late { self.cfg.delay } else { Duration::ZERO },
+        }
+    }
+
+    /// The answer to request `n`.
+    fn action(&self, n: u64) -> Action {
         let random_drop = self.cfg.drop_prob > 0.0
             && self
                 .rng
@@ -102,6 +117,24 @@ mod tests {
     use super::*;
 
     #[test]
+    fn delays_apply_to_every_or_every_nth_request() {
+        let ms = Duration::from_millis(15);
+        let f = Faults::new(FaultConfig {
+            delay: ms,
+            delay_every: Some(3),
+            ..FaultConfig::default()
+        });
+        let got: Vec<Duration> = (0..6).map(|_| f.next().delay).collect();
+        let z = Duration::ZERO;
+        assert_eq!(got, vec![z, z, ms, z, z, ms]);
+        let f = Faults::new(FaultConfig {
+            delay: ms,
+            ..FaultConfig::default()
+        });
+        assert!((0..3).all(|_| f.next().delay == ms));
+    }
+
+    #[test]
     fn every_n_rules_and_precedence() {
         let f = Faults::new(FaultConfig {
             drop_every: Some(3),
@@ -109,7 +142,7 @@ mod tests {
             corrupt_crc_every: Some(5),
             ..FaultConfig::default()
         });
-        let got: Vec<Action> = (0..6).map(|_| f.next()).collect();
+        let got: Vec<Action> = (0..6).map(|_| f.next().action).collect();
         use Action::*;
         assert_eq!(
             got,
@@ -125,7 +158,7 @@ mod tests {
                 seed,
                 ..FaultConfig::default()
             });
-            (0..4000).map(|_| f.next()).collect::<Vec<_>>()
+            (0..4000).map(|_| f.next().action).collect::<Vec<_>>()
         };
         let a = run(7);
         assert_eq!(a, run(7));

@@ -1,7 +1,8 @@
 //! sim-device: a fake Bürkert-style valve positioner that speaks real Modbus TCP and RTU.
 //!
-//! It serves the register map of `valve-bridge`'s `[valve.registers]` table (per-mille `u16`
-//! set-point and `i16` position by default) from a [`RegisterBank`], over Modbus TCP
+//! It serves the register map of `valve-bridge`'s `[valve.registers]` table (`--config`; without
+//! it the map of the shipped `config/sim-device-*.toml`: per-mille `u16` set-point in holding
+//! register 0, `i16` position in 1, status word in 2) from a [`RegisterBank`], over Modbus TCP
 //! (`--tcp ADDR`), on a pseudo-terminal it opens itself (`--pty`) or on a serial device
 //! (`--serial PATH`). Its valve is a model from `config/models/` (pin-cart II by default) stepped
 //! at 100 Hz in real time from the last accepted set-point. A set-point outside 0-100 % keeps the
@@ -10,20 +11,20 @@
 //! TCP disconnects; `--baud-emulation` makes a pty answer as slowly as a real line would.
 //!
 //! On start it prints one line per endpoint on stdout, `tcp: 127.0.0.1:5502` and
-//! `pty: /dev/pts/5`, for a client (or a test) to connect to. It is a test instrument: no
+//! `pty: /dev/pts/5`, for a client (or a test) to connect to. The TCP server survives accept
+//! errors, keeps at most `--max-connections` and closes connections idle for
+//! `--idle-timeout-s`; each connection is logged (`client connected from ...`), and SIGINT or
+//! SIGTERM logs what the server went through before exiting. It is a test instrument: no
 //! persistence, no device identification, no coils.
 
 mod faults;
 mod rtu;
+mod tcp;
 
-use std::future::Future;
 use std::io::Write;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::pin::Pin;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
-use std::task::{Context, Poll};
 use std::time::Duration;
 
 use anyhow::{bail, Context as _};
@@ -32,17 +33,17 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::net::{TcpListener, TcpStream};
-use tokio_modbus::{ExceptionCode, Request, Response};
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
-use valve_bridge::modbus::link::Parity;
+use tokio::net::TcpListener;
+use tokio_serial::{SerialPort, SerialStream};
+use valve_bridge::modbus::link::{Parity, RtuLink};
 use valve_bridge::modbus::map::RegisterMap;
+use valve_bridge::modbus::serial;
 use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
 use valve_bridge::model::{self, ModelKind, ModelSpec, Valve};
+use valve_bridge::net::{Health, Limits};
 use valve_bridge::toml_file;
 
-use faults::{Action, FaultConfig, Faults};
+use faults::{FaultConfig, Faults};
 use rtu::{LineSpeed, RtuDevice};
 
 /// The model's step, 10 ms (100 Hz).
@@ -89,9 +90,12 @@ struct Args {
     /// Seed of the noise and of --drop-prob.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Extra delay before every response, ms.
+    /// Extra delay before every response, ms (with --delay-every: before those responses only).
     #[arg(long, default_value_t = 0)]
     delay_ms: u64,
+    /// Delay only every N-th response by --delay-ms (a device that is late now and then).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..), requires = "delay_ms")]
+    delay_every: Option<u64>,
     /// Leave every N-th request unanswered.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     drop_every: Option<u64>,
@@ -112,6 +116,12 @@ struct Args {
     /// Close a TCP connection on its N-th request, unanswered (the client must reconnect).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     disconnect_after: Option<u64>,
+    /// TCP connections open at once; more are closed as they arrive.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    max_connections: u64,
+    /// Close a TCP connection that sends no request for this long, s.
+    #[arg(long, default_value_t = 60.0)]
+    idle_timeout_s: f64,
     /// RTU: answer as late as a line at this baud rate would (characters of request and reply,
     /// at the --parity/--stop-bits character size, plus --turnaround-ms).
     #[arg(long, value_name = "BAUD", value_parser = clap::value_parser!(u32).range(300..))]
@@ -180,8 +190,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-            eprintln!("sim-device: error: {}", chain.join(": "));
+            eprintln!("sim-device: error: {}", valve_bridge::error_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
@@ -194,7 +203,8 @@ fn announce(line: &str) {
     let _ = writeln!(out, "{line}").and_then(|()| out.flush());
 }
 
-async fn run(args: Args) -> anyhow::Result<()> {
+/// Refuses option combinations that cannot work, with the option to change.
+fn check(args: &Args) -> anyhow::Result<()> {
     if args.tcp.is_none() && !args.pty && args.serial.is_none() {
         bail!("nothing to serve: give --tcp ADDR, --pty or --serial PATH");
     }
@@ -217,21 +227,43 @@ async fn run(args: Args) -> anyhow::Result<()> {
             args.noise_pct
         );
     }
+    if !(args.idle_timeout_s.is_finite() && (0.1..=86_400.0).contains(&args.idle_timeout_s)) {
+        bail!(
+            "--idle-timeout-s {}: a time in s, 0.1-86400",
+            args.idle_timeout_s
+        );
+    }
     if !(args.turnaround_ms.is_finite() && (0.0..=1000.0).contains(&args.turnaround_ms)) {
         bail!(
             "--turnaround-ms {}: a response time in ms, 0-1000",
             args.turnaround_ms
         );
     }
+    Ok(())
+}
+
+/// The serial line settings of the command line (the port is set where it is opened).
+fn line(args: &Args, port: &str) -> RtuLink {
+    RtuLink {
+        baud: args.baud,
+        parity: args.parity,
+        stop_bits: args.stop_bits,
+        ..RtuLink::new(port)
+    }
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
+    check(&args)?;
     let (map, config_unit) = match &args.config {
         Some(path) => load_config(path)?,
-        None => (RegisterMap::default(), None),
+        None => (RegisterMap::device_default(), None),
     };
     let unit = args.unit.or(config_unit).unwrap_or(1);
     let spec = load_model(&args.model)?;
     let bank = Arc::new(RegisterBank::new(map, 0.0, 100.0, OutOfRange::KeepAndFlag));
     let faults = Arc::new(Faults::new(FaultConfig {
         delay: Duration::from_millis(args.delay_ms),
+        delay_every: args.delay_every,
         drop_every: args.drop_every,
         drop_prob: args.drop_prob,
         corrupt_crc_every: args.corrupt_crc_every,
@@ -257,72 +289,108 @@ async fn run(args: Args) -> anyhow::Result<()> {
     let stepping = tokio::spawn(step_valve(Arc::clone(&bank), valve, noise, args.seed));
 
     let mut servers: tokio::task::JoinSet<anyhow::Result<()>> = tokio::task::JoinSet::new();
+    let health = Arc::new(Health::default());
     if let Some(addr) = args.tcp {
         let listener = TcpListener::bind(addr)
             .await
             .with_context(|| format!("cannot listen on {addr} (--tcp)"))?;
         announce(&format!("tcp: {}", listener.local_addr()?));
-        servers.spawn(serve_tcp(listener, Arc::clone(&bank), Arc::clone(&faults)));
+        let limits = Limits {
+            max_connections: args.max_connections as usize,
+            idle_timeout: Duration::from_secs_f64(args.idle_timeout_s),
+        };
+        let serving = tcp::serve(
+            listener,
+            Arc::clone(&bank),
+            Arc::clone(&faults),
+            limits,
+            Arc::clone(&health),
+        );
+        servers.spawn(async move {
+            serving.await;
+            Ok(())
+        });
     }
-    if rtu {
-        let bits = 1 + 8 + u32::from(args.parity != Parity::None) + u32::from(args.stop_bits);
+    if args.pty || args.serial.is_some() {
         let device = RtuDevice {
             bank: Arc::clone(&bank),
             faults: Arc::clone(&faults),
             slave: unit,
             line: args.baud_emulation.map(|baud| LineSpeed {
                 baud,
-                bits_per_char: bits,
+                bits_per_char: line(&args, "").bits_per_char(),
                 turnaround: Duration::from_secs_f64(args.turnaround_ms / 1000.0),
             }),
         };
-        if args.pty {
-            let (server_end, client_end) =
-                SerialStream::pair().context("cannot open a pseudo-terminal (--pty)")?;
-            let path = client_end
-                .name()
-                .context("the pseudo-terminal has no path")?;
-            if let Some(link) = &args.pty_link {
-                // Replace a link left by an earlier run; a missing one is fine.
-                let _ = std::fs::remove_file(link);
-                std::os::unix::fs::symlink(&path, link).with_context(|| {
-                    format!("cannot create the link {} (--pty-link)", link.display())
-                })?;
-            }
-            announce(&format!("pty: {path}"));
-            servers.spawn(async move {
-                // The client end stays open for the device's life: without it, the server end
-                // reads EIO whenever a client closes its handle.
-                let _client_end = client_end;
-                device.serve(server_end).await.context("pseudo-terminal")
-            });
-        } else if let Some(path) = &args.serial {
-            let name = path.display().to_string();
-            let port = tokio_serial::new(&name, args.baud)
-                .parity(match args.parity {
-                    Parity::None => tokio_serial::Parity::None,
-                    Parity::Even => tokio_serial::Parity::Even,
-                    Parity::Odd => tokio_serial::Parity::Odd,
-                })
-                .stop_bits(if args.stop_bits == 2 {
-                    tokio_serial::StopBits::Two
-                } else {
-                    tokio_serial::StopBits::One
-                })
-                .open_native_async()
-                .with_context(|| format!("cannot open serial port {name} (--serial)"))?;
-            announce(&format!("serial: {name}"));
-            servers.spawn(async move { device.serve(port).await.with_context(|| name) });
-        }
+        spawn_rtu(&mut servers, &args, device)?;
     }
-    // Serve until the first server ends (an error, or a serial port that closed).
-    let result = match servers.join_next().await {
-        Some(Ok(r)) => r,
-        Some(Err(e)) => Err(anyhow::anyhow!("server task failed: {e}")),
-        None => Ok(()),
+    // Serve until a signal, or until the first server ends (a serial port that closed).
+    let result = tokio::select! {
+        signal = stop_signal() => {
+            let signal = signal?;
+            if args.tcp.is_some() {
+                tracing::info!("{signal}: stopping; Modbus TCP served {}", health.view());
+            } else {
+                tracing::info!("{signal}: stopping");
+            }
+            Ok(())
+        }
+        ended = servers.join_next() => match ended {
+            Some(Ok(r)) => r,
+            Some(Err(e)) => Err(anyhow::anyhow!("server task failed: {e}")),
+            None => Ok(()),
+        },
     };
     stepping.abort();
     result
+}
+
+/// Waits for SIGINT or SIGTERM and names it.
+async fn stop_signal() -> anyhow::Result<&'static str> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut int = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
+    let mut term = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
+    Ok(tokio::select! {
+        _ = int.recv() => "SIGINT",
+        _ = term.recv() => "SIGTERM",
+    })
+}
+
+/// Opens the pseudo-terminal (`--pty`) or the serial device (`--serial`), announces it and
+/// serves `device` on it.
+fn spawn_rtu(
+    servers: &mut tokio::task::JoinSet<anyhow::Result<()>>,
+    args: &Args,
+    device: RtuDevice,
+) -> anyhow::Result<()> {
+    if args.pty {
+        let (server_end, client_end) =
+            SerialStream::pair().context("cannot open a pseudo-terminal (--pty)")?;
+        let path = client_end
+            .name()
+            .context("the pseudo-terminal has no path")?;
+        if let Some(link) = &args.pty_link {
+            // Replace a link left by an earlier run; a missing one is fine.
+            let _ = std::fs::remove_file(link);
+            std::os::unix::fs::symlink(&path, link).with_context(|| {
+                format!("cannot create the link {} (--pty-link)", link.display())
+            })?;
+        }
+        announce(&format!("pty: {path}"));
+        servers.spawn(async move {
+            // The client end stays open for the device's life: without it, the server end
+            // reads EIO whenever a client closes its handle.
+            let _client_end = client_end;
+            device.serve(server_end).await.context("pseudo-terminal")
+        });
+    } else if let Some(path) = &args.serial {
+        let name = path.display().to_string();
+        let port = serial::open(&line(args, &name))
+            .with_context(|| format!("cannot open serial port {name} (--serial)"))?;
+        announce(&format!("serial: {name}"));
+        servers.spawn(async move { device.serve(port).await.with_context(|| name) });
+    }
+    Ok(())
 }
 
 /// Steps the valve at 100 Hz in real time from the bank's set-point and reports its position.
@@ -343,116 +411,4 @@ async fn step_valve(
         let n = noise.map(|d| d.sample(&mut rng)).unwrap_or(0.0);
         bank.set_position_pct(vp + n);
     }
-}
-
-/// The TCP service: the bank behind fault injection, one per connection.
-#[derive(Debug, Clone)]
-struct TcpService {
-    bank: Arc<RegisterBank>,
-    faults: Arc<Faults>,
-    /// Requests on this connection.
-    served: Arc<AtomicU64>,
-    /// Set to close this connection.
-    closing: Arc<AtomicBool>,
-}
-
-type Reply = Result<Option<Response>, ExceptionCode>;
-
-impl tokio_modbus::server::Service for TcpService {
-    type Request = Request<'static>;
-    type Response = Option<Response>;
-    type Exception = ExceptionCode;
-    type Future = Pin<Box<dyn Future<Output = Reply> + Send>>;
-
-    fn call(&self, req: Self::Request) -> Self::Future {
-        let n = self.served.fetch_add(1, Ordering::Relaxed) + 1;
-        if matches!(self.faults.disconnect_after(), Some(limit) if n >= limit) {
-            tracing::info!("closing the TCP connection on request {n} (--disconnect-after)");
-            self.closing.store(true, Ordering::Relaxed);
-            return Box::pin(std::future::ready(Ok(None)));
-        }
-        let action = self.faults.next();
-        let reply: Reply = match action {
-            Action::Drop => Ok(None),
-            Action::Exception => Err(ExceptionCode::ServerDeviceFailure),
-            Action::Answer | Action::CorruptCrc => self.bank.handle(&req).map(Some),
-        };
-        let delay = self.faults.delay();
-        Box::pin(async move {
-            if !delay.is_zero() {
-                tokio::time::sleep(delay).await;
-            }
-            reply
-        })
-    }
-}
-
-/// A TCP stream that reads as closed once its flag is set, which ends tokio-modbus's
-/// connection task and drops the socket (tokio-modbus has no other way to close from a service).
-#[derive(Debug)]
-struct Closable {
-    inner: TcpStream,
-    closing: Arc<AtomicBool>,
-}
-
-impl AsyncRead for Closable {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<std::io::Result<()>> {
-        if self.closing.load(Ordering::Relaxed) {
-            return Poll::Ready(Ok(()));
-        }
-        Pin::new(&mut self.inner).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for Closable {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<std::io::Result<usize>> {
-        Pin::new(&mut self.inner).poll_write(cx, buf)
-    }
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
-    }
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
-    }
-}
-
-async fn serve_tcp(
-    listener: TcpListener,
-    bank: Arc<RegisterBank>,
-    faults: Arc<Faults>,
-) -> anyhow::Result<()> {
-    let server = tokio_modbus::server::tcp::Server::new(listener);
-    let on_connected = |stream: TcpStream, peer: SocketAddr| {
-        let closing = Arc::new(AtomicBool::new(false));
-        let service = TcpService {
-            bank: Arc::clone(&bank),
-            faults: Arc::clone(&faults),
-            served: Arc::new(AtomicU64::new(0)),
-            closing: Arc::clone(&closing),
-        };
-        tracing::info!("client connected from {peer}");
-        // Latency matters more than throughput for one register per request.
-        if let Err(e) = stream.set_nodelay(true) {
-            tracing::debug!("TCP_NODELAY on {peer}: {e}");
-        }
-        std::future::ready(Ok(Some((
-            service,
-            Closable {
-                inner: stream,
-                closing,
-            },
-        ))))
-    };
-    server
-        .serve(&on_connected, |e| tracing::info!("connection ended: {e}"))
-        .await
-        .context("Modbus TCP server")
 }

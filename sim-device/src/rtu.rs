@@ -4,8 +4,8 @@
 //! privately, so through it a reply cannot carry a deliberately wrong CRC, and it cannot hold a
 //! reply back for the time its characters would take on a real line. Requests are decoded by
 //! tokio-modbus (`Request::try_from` on the PDU) and answered by the shared
-//! [`RegisterBank`]; only the frame (address, PDU, CRC) and the few response PDUs the bank
-//! produces are encoded here.
+//! [`RegisterBank`], whose responses the library encodes (`response_pdu`); only the frame
+//! (address, PDU, CRC) is built here.
 //!
 //! A request frame ends when its function code says it is complete, or, for function codes
 //! whose length is not known here, at an idle gap. Frames with a bad CRC or for another slave
@@ -16,11 +16,11 @@ use std::time::Duration;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_modbus::bytes::{Bytes, BytesMut};
-use tokio_modbus::{ExceptionCode, Request, Response};
+use tokio_modbus::{ExceptionCode, Request};
 use tokio_serial::SerialStream;
-use valve_bridge::modbus::server::RegisterBank;
+use valve_bridge::modbus::server::{response_pdu, RegisterBank};
 
-use crate::faults::{Action, Faults};
+use crate::faults::{Action, Decision, Faults};
 
 const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
 
@@ -74,35 +74,6 @@ fn request_len(buf: &[u8]) -> Result<Option<usize>, ()> {
     }
 }
 
-/// The PDU of a response (or exception) to function code `fc`.
-pub fn response_pdu(fc: u8, result: &Result<Response, ExceptionCode>) -> Vec<u8> {
-    let words = |w: &[u16]| {
-        let mut out = Vec::with_capacity(2 + 2 * w.len());
-        out.push(fc);
-        // At most 125 registers are ever read, so the byte count fits in a u8.
-        out.push((2 * w.len()).min(250) as u8);
-        for v in w {
-            out.extend_from_slice(&v.to_be_bytes());
-        }
-        out
-    };
-    let exception = |code: ExceptionCode| vec![fc | 0x80, u8::from(code)];
-    match result {
-        Ok(Response::ReadHoldingRegisters(w))
-        | Ok(Response::ReadInputRegisters(w))
-        | Ok(Response::ReadWriteMultipleRegisters(w)) => words(w),
-        Ok(Response::WriteSingleRegister(a, v)) | Ok(Response::WriteMultipleRegisters(a, v)) => {
-            let mut out = vec![fc];
-            out.extend_from_slice(&a.to_be_bytes());
-            out.extend_from_slice(&v.to_be_bytes());
-            out
-        }
-        // The bank answers only the register functions above; anything else is a device failure.
-        Ok(_) => exception(ExceptionCode::ServerDeviceFailure),
-        Err(code) => exception(*code),
-    }
-}
-
 /// Appends the CRC (low byte first) to `adu`, inverted when `corrupt`.
 pub fn seal(mut adu: Vec<u8>, corrupt: bool) -> Vec<u8> {
     let crc = MODBUS_CRC.checksum(&adu) ^ if corrupt { 0xFFFF } else { 0 };
@@ -111,8 +82,9 @@ pub fn seal(mut adu: Vec<u8>, corrupt: bool) -> Vec<u8> {
 }
 
 impl RtuDevice {
-    /// The reply to one request frame, or None when the device stays silent.
-    pub fn reply(&self, frame: &[u8]) -> Option<Vec<u8>> {
+    /// The reply to one request frame and the injected delay before it, or None when the
+    /// device stays silent.
+    pub fn reply(&self, frame: &[u8]) -> Option<(Vec<u8>, Duration)> {
         if frame.len() < 4 {
             return None;
         }
@@ -126,7 +98,7 @@ impl RtuDevice {
             return None;
         }
         let fc = pdu[0];
-        let action = self.faults.next();
+        let Decision { action, delay } = self.faults.next();
         let result = match Request::try_from(Bytes::copy_from_slice(pdu)) {
             _ if action == Action::Exception => Err(ExceptionCode::ServerDeviceFailure),
             Ok(req) => self.bank.handle(&req),
@@ -137,7 +109,7 @@ impl RtuDevice {
         }
         let mut adu = vec![slave];
         adu.extend_from_slice(&response_pdu(fc, &result));
-        Some(seal(adu, action == Action::CorruptCrc))
+        Some((seal(adu, action == Action::CorruptCrc), delay))
     }
 
     /// Serves requests on `port` until it closes.
@@ -171,10 +143,9 @@ impl RtuDevice {
     }
 
     async fn answer(&self, port: &mut SerialStream, frame: &[u8]) -> std::io::Result<()> {
-        let Some(reply) = self.reply(frame) else {
+        let Some((reply, mut wait)) = self.reply(frame) else {
             return Ok(());
         };
-        let mut wait = self.faults.delay();
         if let Some(line) = self.line {
             wait += line.chars(frame.len() + reply.len()) + line.turnaround;
         }
@@ -222,7 +193,7 @@ mod tests {
         let d = device(FaultConfig::default());
         // Read holding register 1 of slave 7: the reference frame from the Modbus spec's CRC.
         let req = seal(vec![7, 3, 0, 1, 0, 1], false);
-        let reply = d.reply(&req).unwrap();
+        let reply = d.reply(&req).unwrap().0;
         assert_eq!(&reply[..5], &[7, 3, 2, 0x01, 0xF4]); // 500 per mille
         assert_eq!(reply, seal(vec![7, 3, 2, 0x01, 0xF4], false));
         // Known CRC: 01 03 00 00 00 01 -> 84 0A.
@@ -251,23 +222,24 @@ mod tests {
         // 1: FC16 write 700 per mille.
         let reply = d
             .reply(&seal(vec![7, 16, 0, 0, 0, 1, 2, 0x02, 0xBC], false))
-            .unwrap();
+            .unwrap()
+            .0;
         assert_eq!(reply, seal(vec![7, 16, 0, 0, 0, 1], false));
         assert_eq!(d.bank.setpoint_pct(), 70.0);
         // 2: corrupted CRC.
-        let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap();
+        let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap().0;
         assert_eq!(reply, seal(vec![7, 3, 2, 0x01, 0xF4], true));
         // 3: injected exception 04.
-        let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap();
+        let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap().0;
         assert_eq!(reply, seal(vec![7, 0x83, 4], false));
         // 5: unmapped address gives exception 02 (4 is a corrupted CRC).
         d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false));
-        let reply = d.reply(&seal(vec![7, 3, 0, 9, 0, 1], false)).unwrap();
+        let reply = d.reply(&seal(vec![7, 3, 0, 9, 0, 1], false)).unwrap().0;
         assert_eq!(reply, seal(vec![7, 0x83, 2], false));
         // 6: injected exception again, whatever the function; 7: unknown function, exception 01.
-        let reply = d.reply(&seal(vec![7, 0x41, 1, 2], false)).unwrap();
+        let reply = d.reply(&seal(vec![7, 0x41, 1, 2], false)).unwrap().0;
         assert_eq!(reply, seal(vec![7, 0xC1, 4], false));
-        let reply = d.reply(&seal(vec![7, 0x41, 1, 2], false)).unwrap();
+        let reply = d.reply(&seal(vec![7, 0x41, 1, 2], false)).unwrap().0;
         assert_eq!(reply, seal(vec![7, 0xC1, 1], false));
     }
 

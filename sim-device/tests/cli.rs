@@ -57,4 +57,7 @@ fn unreachable_devices_and_bad_options_are_named() {
         &["no/such/model.toml", "cannot read"],
     );
     fails_with(&[], &["nothing to serve"]);
+    // Each cause once: the OS error is not repeated after the message that quotes it.
+    let (_, err) = run_to_end(&["--tcp", "127.0.0.1:0", "--config", "/no/such/file.toml"]);
+    assert_eq!(err.matches("os error 2").count(), 1, "{err}");
 }

@@ -1,16 +1,14 @@
 //! Independent Modbus implementations against sim-device: mbpoll (libmodbus) and pymodbus,
-//! over TCP and RTU on a pseudo-terminal. Each test prints SKIPPED and passes only when the tool
-//! is not installed (CI installs both: see .ci/run).
+//! over TCP and RTU on a pseudo-terminal. Without those tools a test cannot run: see
+//! `tests/common/tools.rs` (a visible SKIPPED line, or a failure under `VB_REQUIRE_TOOLS=1`).
 
 mod common;
 
 use std::process::Command;
 use std::time::Duration;
 
-use common::{have, Sim};
-
-const MBPOLL_INSTALL: &str = "apt-get update && apt-get install -y mbpoll";
-const PYMODBUS_INSTALL: &str = "python3 -m pip install 'pymodbus[serial]>=3.6,<4'";
+use common::tools::{have_mbpoll, have_pymodbus};
+use common::Sim;
 
 fn mbpoll(endpoint: &[&str], extra: &[&str]) -> String {
     let out = Command::new("mbpoll")
@@ -41,7 +39,7 @@ fn mbpoll_round_trip(endpoint: &[&str], target: &str) {
 
 #[test]
 fn mbpoll_reads_and_writes_over_tcp() {
-    if !have("mbpoll", &["-V"], MBPOLL_INSTALL) {
+    if !have_mbpoll() {
         return;
     }
     let sim = Sim::start(&["--tcp", "127.0.0.1:0", "--model", "modelless"]);
@@ -52,7 +50,7 @@ fn mbpoll_reads_and_writes_over_tcp() {
 
 #[test]
 fn mbpoll_reads_and_writes_over_rtu_pty() {
-    if !have("mbpoll", &["-V"], MBPOLL_INSTALL) {
+    if !have_mbpoll() {
         return;
     }
     let sim = Sim::start(&["--pty", "--model", "modelless"]);
@@ -122,14 +120,6 @@ fn check_pymodbus(text: &str) {
         text.contains("read-only True 2"),
         "exception 02 for the read-only position: {text}"
     );
-}
-
-fn have_pymodbus() -> bool {
-    have(
-        "python3",
-        &["-c", "import pymodbus, serial"],
-        PYMODBUS_INSTALL,
-    )
 }
 
 #[test]

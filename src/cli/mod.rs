@@ -4,6 +4,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod identify;
 pub mod input;
+pub mod probe;
 pub mod run;
 pub mod simulate;
 pub mod steps;
@@ -24,13 +25,13 @@ pub fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> 
     })
 }
 
-/// Prints an error and its causes on one line, `valve-bridge: error: ...`, and picks the exit code.
+/// Prints an error and its causes on one line, `valve-bridge: error: ...` (each cause once, see
+/// [`valve_bridge::error_line`]), and picks the exit code.
 pub fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let chain: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-            eprintln!("valve-bridge: error: {}", chain.join(": "));
+            eprintln!("valve-bridge: error: {}", valve_bridge::error_line(&e));
             ExitCode::FAILURE
         }
     }

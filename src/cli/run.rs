@@ -21,9 +21,14 @@ pub struct Args {
     /// for tests and offline runs with the emulated valve; --duration is then loop time.
     #[arg(long)]
     as_fast_as_possible: bool,
+    /// Stop at start when the Modbus device cannot be reached (by default the loop starts,
+    /// logs `disconnected` rows and connects as soon as the device answers).
+    #[arg(long)]
+    require_device: bool,
 }
 
-/// Loads the config, runs the loop and prints the summary on stdout.
+/// Loads the config, runs the loop and prints the summary on stdout; fails when no cycle read a
+/// V_P.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = Config::load(args.config.as_deref())?;
     let summary = daemon::run(
@@ -33,8 +38,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             log_dir: args.log_dir,
             virtual_clock: args.as_fast_as_possible,
             progress: true,
+            require_device: args.require_device,
         },
     )?;
     println!("{summary}");
+    // A run in which no cycle read a V_P did not do its job: exit 1 and say why.
+    summary.check()?;
     Ok(())
 }

@@ -1,61 +1,86 @@
 //! The Prometheus endpoint of `[metrics]`: the loop's figures, served as text on `GET /metrics`.
 //!
-//! [`LoopMetrics`] registers every metric once at start-up and keeps the handles, so the loop
-//! updates them with atomic operations only (no lookup by label, no allocation):
-//! - `valve_bridge_timing_error_us`: histogram of |actual - scheduled| cycle start, µs;
+//! Names follow Prometheus conventions (base units, `_total` for counters, ratios 0-1):
+//! - `valve_bridge_timing_error_seconds`: histogram of |actual - scheduled| cycle start;
 //! - `valve_bridge_cycles_total`: cycles that ran a valve transaction;
 //! - `valve_bridge_cycle_failures_total{kind="timeout"|"error"|"disconnected"}`;
 //! - `valve_bridge_missed_cycles_total`: slots skipped because a cycle overran;
-//! - `valve_bridge_op_pct`, `valve_bridge_vp_pct`: last O_P sent and last V_P read, %;
+//! - `valve_bridge_op_ratio`, `valve_bridge_vp_ratio`: last O_P sent and last V_P read, as a
+//!   fraction of full travel (0.45 = 45 %);
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
-//! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source.
+//! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
+//! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
+//!   `accept()` fails), `valve_bridge_server_connections` (open now),
+//!   `valve_bridge_server_connections_accepted_total`, `..._refused_total` (closed at the
+//!   connection limit), `..._idle_closed_total` and `valve_bridge_server_accept_errors_total`.
 //!
-//! [`serve`] answers HTTP on the daemon's network thread: one request per connection
-//! (`Connection: close`), `GET /metrics` gives the text format, other paths 404, other methods
-//! 405. Encoding happens there, never on the loop thread.
+//! [`LoopMetrics`] registers every metric once at start-up and keeps the handles, so the loop
+//! updates its own with atomic operations only (no lookup by label, no allocation); the server
+//! figures are copied from their [`Health`] when the endpoint is scraped.
+//!
+//! [`serve`] answers HTTP on the daemon's network thread, as a [`crate::net`] server (accept
+//! errors retried, connections capped): one request per connection (`Connection: close`),
+//! `GET /metrics` gives the text format, other paths 404, other methods 405. Encoding happens
+//! there, never on the loop thread.
 
+use std::sync::Arc;
 use std::time::Duration;
 
-use prometheus::{Gauge, Histogram, HistogramOpts, IntCounter, IntCounterVec, Opts, Registry};
+use prometheus::{
+    Gauge, Histogram, HistogramOpts, IntCounter, IntCounterVec, IntGaugeVec, Opts, Registry,
+};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
 use super::logger::{Sample, Status};
+use crate::net::{self, Health, Limits};
 
-/// Upper bounds of the timing-error buckets, µs.
-const TIMING_BUCKETS_US: [f64; 12] = [
-    10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1e3, 2e3, 5e3, 1e4, 2e4, 5e4,
+/// Upper bounds of the timing-error buckets, s.
+const TIMING_BUCKETS_S: [f64; 12] = [
+    10e-6, 20e-6, 50e-6, 100e-6, 200e-6, 500e-6, 1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3,
 ];
 /// Longest request head read, bytes.
 const MAX_HEAD: usize = 8 * 1024;
-/// Time a client gets to send its request head.
-const HEAD_TIMEOUT: Duration = Duration::from_secs(5);
+/// Time a client gets to send its request head (its connection is closed after it).
+pub const HEAD_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The per-server metrics, by the `server` label.
+#[derive(Debug, Clone)]
+struct ServerMetrics {
+    up: IntGaugeVec,
+    open: IntGaugeVec,
+    accepted: IntCounterVec,
+    refused: IntCounterVec,
+    idle_closed: IntCounterVec,
+    accept_errors: IntCounterVec,
+}
 
 /// The loop's metrics and their registry.
 #[derive(Debug, Clone)]
 pub struct LoopMetrics {
     registry: Registry,
-    timing_us: Histogram,
+    timing_s: Histogram,
     cycles: IntCounter,
     /// Failures by kind: timeout, error, disconnected.
     failures: [IntCounter; 3],
     missed: IntCounter,
-    op_pct: Gauge,
-    vp_pct: Gauge,
+    op_ratio: Gauge,
+    vp_ratio: Gauge,
     reconnects: IntCounter,
     watchdog_trips: IntCounter,
+    servers: ServerMetrics,
 }
 
 impl LoopMetrics {
     /// Registers every metric in a new registry.
     pub fn new() -> Result<LoopMetrics, prometheus::Error> {
         let registry = Registry::new();
-        let timing_us = Histogram::with_opts(
+        let timing_s = Histogram::with_opts(
             HistogramOpts::new(
-                "valve_bridge_timing_error_us",
-                "Timing error of the cycle start, |actual - scheduled|, in microseconds",
+                "valve_bridge_timing_error_seconds",
+                "Timing error of the cycle start, |actual - scheduled|",
             )
-            .buckets(TIMING_BUCKETS_US.to_vec()),
+            .buckets(TIMING_BUCKETS_S.to_vec()),
         )?;
         let counter = |name: &str, help: &str| IntCounter::new(name, help);
         let gauge = |name: &str, help: &str| Gauge::new(name, help);
@@ -79,8 +104,14 @@ impl LoopMetrics {
             "valve_bridge_missed_cycles_total",
             "Slots skipped because the previous cycle overran",
         )?;
-        let op_pct = gauge("valve_bridge_op_pct", "Last O_P sent to the valve, %")?;
-        let vp_pct = gauge("valve_bridge_vp_pct", "Last V_P read from the valve, %")?;
+        let op_ratio = gauge(
+            "valve_bridge_op_ratio",
+            "Last O_P sent to the valve, as a fraction of full travel",
+        )?;
+        let vp_ratio = gauge(
+            "valve_bridge_vp_ratio",
+            "Last V_P read from the valve, as a fraction of full travel",
+        )?;
         let reconnects = counter(
             "valve_bridge_reconnects_total",
             "Times the Modbus valve link was reopened after a fault",
@@ -89,24 +120,27 @@ impl LoopMetrics {
             "valve_bridge_watchdog_trips_total",
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
-        registry.register(Box::new(timing_us.clone()))?;
+        let servers = ServerMetrics::new()?;
+        registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
         for c in [&cycles, &missed, &reconnects, &watchdog_trips] {
             registry.register(Box::new(c.clone()))?;
         }
-        for g in [&op_pct, &vp_pct] {
+        for g in [&op_ratio, &vp_ratio] {
             registry.register(Box::new(g.clone()))?;
         }
+        servers.register(&registry)?;
         Ok(LoopMetrics {
             registry,
-            timing_us,
+            timing_s,
             cycles,
             failures,
             missed,
-            op_pct,
-            vp_pct,
+            op_ratio,
+            vp_ratio,
             reconnects,
             watchdog_trips,
+            servers,
         })
     }
 
@@ -118,7 +152,7 @@ impl LoopMetrics {
     /// Counts a logged row and its timing error (None for a skipped slot).
     pub fn record(&self, row: &Sample, lateness: Option<Duration>) {
         if let Some(l) = lateness {
-            self.timing_us.observe(l.as_nanos() as f64 / 1e3);
+            self.timing_s.observe(l.as_secs_f64());
         }
         match row.status {
             Status::Skipped => self.missed.inc(),
@@ -130,11 +164,11 @@ impl LoopMetrics {
         if row.status != Status::Skipped {
             self.cycles.inc();
             if let Some(op) = row.op_pct {
-                self.op_pct.set(op);
+                self.op_ratio.set(op / 100.0);
             }
         }
         if let Some(vp) = row.vp_pct {
-            self.vp_pct.set(vp);
+            self.vp_ratio.set(vp / 100.0);
         }
     }
 
@@ -147,19 +181,100 @@ impl LoopMetrics {
             c.inc_by(total.saturating_sub(c.get()));
         }
     }
+
+    /// Copies the servers' figures into their metrics (at scrape time, off the loop thread).
+    pub fn observe_servers(&self, servers: &[(&'static str, Arc<Health>)]) {
+        for (name, health) in servers {
+            self.servers.observe(name, &health.view());
+        }
+    }
 }
 
-/// Answers `GET /metrics` on `listener` from `registry` until the listener fails.
-pub async fn serve(listener: TcpListener, registry: Registry) -> std::io::Result<()> {
-    loop {
-        let (stream, peer) = listener.accept().await?;
-        let registry = registry.clone();
-        tokio::spawn(async move {
-            if let Err(e) = answer(stream, &registry).await {
-                tracing::debug!("metrics request from {peer}: {e}");
-            }
-        });
+impl ServerMetrics {
+    fn new() -> Result<ServerMetrics, prometheus::Error> {
+        let gauge = |name: &str, help: &str| IntGaugeVec::new(Opts::new(name, help), &["server"]);
+        let counter =
+            |name: &str, help: &str| IntCounterVec::new(Opts::new(name, help), &["server"]);
+        Ok(ServerMetrics {
+            up: gauge(
+                "valve_bridge_server_up",
+                "1 while the server accepts connections, 0 while accept() fails",
+            )?,
+            open: gauge("valve_bridge_server_connections", "Connections open now")?,
+            accepted: counter(
+                "valve_bridge_server_connections_accepted_total",
+                "Connections accepted",
+            )?,
+            refused: counter(
+                "valve_bridge_server_connections_refused_total",
+                "Connections closed on arrival because the connection limit was reached",
+            )?,
+            idle_closed: counter(
+                "valve_bridge_server_connections_idle_closed_total",
+                "Connections closed for sending no request",
+            )?,
+            accept_errors: counter(
+                "valve_bridge_server_accept_errors_total",
+                "Failed accept() calls (each retried)",
+            )?,
+        })
     }
+
+    fn register(&self, registry: &Registry) -> Result<(), prometheus::Error> {
+        for g in [&self.up, &self.open] {
+            registry.register(Box::new(g.clone()))?;
+        }
+        let counters = [
+            &self.accepted,
+            &self.refused,
+            &self.idle_closed,
+            &self.accept_errors,
+        ];
+        for c in counters {
+            registry.register(Box::new(c.clone()))?;
+        }
+        Ok(())
+    }
+
+    fn observe(&self, name: &str, v: &net::HealthView) {
+        self.up.with_label_values(&[name]).set(i64::from(!v.down));
+        self.open.with_label_values(&[name]).set(v.open as i64);
+        for (c, total) in [
+            (&self.accepted, v.accepted),
+            (&self.refused, v.refused),
+            (&self.idle_closed, v.idle_closed),
+            (&self.accept_errors, v.accept_errors),
+        ] {
+            let c = c.with_label_values(&[name]);
+            c.inc_by(total.saturating_sub(c.get()));
+        }
+    }
+}
+
+/// Answers `GET /metrics` on `listener` within `limits`, forever (drop the task to stop);
+/// `servers` are the daemon's servers whose figures go into the metrics.
+pub async fn serve(
+    listener: TcpListener,
+    metrics: LoopMetrics,
+    servers: Vec<(&'static str, Arc<Health>)>,
+    limits: Limits,
+    health: Arc<Health>,
+) {
+    let servers = Arc::new(servers);
+    net::serve(
+        "metrics endpoint",
+        listener,
+        limits,
+        health,
+        move |stream, _| {
+            let (metrics, servers) = (metrics.clone(), Arc::clone(&servers));
+            async move {
+                metrics.observe_servers(&servers);
+                answer(stream, metrics.registry()).await
+            }
+        },
+    )
+    .await
 }
 
 /// Reads one request head and writes the response.
@@ -239,6 +354,8 @@ mod tests {
             status,
             lateness_us: None,
             latency_us: None,
+            op_sent_pct: None,
+            utc: std::time::SystemTime::UNIX_EPOCH,
         }
     }
 
@@ -253,6 +370,10 @@ mod tests {
         m.record(&row(Status::Skipped, None), None);
         m.totals(2, 1);
         m.totals(2, 1);
+        let health = Arc::new(Health::default());
+        health.idle_closed();
+        m.observe_servers(&[("modbus-server", Arc::clone(&health))]);
+        m.observe_servers(&[("modbus-server", health)]);
         let (status, ctype, text) =
             respond(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n", m.registry());
         assert_eq!((status, ctype), ("200 OK", prometheus::TEXT_FORMAT));
@@ -261,13 +382,17 @@ mod tests {
             "valve_bridge_cycle_failures_total{kind=\"timeout\"} 1",
             "valve_bridge_cycle_failures_total{kind=\"error\"} 0",
             "valve_bridge_missed_cycles_total 1",
-            "valve_bridge_op_pct 42",
-            "valve_bridge_vp_pct 41.5",
+            "valve_bridge_op_ratio 0.42",
+            "valve_bridge_vp_ratio 0.415",
             "valve_bridge_reconnects_total 2",
             "valve_bridge_watchdog_trips_total 1",
-            "valve_bridge_timing_error_us_bucket{le=\"50\"} 2",
-            "valve_bridge_timing_error_us_bucket{le=\"10\"} 1",
-            "valve_bridge_timing_error_us_count 2",
+            "valve_bridge_server_up{server=\"modbus-server\"} 1",
+            "valve_bridge_server_connections{server=\"modbus-server\"} 0",
+            "valve_bridge_server_connections_idle_closed_total{server=\"modbus-server\"} 1",
+            "valve_bridge_server_accept_errors_total{server=\"modbus-server\"} 0",
+            "valve_bridge_timing_error_seconds_bucket{le=\"0.00005\"} 2",
+            "valve_bridge_timing_error_seconds_bucket{le=\"0.00001\"} 1",
+            "valve_bridge_timing_error_seconds_count 2",
         ] {
             assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
         }

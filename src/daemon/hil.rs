@@ -21,17 +21,22 @@
 //! and a warning is logged once when the watchdog fires and once when writes resume; the next
 //! accepted write is followed at once. Refused writes do not feed the watchdog.
 //!
-//! The server runs on the daemon's network thread ([`serve`]); the loop only touches the bank,
-//! whose lock is held for a few loads and stores, so the loop never waits on the network.
+//! The server runs on the daemon's network thread ([`serve`], a [`tcp_server`] that retries
+//! accept errors, caps its connections at `max_connections` and closes a connection idle for
+//! `idle_timeout_s`); the loop only touches the bank, whose lock is held for a few loads and
+//! stores, so the loop never waits on the network.
 
-use std::net::SocketAddr;
 use std::sync::Arc;
+use std::time::Duration;
 
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
+use tokio_modbus::Request;
 
 use super::config::{OnStop, SafetyConfig, SourceConfig};
 use super::logger::Sample;
-use crate::modbus::server::{BankService, OutOfRange, RegisterBank};
+use crate::modbus::server::{OutOfRange, RegisterBank};
+use crate::modbus::tcp_server::{self, Reply, Respond};
+use crate::net::{Health, Limits};
 
 /// Status register bit set while the valve gives no V_P.
 pub const VALVE_FAULT_BIT: u8 = 1;
@@ -99,9 +104,8 @@ impl Controller {
             if self.tripped {
                 self.tripped = false;
                 tracing::warn!(
-                    t_s,
-                    op_pct = setpoint,
-                    "watchdog: set-point writes resumed, following the process controller again"
+                    "watchdog: set-point writes resumed at t = {t_s:.2} s, following the process \
+                     controller again (O_P {setpoint:.2} %)"
                 );
             }
         } else if !self.tripped && t_s - self.last_write_t_s >= self.watchdog_s {
@@ -111,10 +115,10 @@ impl Controller {
                 self.op_pct = safe;
             }
             tracing::warn!(
-                t_s,
-                op_pct = self.op_pct,
-                "watchdog: no set-point from the process controller for {} s, sending the safe O_P",
-                self.watchdog_s
+                "watchdog: no set-point from the process controller for {:.2} s at t = {t_s:.2} s, \
+                 sending the safe O_P {:.2} %",
+                self.watchdog_s,
+                self.op_pct
             );
         }
         self.op_pct
@@ -138,22 +142,28 @@ impl Controller {
     }
 }
 
-/// Serves `bank` over Modbus TCP on `listener` until the listener fails.
-pub async fn serve(listener: TcpListener, bank: Arc<RegisterBank>) -> std::io::Result<()> {
-    let server = tokio_modbus::server::tcp::Server::new(listener);
-    let on_connected = |stream: TcpStream, peer: SocketAddr| {
+/// A process controller's connection: every request is answered from the bank at once.
+struct Controlled(Arc<RegisterBank>);
+
+impl Respond for Controlled {
+    fn respond(&mut self, request: &Request<'_>) -> Reply {
+        Reply::Answer(self.0.handle(request), Duration::ZERO)
+    }
+}
+
+/// Serves `bank` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
+pub async fn serve(
+    listener: TcpListener,
+    bank: Arc<RegisterBank>,
+    limits: Limits,
+    health: Arc<Health>,
+) {
+    let what = "Modbus server for the process controller";
+    tcp_server::serve(what, listener, limits, health, move |peer| {
         tracing::info!("process controller connected from {peer}");
-        // One register per request: latency matters more than throughput.
-        if let Err(e) = stream.set_nodelay(true) {
-            tracing::debug!("TCP_NODELAY on {peer}: {e}");
-        }
-        std::future::ready(Ok(Some((BankService(Arc::clone(&bank)), stream))))
-    };
-    server
-        .serve(&on_connected, |e| {
-            tracing::info!("process controller connection ended: {e}")
-        })
-        .await
+        Controlled(Arc::clone(&bank))
+    })
+    .await
 }
 
 #[cfg(test)]
@@ -163,7 +173,7 @@ mod tests {
     use crate::daemon::logger::Status;
     use std::borrow::Cow;
     use std::path::Path;
-    use tokio_modbus::{ExceptionCode, Request};
+    use tokio_modbus::ExceptionCode;
 
     fn controller(toml: &str) -> Controller {
         let cfg = Config::from_toml(
@@ -190,6 +200,8 @@ mod tests {
             status: Status::Ok,
             lateness_us: None,
             latency_us: None,
+            op_sent_pct: None,
+            utc: std::time::SystemTime::UNIX_EPOCH,
         }
     }
 

@@ -7,13 +7,24 @@
 //! (UTC; `-1`, `-2`, ... added if that name is taken). A crash loses at most the last flush
 //! interval, and a file cut mid-line still loads with the recording reader.
 //!
-//! Columns: `t_s,op_pct,vp_pct,status,lateness_us,latency_us`.
+//! Columns: `t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc` (the first six
+//! as they always were, so readers of older logs read these; the recording reader ignores
+//! columns it is not asked for).
 //! - `t_s`: the slot's scheduled time, s from the first slot (the grid, k / rate).
 //! - `op_pct`: the O_P sent in this slot; in a `skipped` row, the O_P the valve was holding.
 //! - `vp_pct`: the V_P read back; empty when none was read (never repeated or invented).
 //! - `status`: see [`Status`].
 //! - `lateness_us`: actual start of the cycle minus `t_s`, µs (empty for `skipped`).
 //! - `latency_us`: duration of the valve transaction, µs (empty for `skipped`).
+//! - `op_sent_pct`: the set-point as the valve received it, % (a positioner gets O_P after its
+//!   register's scaling and rounding, e.g. 45.67 % as 457 per mille = 45.7 %); empty when the
+//!   write was not acknowledged.
+//! - `utc`: the slot's scheduled time as UTC wall-clock time, ms (`2026-11-23T19:27:09.045Z`):
+//!   the wall clock read when the loop started plus `t_s`, so it never jumps with the clock.
+//!
+//! Numbers are written with a fixed precision, trailing zeros dropped: times to 1 µs (`t_s`),
+//! percentages to 0.0001 % ([`PCT_DECIMALS`]; the loop rounds O_P to it before sending, so the
+//! logged O_P is the one sent), durations to 1 ns: never `49.400000000000006`.
 //!
 //! This module does not decide what is logged; the loop does.
 
@@ -26,25 +37,34 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use serde::Serialize;
 use time::OffsetDateTime;
 
 use super::config::LogConfig;
 use super::DaemonError;
 
 /// The header of every log file.
-pub const HEADER: [&str; 6] = [
+pub const HEADER: [&str; 8] = [
     "t_s",
     "op_pct",
     "vp_pct",
     "status",
     "lateness_us",
     "latency_us",
+    "op_sent_pct",
+    "utc",
 ];
 
+/// Decimals of the percentages in the log (0.0001 %).
+pub const PCT_DECIMALS: usize = 4;
+
+/// `pct` rounded to the log's precision, so that what the loop sends is what it logs.
+pub fn round_pct(pct: f64) -> f64 {
+    let scale = 10f64.powi(PCT_DECIMALS as i32);
+    (pct * scale).round() / scale
+}
+
 /// What happened in a slot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Status {
     /// O_P written and V_P read.
     Ok,
@@ -94,7 +114,7 @@ impl Status {
 }
 
 /// One row of the log.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
     /// Scheduled time, s from the first slot.
     pub t_s: f64,
@@ -108,6 +128,63 @@ pub struct Sample {
     pub lateness_us: Option<f64>,
     /// Valve transaction time, µs.
     pub latency_us: Option<f64>,
+    /// The set-point as the valve received it, % (empty when no write was acknowledged).
+    pub op_sent_pct: Option<f64>,
+    /// The scheduled time as wall-clock time.
+    pub utc: SystemTime,
+}
+
+impl Sample {
+    /// The row's cells, as written.
+    fn cells(&self) -> [String; HEADER.len()] {
+        let opt = |v: Option<f64>, decimals| v.map_or(String::new(), |v| fixed(v, decimals));
+        [
+            fixed(self.t_s, 6),
+            opt(self.op_pct, PCT_DECIMALS),
+            opt(self.vp_pct, PCT_DECIMALS),
+            self.status.as_str().to_string(),
+            opt(self.lateness_us, 3),
+            opt(self.latency_us, 3),
+            opt(self.op_sent_pct, PCT_DECIMALS),
+            utc_stamp(self.utc),
+        ]
+    }
+}
+
+/// `v` with `decimals` decimals, trailing zeros dropped but one kept (`50.0`, `0.07`, `12.5`).
+pub fn fixed(v: f64, decimals: usize) -> String {
+    let text = format!("{v:.decimals$}");
+    let text = match text.find('.') {
+        Some(dot) => {
+            let trimmed = text.trim_end_matches('0');
+            if trimmed.len() == dot + 1 {
+                format!("{trimmed}0")
+            } else {
+                trimmed.to_string()
+            }
+        }
+        None => text,
+    };
+    // -0.0 after rounding reads as 0.0.
+    if text
+        .trim_start_matches('-')
+        .trim_matches(['0', '.'])
+        .is_empty()
+    {
+        "0.0".to_string()
+    } else {
+        text
+    }
+}
+
+/// `2026-11-23T19:27:09.045Z` (UTC, ms).
+fn utc_stamp(t: SystemTime) -> String {
+    let format = time::macros::format_description!(
+        "[year]-[month]-[day]T[hour]:[minute]:[second].[subsecond digits:3]Z"
+    );
+    OffsetDateTime::from(t)
+        .format(&format)
+        .unwrap_or_else(|_| "unknown-time".into())
 }
 
 /// What the logger wrote.
@@ -211,7 +288,9 @@ impl Files {
             self.open(s.t_s)?;
         }
         if let Some(f) = &mut self.current {
-            f.csv.serialize(s).map_err(|e| write_error(&f.path, e))?;
+            f.csv
+                .write_record(s.cells())
+                .map_err(|e| write_error(&f.path, e))?;
             self.report.rows += 1;
         }
         Ok(())
@@ -348,6 +427,10 @@ mod tests {
             status,
             lateness_us: Some(12.5),
             latency_us: Some(3.0),
+            op_sent_pct: vp.map(|_| 50.0),
+            utc: SystemTime::UNIX_EPOCH
+                + Duration::from_secs(1_800_000_000)
+                + Duration::from_micros((t_s * 1e6).round() as u64),
         }
     }
 
@@ -375,9 +458,19 @@ mod tests {
         assert_eq!(report.files.len(), 3, "{:?}", report.files);
         let first = std::fs::read_to_string(&report.files[0]).unwrap();
         let lines: Vec<&str> = first.lines().collect();
-        assert_eq!(lines[0], "t_s,op_pct,vp_pct,status,lateness_us,latency_us");
+        assert_eq!(
+            lines[0],
+            "t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc"
+        );
         assert_eq!(lines.len(), 101);
-        assert_eq!(lines[8], "0.07,50.0,,timeout,12.5,3.0");
+        assert_eq!(
+            lines[8],
+            "0.07,50.0,,timeout,12.5,3.0,,2027-01-15T08:00:00.070Z"
+        );
+        assert_eq!(
+            lines[9],
+            "0.08,50.0,0.8,ok,12.5,3.0,50.0,2027-01-15T08:00:00.080Z"
+        );
         let name = report.files[0]
             .file_name()
             .unwrap()
@@ -389,6 +482,20 @@ mod tests {
                 && name.len() == "vb-20261122T101500Z.csv".len(),
             "{name}"
         );
+    }
+
+    #[test]
+    fn numbers_have_a_fixed_precision_without_artefacts() {
+        assert_eq!(fixed(49.400000000000006, PCT_DECIMALS), "49.4");
+        assert_eq!(fixed(0.1 + 0.2, 6), "0.3");
+        assert_eq!(fixed(50.9913961021933, PCT_DECIMALS), "50.9914");
+        assert_eq!(fixed(40.0, PCT_DECIMALS), "40.0");
+        assert_eq!(fixed(-0.00001, PCT_DECIMALS), "0.0");
+        assert_eq!(fixed(-0.3, PCT_DECIMALS), "-0.3");
+        assert_eq!(fixed(1234.5678, 3), "1234.568");
+        // What the loop sends is what the log shows, to the last digit.
+        let op = round_pct(50.9913961021933);
+        assert_eq!(fixed(op, PCT_DECIMALS).parse::<f64>().unwrap(), op);
     }
 
     #[test]

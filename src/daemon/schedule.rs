@@ -10,7 +10,7 @@
 //!
 //! This module only decides when; it knows nothing of valves, sources or logs.
 
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 /// One slot of the grid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,6 +45,8 @@ pub struct Schedule {
     period_ns: u64,
     next_k: u64,
     clock: Clock,
+    /// Wall-clock time of slot 0.
+    wall0: SystemTime,
 }
 
 impl Schedule {
@@ -57,6 +59,7 @@ impl Schedule {
                 t0: Instant::now() + period,
                 spin,
             },
+            wall0: SystemTime::now() + period,
         }
     }
 
@@ -66,6 +69,7 @@ impl Schedule {
             period_ns: period.as_nanos() as u64,
             next_k: 0,
             clock: Clock::Virtual,
+            wall0: SystemTime::now(),
         }
     }
 
@@ -73,6 +77,12 @@ impl Schedule {
     pub fn t_s(&self, k: u64) -> f64 {
         // Integer nanoseconds, then one division: k/100 at 100 Hz is the correctly rounded value.
         (k as f64 * self.period_ns as f64) / 1e9
+    }
+
+    /// The scheduled time of slot `k` as wall-clock time: the wall clock read when the grid
+    /// was laid, plus `k` periods (so it never jumps when the system clock is set).
+    pub fn wall(&self, k: u64) -> SystemTime {
+        self.wall0 + Duration::from_nanos(k.saturating_mul(self.period_ns))
     }
 
     /// Waits for the next slot (real clock) and returns it, or reports it as skipped.

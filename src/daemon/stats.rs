@@ -12,12 +12,19 @@ use std::time::Duration;
 use hdrhistogram::Histogram;
 
 use super::logger::{LogReport, Sample, Status};
+use super::valve::Fault;
+use crate::net::HealthView;
+
+/// The failure statuses, in the order of [`Stats::last_faults`].
+const FAILURES: [Status; 3] = [Status::Timeout, Status::Error, Status::Disconnected];
 
 /// Counts and timing of the loop's slots.
 #[derive(Debug, Clone)]
 pub struct Stats {
     lateness_ns: Histogram<u64>,
     counts: [u64; Status::ALL.len()],
+    /// The last fault of each failure kind (timeout, error, disconnected).
+    last_faults: [Option<Fault>; 3],
 }
 
 impl Default for Stats {
@@ -34,7 +41,29 @@ impl Stats {
             lateness_ns: Histogram::new_with_bounds(1, 60_000_000_000, 3)
                 .unwrap_or_else(|e| panic!("histogram bounds: {e}")),
             counts: [0; Status::ALL.len()],
+            last_faults: [None, None, None],
         }
+    }
+
+    /// Keeps `fault` as the last of its kind (the summary says what went wrong).
+    pub fn note_fault(&mut self, fault: Fault) {
+        let i = match fault {
+            Fault::Timeout(_) => 0,
+            Fault::Error(_) => 1,
+            Fault::Disconnected(_) => 2,
+        };
+        self.last_faults[i] = Some(fault);
+    }
+
+    /// The last fault of each kind that occurred, most frequent kind first.
+    pub fn last_faults(&self) -> Vec<(u64, &Fault)> {
+        let mut out: Vec<(u64, &Fault)> = FAILURES
+            .iter()
+            .zip(&self.last_faults)
+            .filter_map(|(s, f)| f.as_ref().map(|f| (self.count(*s), f)))
+            .collect();
+        out.sort_by_key(|f| std::cmp::Reverse(f.0));
+        out
     }
 
     /// Counts a row and, when it ran, its timing error.
@@ -167,11 +196,51 @@ pub struct Summary {
     pub safe: Option<Sample>,
     /// Times a Modbus link was reopened after a fault (None: not a Modbus valve).
     pub reconnects: Option<u64>,
+    /// Connection attempts of a Modbus link, the first one included.
+    pub connection_attempts: Option<u64>,
+    /// What each server (`modbus-server`, `metrics`) went through.
+    pub servers: Vec<(&'static str, HealthView)>,
     /// What the logger wrote.
     pub log: LogReport,
 }
 
+/// A run in which the valve never gave a V_P: it did not do its job, whatever stopped it.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("no cycle read a V_P: all {cycles} failed ({counts}); the last {last}")]
+pub struct NothingRead {
+    /// Cycles that ran a transaction.
+    pub cycles: u64,
+    /// The failures by kind, e.g. `200 error`.
+    pub counts: String,
+    /// The last fault of the most frequent kind, e.g. `error: device answered FC 23 with ...`.
+    pub last: String,
+}
+
 impl Summary {
+    /// Err when cycles ran but none read a V_P (every transaction failed): the cause is the
+    /// last fault of the most frequent kind.
+    pub fn check(&self) -> Result<(), NothingRead> {
+        let s = &self.stats;
+        let cycles = self.samples();
+        if cycles == 0 || s.count(Status::Ok) + s.count(Status::Watchdog) > 0 {
+            return Ok(());
+        }
+        let counts: Vec<String> = FAILURES
+            .iter()
+            .filter(|st| s.count(**st) > 0)
+            .map(|st| format!("{} {}", s.count(*st), st.as_str()))
+            .collect();
+        let last = s
+            .last_faults()
+            .first()
+            .map_or("fault is unknown".into(), |(_, f)| format!("was {f}"));
+        Err(NothingRead {
+            cycles,
+            counts: counts.join(", "),
+            last,
+        })
+    }
+
     /// Slots that ran a transaction (ok or failed), not counting skipped slots or the stop action.
     pub fn samples(&self) -> u64 {
         [
@@ -219,9 +288,16 @@ impl fmt::Display for Summary {
                 "watchdog: {held} cycles sent the safe O_P (no set-point from the controller)"
             )?;
         }
+        for (_, fault) in s.last_faults() {
+            writeln!(f, "last {fault}")?;
+        }
         writeln!(f, "missed cycles: {}", self.missed())?;
         if let Some(n) = self.reconnects {
-            writeln!(f, "reconnects: {n}")?;
+            let attempts = self.connection_attempts.unwrap_or(0);
+            writeln!(f, "reconnects: {n} ({attempts} connection attempts)")?;
+        }
+        for (name, health) in &self.servers {
+            writeln!(f, "{name}: {health}")?;
         }
         writeln!(
             f,

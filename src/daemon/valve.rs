@@ -13,14 +13,15 @@
 //!
 //! The `modbus-tcp` / `modbus-rtu` backends are [`ModbusValve`]: one cycle writes O_P and reads
 //! V_P under the link's deadline; its faults are logged as they come (`timeout`, `error`,
-//! `disconnected`), the link is reopened in the background of later cycles, and the number of
-//! reconnections goes into the summary. A real device runs on its own clock, so slots the loop
+//! `disconnected`), the link is reopened in the background of later cycles (also when the
+//! device was not there at start, unless `--require-device`), and the number of reconnections
+//! goes into the summary. A real device runs on its own clock, so slots the loop
 //! skipped are simply not sent.
 //!
 //! The `emulated` backend steps a [`crate::model::Valve`] once per slot, in real time: slots the
 //! loop skipped are stepped with the O_P the valve was holding, so the emulated valve never falls
-//! behind the clock, and the log (which shows that held O_P in skipped rows) replays exactly
-//! through [`crate::model::Valve::simulate`]. It starts at rest at its first O_P
+//! behind the clock, and the log (which shows that held O_P in skipped rows) replays through
+//! [`crate::model::Valve::simulate`] to the log's precision. It starts at rest at its first O_P
 //! (`reset(op0, op0)`). Optional Gaussian measurement noise is added to the reported V_P only.
 
 use rand::SeedableRng;
@@ -28,7 +29,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::config::{ValveConfig, ValveKind};
-use crate::modbus::client::{Link, ModbusValve, OpenError};
+use crate::modbus::client::{Link, ModbusValve, OpenError, MAX_BACKOFF};
 use crate::model::{ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
@@ -59,21 +60,35 @@ pub enum Backend {
 }
 
 impl Backend {
-    /// Opens the backend `[valve]` selects, for a loop of period `period_s` (connecting to a
-    /// Modbus device); to be awaited on the runtime that will run its transactions.
-    pub async fn open(cfg: &ValveConfig, period_s: f64) -> Result<Backend, BackendError> {
-        let modbus = |link: Option<Link>| {
-            link.ok_or(BackendError::MissingTable(cfg.kind.tag()))
-                .map(|l| ModbusValve::open(l, cfg.registers, period_s))
-        };
+    /// Opens the backend `[valve]` selects, for a loop of period `period_s`; to be awaited on
+    /// the runtime that will run its transactions. A Modbus device that cannot be reached is an
+    /// error with `require_device`; otherwise the backend starts disconnected, says so once, and
+    /// its cycles retry the link with backoff (logged as `disconnected`) until the device answers.
+    pub async fn open(
+        cfg: &ValveConfig,
+        period_s: f64,
+        require_device: bool,
+    ) -> Result<Backend, BackendError> {
         match cfg.kind {
-            ValveKind::ModbusTcp => {
-                let valve = modbus(cfg.tcp.clone().map(Link::Tcp))?.await?;
-                Ok(Backend::Modbus(Box::new(valve)))
-            }
-            ValveKind::ModbusRtu => {
+            ValveKind::ModbusTcp | ValveKind::ModbusRtu => {
+                let link = match cfg.kind {
+                    ValveKind::ModbusTcp => cfg.tcp.clone().map(Link::Tcp),
+                    _ => cfg.rtu.clone().map(Link::Rtu),
+                };
+                let link = link.ok_or(BackendError::MissingTable(cfg.kind.tag()))?;
+                let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
                 // The bus budget is logged by its own check, once.
-                let valve = modbus(cfg.rtu.clone().map(Link::Rtu))?.await?;
+                valve.check_budget()?;
+                match valve.connect_now().await {
+                    Ok(()) => {}
+                    Err(e) if require_device => return Err(e.into()),
+                    Err(e) => tracing::warn!(
+                        "{e}; running without it: cycles are logged as `disconnected` and the \
+                         link is retried (every {} s at most) until the device answers \
+                         (--require-device stops instead)",
+                        MAX_BACKOFF.as_secs()
+                    ),
+                }
                 Ok(Backend::Modbus(Box::new(valve)))
             }
             ValveKind::Emulated => {
@@ -108,11 +123,29 @@ impl Backend {
         }
     }
 
+    /// The set-point the valve received in the last transaction, % (the O_P after the
+    /// register's scaling and rounding; the O_P itself for the emulated valve); None when no
+    /// write was acknowledged.
+    pub fn sent_pct(&self) -> Option<f64> {
+        match self {
+            Backend::Emulated(e) => e.last.map(|(_, op)| op),
+            Backend::Modbus(m) => m.sent_pct(),
+        }
+    }
+
     /// How many times a Modbus link was reopened after a fault (None: not a Modbus valve).
     pub fn reconnects(&self) -> Option<u64> {
         match self {
             Backend::Emulated(_) => None,
             Backend::Modbus(m) => Some(m.reconnects()),
+        }
+    }
+
+    /// How many connection attempts a Modbus link made, the first one included.
+    pub fn connection_attempts(&self) -> Option<u64> {
+        match self {
+            Backend::Emulated(_) => None,
+            Backend::Modbus(m) => Some(m.attempts()),
         }
     }
 
@@ -166,7 +199,7 @@ mod tests {
         let rt = tokio::runtime::Builder::new_current_thread()
             .build()
             .unwrap();
-        rt.block_on(Backend::open(&cfg.valve, 0.01)).unwrap()
+        rt.block_on(Backend::open(&cfg.valve, 0.01, true)).unwrap()
     }
 
     fn run(b: &mut Backend, ops: &[(u64, f64)]) -> Vec<f64> {

@@ -311,7 +311,10 @@ pub(crate) fn fit(
         (slips, d, scorer.errors_of(&y).fit)
     };
     let (slips_before, before, _) = run(current);
-    let missed = (total(&before, &pieces, false), total(&before, &pieces, true));
+    let missed = (
+        total(&before, &pieces, false),
+        total(&before, &pieces, true),
+    );
     tracing::debug!(
         measured = measured_slips.len(),
         model = slips_before.len(),

@@ -1,7 +1,10 @@
 //! Link settings of a Modbus valve: the `[valve.modbus-tcp]` and `[valve.modbus-rtu]` tables.
 //!
-//! Plain serde structs with defaults, plus the serial character size that the bus budget needs.
+//! Plain serde structs with defaults, plus the serial character size that the bus budget needs,
+//! [`Link`] (either of them, as the client takes it) and its description for the log.
 //! Opening the link is [`crate::modbus::client`]'s job.
+
+use std::net::{SocketAddr, ToSocketAddrs};
 
 use serde::{Deserialize, Serialize};
 
@@ -60,6 +63,53 @@ pub struct RtuLink {
     /// bus budget (default 1 ms; measure your device and set it).
     #[serde(default = "default_turnaround")]
     pub turnaround_ms: f64,
+}
+
+/// Where the valve is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Link {
+    /// `[valve] kind = "modbus-tcp"`.
+    Tcp(TcpLink),
+    /// `[valve] kind = "modbus-rtu"`.
+    Rtu(RtuLink),
+}
+
+impl Link {
+    /// The config table of the link, e.g. `valve.modbus-tcp`.
+    pub fn section(&self) -> &'static str {
+        match self {
+            Link::Tcp(_) => "valve.modbus-tcp",
+            Link::Rtu(_) => "valve.modbus-rtu",
+        }
+    }
+
+    /// The configured deadline of a cycle, ms.
+    pub fn timeout_ms(&self) -> Option<f64> {
+        match self {
+            Link::Tcp(l) => l.timeout_ms,
+            Link::Rtu(l) => l.timeout_ms,
+        }
+    }
+
+    /// A short description for the log.
+    pub fn describe(&self) -> String {
+        match self {
+            Link::Tcp(l) => format!("Modbus TCP {} unit {}", l.address, l.unit_id),
+            Link::Rtu(l) => format!(
+                "Modbus RTU {} {} baud {}{}{} slave {}",
+                l.port,
+                l.baud,
+                l.data_bits,
+                match l.parity {
+                    Parity::None => 'N',
+                    Parity::Even => 'E',
+                    Parity::Odd => 'O',
+                },
+                l.stop_bits,
+                l.slave_id
+            ),
+        }
+    }
 }
 
 fn one() -> u8 {
@@ -139,6 +189,15 @@ impl RtuLink {
 }
 
 impl TcpLink {
+    /// The socket address of `address` (`host:port`), or why there is none.
+    pub fn resolve(&self) -> Result<SocketAddr, String> {
+        self.address
+            .to_socket_addrs()
+            .map_err(|e| e.to_string())?
+            .next()
+            .ok_or_else(|| "no address found".into())
+    }
+
     /// The first setting that is not allowed, as (key, message).
     pub fn violation(&self) -> Option<(&'static str, String)> {
         timeout_violation(self.timeout_ms)

@@ -201,6 +201,22 @@ impl Default for RegisterMap {
     }
 }
 
+impl RegisterMap {
+    /// The default map with a status word in holding register 2 (set-point error in bit 0): the
+    /// map of the shipped sim-device configs, what sim-device serves without `--config`, and
+    /// what the daemon's Modbus server for a process controller serves by default.
+    pub fn device_default() -> RegisterMap {
+        RegisterMap {
+            status: Some(StatusRegister {
+                table: Table::Holding,
+                address: 2,
+                setpoint_error_bit: 0,
+            }),
+            ..RegisterMap::default()
+        }
+    }
+}
+
 /// A rule of the map that is broken: the key inside the map section and what is allowed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{key}: {message}")]

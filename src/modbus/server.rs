@@ -7,7 +7,7 @@
 //! (the positioner's behaviour: the status register's error bit is raised until a valid
 //! set-point arrives) or refused with exception 03 (what a process-controller-facing server
 //! wants). Unmapped or read-only addresses give exception 02, bad quantities exception 03, other
-//! function codes exception 01. [`BankService`] plugs the bank into tokio-modbus's servers.
+//! function codes exception 01. [`response_pdu`] encodes its answers for a server's frames.
 //!
 //! The bank does no I/O, owns no clock and runs no valve model: `sim-device` advances its valve
 //! and calls [`RegisterBank::set_position_pct`], the daemon's `modbus-server` source reads the
@@ -15,7 +15,7 @@
 //! [`RegisterBank::report`]; framing and fault injection live with the server. Every method holds
 //! the bank's lock only for a few plain loads and stores, never across I/O.
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
 use tokio_modbus::{ExceptionCode, Request, Response};
@@ -248,18 +248,32 @@ impl RegisterBank {
     }
 }
 
-/// A tokio-modbus server [`Service`](tokio_modbus::server::Service) answering from a bank.
-#[derive(Debug, Clone)]
-pub struct BankService(pub Arc<RegisterBank>);
-
-impl tokio_modbus::server::Service for BankService {
-    type Request = Request<'static>;
-    type Response = Response;
-    type Exception = ExceptionCode;
-    type Future = std::future::Ready<Result<Response, ExceptionCode>>;
-
-    fn call(&self, req: Self::Request) -> Self::Future {
-        std::future::ready(self.0.handle(&req))
+/// The PDU of a response (or exception) to function code `fc`.
+pub fn response_pdu(fc: u8, result: &Result<Response, ExceptionCode>) -> Vec<u8> {
+    let words = |w: &[u16]| {
+        let mut out = Vec::with_capacity(2 + 2 * w.len());
+        out.push(fc);
+        // At most 125 registers are ever read, so the byte count fits in a u8.
+        out.push((2 * w.len()).min(250) as u8);
+        for v in w {
+            out.extend_from_slice(&v.to_be_bytes());
+        }
+        out
+    };
+    let exception = |code: ExceptionCode| vec![fc | 0x80, u8::from(code)];
+    match result {
+        Ok(Response::ReadHoldingRegisters(w))
+        | Ok(Response::ReadInputRegisters(w))
+        | Ok(Response::ReadWriteMultipleRegisters(w)) => words(w),
+        Ok(Response::WriteSingleRegister(a, v)) | Ok(Response::WriteMultipleRegisters(a, v)) => {
+            let mut out = vec![fc];
+            out.extend_from_slice(&a.to_be_bytes());
+            out.extend_from_slice(&v.to_be_bytes());
+            out
+        }
+        // The bank answers only the register functions above; anything else is a device failure.
+        Ok(_) => exception(ExceptionCode::ServerDeviceFailure),
+        Err(code) => exception(*code),
     }
 }
 

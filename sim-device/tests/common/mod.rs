@@ -2,6 +2,9 @@
 //! (which include this file with `#[path]`).
 #![allow(dead_code)] // each test file and bench uses a different part of this helper
 
+#[path = "../../../tests/common/tools.rs"]
+pub mod tools;
+
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, ChildStdout, Command, Stdio};
 
@@ -80,20 +83,6 @@ pub fn free_port() -> u16 {
         .and_then(|l| l.local_addr())
         .map(|a| a.port())
         .expect("a free port")
-}
-
-/// True if `program` can be run; otherwise prints why the test is skipped.
-pub fn have(program: &str, probe: &[&str], install: &str) -> bool {
-    let ok = Command::new(program)
-        .args(probe)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        println!("SKIPPED: `{program}` is not available ({install})");
-    }
-    ok
 }
 
 /// The value at quantile `q` (0-1) of ascending `sorted` values (nearest rank); 0 when empty.

@@ -1,0 +1,370 @@
+//! The daemon's TOML configuration: types, defaults, range checks and the embedded default.
+//!
+//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]` and `[metrics]`,
+//! all optional (no `[metrics]`: no Prometheus endpoint).
+//! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
+//! each kind live in their own sub-table (`[valve.emulated]`, `[source.sine]`, ...), so a file
+//! can keep settings for several kinds and switch with one line, and every key keeps its exact
+//! line in error messages. Every error names the file, the line and the dotted key, and says
+//! what is allowed. Loading also resolves what the config points at (the model file, the
+//! replayed recording), so a missing file is reported against the key that names it.
+//!
+//! Files: this one holds [`Config`], loading, and the small tables (`[loop]`, `[safety]`,
+//! `[log]`, `[metrics]`); [`valve`] holds `[valve]` and [`source`] holds `[source]`, each with
+//! the checks of its tables (`check_in`, as [`RegisterMap::check_in`] does for a register map).
+//!
+//! This module does not run anything; [`crate::daemon`] builds the loop from a [`Config`].
+//!
+//! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
+
+mod source;
+mod valve;
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::toml_file::{self, TomlError};
+
+pub use source::{
+    ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
+    SineConfig, SourceConfig, SourceKind, StepsConfig,
+};
+pub use valve::{EmulatedConfig, ValveConfig, ValveKind};
+
+/// The default configuration, `config/emulated.toml`, embedded so default == file by construction.
+pub const DEFAULT_TOML: &str = include_str!("../../../config/emulated.toml");
+
+/// The most connections a server may be allowed (each is a file descriptor).
+pub const MAX_CONNECTIONS: usize = 1000;
+
+/// The name the embedded default goes by in messages.
+pub const DEFAULT_LABEL: &str = "config/emulated.toml (embedded default)";
+
+/// A whole daemon configuration, checked and resolved.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Loop rate and clock.
+    #[serde(rename = "loop", default)]
+    pub loop_: LoopConfig,
+    /// The valve backend.
+    #[serde(default)]
+    pub valve: ValveConfig,
+    /// The source of O_P.
+    #[serde(default)]
+    pub source: SourceConfig,
+    /// What to do on stop.
+    #[serde(default)]
+    pub safety: SafetyConfig,
+    /// The CSV log.
+    #[serde(default)]
+    pub log: LogConfig,
+    /// The Prometheus endpoint, if any.
+    pub metrics: Option<MetricsConfig>,
+}
+
+/// `[loop]`: rate and clock.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopConfig {
+    /// Cycles per second, 1-1000.
+    pub rate_hz: f64,
+    /// Real (wall) clock or virtual clock (as fast as possible).
+    pub clock: ClockKind,
+    /// The loop sleeps until `spin_us` before each deadline, then busy-waits, 0-2000 µs.
+    pub spin_us: u32,
+    /// SCHED_FIFO priority of the loop thread, 1-99; 0 keeps the normal scheduler.
+    pub realtime_priority: u8,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        LoopConfig {
+            rate_hz: 100.0,
+            clock: ClockKind::Real,
+            spin_us: 200,
+            realtime_priority: 0,
+        }
+    }
+}
+
+impl LoopConfig {
+    /// The loop period, rounded to whole nanoseconds (the grid's unit).
+    pub fn period(&self) -> std::time::Duration {
+        std::time::Duration::from_nanos((1e9 / self.rate_hz).round() as u64)
+    }
+
+    /// The loop period in seconds.
+    pub fn period_s(&self) -> f64 {
+        self.period().as_secs_f64()
+    }
+}
+
+/// Which clock drives the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockKind {
+    /// Cycles start on the wall clock, on an absolute 1/rate grid.
+    Real,
+    /// Cycles run back to back on a simulated clock (tests, offline runs).
+    Virtual,
+}
+
+/// `[metrics]`: the Prometheus endpoint.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MetricsConfig {
+    /// Address of the HTTP endpoint (`GET /metrics`).
+    pub listen: ListenAddr,
+    /// Connections open at once; more are closed as they arrive.
+    pub max_connections: usize,
+}
+
+impl Default for MetricsConfig {
+    fn default() -> Self {
+        MetricsConfig {
+            listen: ListenAddr(SocketAddr::from(([127, 0, 0, 1], 9100))),
+            max_connections: 8,
+        }
+    }
+}
+
+/// An `IP:port` to listen on, from a string such as `"127.0.0.1:5020"` (names are not resolved).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ListenAddr(pub SocketAddr);
+
+impl<'de> Deserialize<'de> for ListenAddr {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse().map(ListenAddr).map_err(|_| {
+            serde::de::Error::custom(format!(
+                "`{text}` is not an IP address and port: write e.g. \"127.0.0.1:5020\" \
+                 (host names are not resolved; \"0.0.0.0:5020\" serves every interface)"
+            ))
+        })
+    }
+}
+
+/// `[safety]`.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// What the valve gets when the loop stops.
+    #[serde(default)]
+    pub on_stop: OnStop,
+    /// The O_P sent on stop with `on_stop = "go-to"`, %.
+    #[serde(default)]
+    pub go_to_pct: Option<f64>,
+}
+
+/// The safe action applied when the loop stops.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OnStop {
+    /// Send the last O_P once more.
+    #[default]
+    Hold,
+    /// Send `go_to_pct`.
+    GoTo,
+}
+
+/// `[log]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogConfig {
+    /// Directory of the CSV files (created if missing).
+    pub dir: PathBuf,
+    /// Rotate when a file reaches this size, MB.
+    pub rotate_size_mb: f64,
+    /// Rotate when a file has covered this much loop time, s.
+    pub rotate_after_s: f64,
+    /// Flush at least this often, ms (10-1000).
+    pub flush_interval_ms: u64,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        LogConfig {
+            dir: PathBuf::from("./logs"),
+            rotate_size_mb: 100.0,
+            rotate_after_s: 3600.0,
+            flush_interval_ms: 1000,
+        }
+    }
+}
+/// Where the checks of one config point their messages: its text and its file.
+pub(super) struct Check<'a> {
+    text: &'a str,
+    path: &'a Path,
+}
+
+impl Check<'_> {
+    /// An error about `table.key`, at the line that sets it.
+    fn bad(&self, table: &str, key: &str, message: String) -> TomlError {
+        toml_file::invalid(self.text, self.path, Some(table), key, message)
+    }
+
+    /// `max_connections` of `table`: 1 to [`MAX_CONNECTIONS`].
+    fn max_connections(&self, table: &str, n: usize) -> Result<(), TomlError> {
+        self.range(
+            table,
+            "max_connections",
+            n as f64,
+            1.0,
+            MAX_CONNECTIONS as f64,
+            "connections open at once",
+        )
+    }
+
+    /// `value` of `table.key` must be finite and within `lo..=hi`; `what` says what it is.
+    fn range(
+        &self,
+        table: &str,
+        key: &str,
+        value: f64,
+        lo: f64,
+        hi: f64,
+        what: &str,
+    ) -> Result<(), TomlError> {
+        if value.is_finite() && (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            Err(self.bad(
+                table,
+                key,
+                format!("{value} is out of range: {what}, {lo} to {hi}"),
+            ))
+        }
+    }
+}
+
+impl Config {
+    /// Loads `path`, or the embedded default when `path` is None; checked and resolved.
+    pub fn load(path: Option<&Path>) -> Result<Config, TomlError> {
+        match path {
+            Some(p) => {
+                let (config, text): (Config, String) = toml_file::load(p)?;
+                config.resolve(&text, p)
+            }
+            None => Config::from_toml(DEFAULT_TOML, Path::new(DEFAULT_LABEL)),
+        }
+    }
+
+    /// The embedded default configuration.
+    pub fn embedded_default() -> Result<Config, TomlError> {
+        Config::load(None)
+    }
+
+    /// Parses, checks and resolves TOML `text` (`label` names it in messages).
+    pub fn from_toml(text: &str, label: &Path) -> Result<Config, TomlError> {
+        let config: Config = toml_file::parse(text, label)?;
+        config.resolve(text, label)
+    }
+
+    /// The checks of every table in file order, then those across tables; loads the model and
+    /// the replayed recording.
+    fn resolve(mut self, text: &str, path: &Path) -> Result<Config, TomlError> {
+        let c = Check { text, path };
+        self.loop_.check_in(&c)?;
+        self.valve.check_in(&c, &self.loop_)?;
+        self.source.check_in(&c, &self.loop_)?;
+        self.safety.check_in(&c)?;
+        self.log.check_in(&c)?;
+        if let Some(m) = &self.metrics {
+            c.max_connections("metrics", m.max_connections)?;
+        }
+        if let (Some(m), SourceKind::ModbusServer) = (&self.metrics, self.source.kind) {
+            let hil = self.source.modbus_server.listen.0;
+            if m.listen.0 == hil && hil.port() != 0 {
+                return Err(c.bad(
+                    "metrics",
+                    "listen",
+                    format!("{hil} is also [source.modbus-server] listen: give the endpoint its own port, e.g. \"127.0.0.1:9100\""),
+                ));
+            }
+        }
+        Ok(self)
+    }
+}
+
+impl LoopConfig {
+    /// The checks of `[loop]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        c.range(
+            "loop",
+            "rate_hz",
+            self.rate_hz,
+            1.0,
+            1000.0,
+            "a loop rate in Hz",
+        )?;
+        c.range(
+            "loop",
+            "spin_us",
+            f64::from(self.spin_us),
+            0.0,
+            2000.0,
+            "a busy-wait margin in µs",
+        )?;
+        c.range(
+            "loop",
+            "realtime_priority",
+            f64::from(self.realtime_priority),
+            0.0,
+            99.0,
+            "a SCHED_FIFO priority (0 = normal scheduling)",
+        )
+    }
+}
+
+impl SafetyConfig {
+    /// The checks of `[safety]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        if self.on_stop != OnStop::GoTo {
+            return Ok(());
+        }
+        match self.go_to_pct {
+            None => Err(c.bad(
+                "safety",
+                "on_stop",
+                "on_stop = \"go-to\" needs go_to_pct = <an opening in %>".into(),
+            )),
+            Some(v) => c.range("safety", "go_to_pct", v, 0.0, 100.0, "an opening in %"),
+        }
+    }
+}
+
+impl LogConfig {
+    /// The checks of `[log]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        c.range(
+            "log",
+            "rotate_size_mb",
+            self.rotate_size_mb,
+            0.001,
+            1e6,
+            "a file size in MB",
+        )?;
+        c.range(
+            "log",
+            "rotate_after_s",
+            self.rotate_after_s,
+            1.0,
+            1e7,
+            "a file duration in s",
+        )?;
+        c.range(
+            "log",
+            "flush_interval_ms",
+            self.flush_interval_ms as f64,
+            10.0,
+            1000.0,
+            "a flush interval in ms",
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,438 @@
+//! `[source]`: the kind of O_P source, its clamp range and the settings of each kind
+//! (`[source.random-steps]` ... `[source.modbus-server]`), with their checks; loading resolves
+//! a replayed recording.
+//!
+//! Checking only: the sources themselves are [`crate::daemon::source`] and [`crate::daemon::hil`].
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::Deserialize;
+
+use super::{Check, ClockKind, ListenAddr, LoopConfig};
+use crate::daemon::hil;
+use crate::modbus::map::RegisterMap;
+use crate::net::Limits;
+use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
+/// The settings of the generated sources (`[source.random-steps]`, `[source.steps]`, ...) are
+/// the parameters of the generators in [`crate::signal`].
+pub use crate::signal::{
+    ConstantParams as ConstantConfig, PrbsParams as PrbsConfig, RampParams as RampConfig,
+    RandomStepsParams as RandomStepsConfig, SineParams as SineConfig, StepsParams as StepsConfig,
+};
+use crate::toml_file::{self, TomlError};
+
+/// `[source]`: the kind of O_P source, the clamp range, and the settings of each kind.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SourceConfig {
+    /// The source in use.
+    pub kind: SourceKind,
+    /// Lowest O_P ever sent, %.
+    pub op_min_pct: f64,
+    /// Highest O_P ever sent, %.
+    pub op_max_pct: f64,
+    /// `[source.random-steps]`.
+    #[serde(rename = "random-steps")]
+    pub random_steps: RandomStepsConfig,
+    /// `[source.steps]`.
+    pub steps: Option<StepsConfig>,
+    /// `[source.ramp]`.
+    pub ramp: RampConfig,
+    /// `[source.sine]`.
+    pub sine: SineConfig,
+    /// `[source.prbs]`.
+    pub prbs: PrbsConfig,
+    /// `[source.replay]`.
+    pub replay: Option<ReplayConfig>,
+    /// `[source.constant]`.
+    pub constant: Option<ConstantConfig>,
+    /// `[source.modbus-server]`.
+    #[serde(rename = "modbus-server")]
+    pub modbus_server: ModbusServerConfig,
+}
+
+impl Default for SourceConfig {
+    fn default() -> Self {
+        SourceConfig {
+            kind: SourceKind::RandomSteps,
+            op_min_pct: 0.0,
+            op_max_pct: 100.0,
+            random_steps: RandomStepsConfig::default(),
+            steps: None,
+            ramp: RampConfig::default(),
+            sine: SineConfig::default(),
+            prbs: PrbsConfig::default(),
+            replay: None,
+            constant: None,
+            modbus_server: ModbusServerConfig::default(),
+        }
+    }
+}
+
+/// O_P sources.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SourceKind {
+    /// The paper's experiment: random levels held for random times.
+    RandomSteps,
+    /// A list of levels, each held for the same time.
+    Steps,
+    /// A linear ramp (or triangle).
+    Ramp,
+    /// A sine wave.
+    Sine,
+    /// A pseudo-random binary signal.
+    Prbs,
+    /// The O_P column of a recording.
+    Replay,
+    /// One fixed O_P.
+    Constant,
+    /// Whatever a process controller writes into the daemon's Modbus TCP server (HIL).
+    ModbusServer,
+}
+
+impl SourceKind {
+    /// The name used in config files.
+    pub fn tag(self) -> &'static str {
+        match self {
+            SourceKind::RandomSteps => "random-steps",
+            SourceKind::Steps => "steps",
+            SourceKind::Ramp => "ramp",
+            SourceKind::Sine => "sine",
+            SourceKind::Prbs => "prbs",
+            SourceKind::Replay => "replay",
+            SourceKind::Constant => "constant",
+            SourceKind::ModbusServer => "modbus-server",
+        }
+    }
+}
+
+/// `[source.replay]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplayConfig {
+    /// The recording whose O_P column is replayed.
+    pub file: PathBuf,
+    /// Its O_P held onto the loop grid (slot k = index k), resolved at load time.
+    #[serde(skip)]
+    pub op_pct: Arc<Vec<f64>>,
+}
+
+/// `[source.modbus-server]`: the Modbus TCP server a process controller writes O_P into.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModbusServerConfig {
+    /// Address to serve on; loopback unless set otherwise here.
+    pub listen: ListenAddr,
+    /// No accepted set-point write for this long applies the `[safety]` action, s.
+    pub watchdog_s: f64,
+    /// O_P before the controller's first write, % (default: `[safety] go_to_pct` with
+    /// `on_stop = "go-to"`, else `[source] op_min_pct`).
+    pub initial_pct: Option<f64>,
+    /// `[source.modbus-server.registers]`: the map served (default: per-mille set-point in
+    /// holding 0, position in holding 1, status in holding 2).
+    pub registers: RegisterMap,
+    /// Connections open at once; more are closed as they arrive.
+    pub max_connections: usize,
+    /// A connection without a request for this long is closed, s.
+    pub idle_timeout_s: f64,
+}
+
+impl ModbusServerConfig {
+    /// The connection limits of the server.
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_connections: self.max_connections,
+            idle_timeout: Duration::from_secs_f64(self.idle_timeout_s),
+        }
+    }
+}
+
+impl Default for ModbusServerConfig {
+    fn default() -> Self {
+        ModbusServerConfig {
+            listen: ListenAddr(SocketAddr::from(([127, 0, 0, 1], 5020))),
+            watchdog_s: 1.0,
+            initial_pct: None,
+            registers: RegisterMap::device_default(),
+            max_connections: 8,
+            idle_timeout_s: 60.0,
+        }
+    }
+}
+/// A range check: key, value, lowest, highest allowed, and what the value is.
+type Range<'a> = (&'a str, f64, f64, f64, &'a str);
+
+/// Runs the range checks of `table`.
+fn ranges(c: &Check<'_>, table: &str, checks: &[Range<'_>]) -> Result<(), TomlError> {
+    checks
+        .iter()
+        .try_for_each(|&(key, v, lo, hi, what)| c.range(table, key, v, lo, hi, what))
+}
+
+/// The longest hold, ramp or period accepted, s.
+const DAY_S: f64 = 86_400.0;
+
+impl SourceConfig {
+    /// The checks of `[source]` and of the sub-table its `kind` uses, for a loop of `[loop]`
+    /// `timing`; a replayed recording is loaded here.
+    pub(super) fn check_in(&mut self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
+        let opening = "an opening in %";
+        ranges(
+            c,
+            "source",
+            &[
+                ("op_min_pct", self.op_min_pct, 0.0, 100.0, opening),
+                ("op_max_pct", self.op_max_pct, 0.0, 100.0, opening),
+            ],
+        )?;
+        if self.op_min_pct >= self.op_max_pct {
+            return Err(c.bad(
+                "source",
+                "op_max_pct",
+                format!("must be above op_min_pct = {}", self.op_min_pct),
+            ));
+        }
+        let tag = self.kind.tag();
+        let missing = |table: &str, example: &str| {
+            c.bad(
+                "source",
+                "kind",
+                format!("kind = \"{tag}\" needs a [source.{table}] table, e.g. {example}"),
+            )
+        };
+        match self.kind {
+            SourceKind::RandomSteps => self.random_steps.check_in(c),
+            SourceKind::Steps => self
+                .steps
+                .as_ref()
+                .ok_or_else(|| missing("steps", "levels_pct = [30.0, 60.0], hold_s = 5.0"))?
+                .check_in(c),
+            SourceKind::Ramp => {
+                let r = &self.ramp;
+                ranges(
+                    c,
+                    "source.ramp",
+                    &[
+                        ("from_pct", r.from_pct, 0.0, 100.0, "a level in %"),
+                        ("to_pct", r.to_pct, 0.0, 100.0, "a level in %"),
+                        ("duration_s", r.duration_s, 1e-3, DAY_S, "a ramp time in s"),
+                    ],
+                )
+            }
+            SourceKind::Sine => {
+                let w = &self.sine;
+                ranges(
+                    c,
+                    "source.sine",
+                    &[
+                        ("mean_pct", w.mean_pct, 0.0, 100.0, "a level in %"),
+                        (
+                            "amplitude_pct",
+                            w.amplitude_pct,
+                            0.0,
+                            100.0,
+                            "an amplitude in %",
+                        ),
+                        ("period_s", w.period_s, 1e-3, DAY_S, "a period in s"),
+                    ],
+                )
+            }
+            SourceKind::Prbs => self.prbs.check_in(c, timing.rate_hz),
+            SourceKind::Replay => self
+                .replay
+                .as_mut()
+                .ok_or_else(|| missing("replay", "file = \"recording.csv\""))?
+                .resolve(c, timing.period_s()),
+            SourceKind::Constant => {
+                let k = self
+                    .constant
+                    .as_ref()
+                    .ok_or_else(|| missing("constant", "op_pct = 50.0"))?;
+                ranges(
+                    c,
+                    "source.constant",
+                    &[("op_pct", k.op_pct, 0.0, 100.0, opening)],
+                )
+            }
+            SourceKind::ModbusServer => self.modbus_server.check_in(c, timing.clock),
+        }
+    }
+}
+
+impl RandomStepsConfig {
+    /// The checks of `[source.random-steps]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        ranges(
+            c,
+            "source.random-steps",
+            &[
+                ("min_pct", self.min_pct, 0.0, 100.0, "a level in %"),
+                (
+                    "max_pct",
+                    self.max_pct,
+                    self.min_pct,
+                    100.0,
+                    "a level in %, at least min_pct",
+                ),
+                (
+                    "hold_min_s",
+                    self.hold_min_s,
+                    0.0,
+                    DAY_S,
+                    "a hold time in s",
+                ),
+                (
+                    "hold_max_s",
+                    self.hold_max_s,
+                    self.hold_min_s.max(1e-3),
+                    DAY_S,
+                    "a hold time in s, above hold_min_s",
+                ),
+            ],
+        )
+    }
+}
+
+impl StepsConfig {
+    /// The checks of `[source.steps]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        let t = "source.steps";
+        if self.levels_pct.is_empty() {
+            return Err(c.bad(
+                t,
+                "levels_pct",
+                "give at least one level, e.g. [30.0, 60.0]".into(),
+            ));
+        }
+        for &v in &self.levels_pct {
+            c.range(t, "levels_pct", v, 0.0, 100.0, "each level in %")?;
+        }
+        c.range(t, "hold_s", self.hold_s, 1e-3, DAY_S, "a hold time in s")
+    }
+}
+
+impl PrbsConfig {
+    /// The checks of `[source.prbs]` for a loop at `rate_hz`.
+    fn check_in(&self, c: &Check<'_>, rate_hz: f64) -> Result<(), TomlError> {
+        ranges(
+            c,
+            "source.prbs",
+            &[
+                ("mean_pct", self.mean_pct, 0.0, 100.0, "a level in %"),
+                (
+                    "amplitude_pct",
+                    self.amplitude_pct,
+                    0.0,
+                    100.0,
+                    "an amplitude in %",
+                ),
+                (
+                    "band_hz",
+                    self.band_hz,
+                    1e-4,
+                    rate_hz / 2.0,
+                    "a frequency in Hz up to half the loop rate",
+                ),
+            ],
+        )
+    }
+}
+
+impl ReplayConfig {
+    /// Loads the recording of `[source.replay]` onto the loop grid of `period_s`.
+    fn resolve(&mut self, c: &Check<'_>, period_s: f64) -> Result<(), TomlError> {
+        let op = load_replay(&self.file, period_s).map_err(|m| {
+            c.bad(
+                "source.replay",
+                "file",
+                format!("cannot replay `{}`: {m}", self.file.display()),
+            )
+        })?;
+        self.op_pct = Arc::new(op);
+        Ok(())
+    }
+}
+
+impl ModbusServerConfig {
+    /// The checks of `[source.modbus-server]`, when it is the source (`clock` is `[loop] clock`).
+    fn check_in(&self, c: &Check<'_>, clock: ClockKind) -> Result<(), TomlError> {
+        let t = "source.modbus-server";
+        if clock == ClockKind::Virtual {
+            return Err(c.bad(
+                "loop",
+                "clock",
+                "\"virtual\" cannot serve a process controller, which runs on the wall clock: \
+                 use clock = \"real\" with [source] kind = \"modbus-server\""
+                    .into(),
+            ));
+        }
+        if !(self.watchdog_s.is_finite() && self.watchdog_s > 0.0 && self.watchdog_s <= 3600.0) {
+            return Err(c.bad(
+                t,
+                "watchdog_s",
+                format!(
+                    "{} is not allowed: the time without a set-point write after which the \
+                     [safety] action applies, above 0 and at most 3600 s, e.g. 1.0",
+                    self.watchdog_s
+                ),
+            ));
+        }
+        if let Some(v) = self.initial_pct {
+            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
+                return Err(c.bad(
+                    t,
+                    "initial_pct",
+                    format!("{v} is out of range: the O_P before the first write, an opening in %, 0 to 100"),
+                ));
+            }
+        }
+        c.max_connections(t, self.max_connections)?;
+        c.range(
+            t,
+            "idle_timeout_s",
+            self.idle_timeout_s,
+            0.1,
+            DAY_S,
+            "the time after which a connection without requests is closed, in s",
+        )?;
+        let section = "source.modbus-server.registers";
+        self.registers.check_in(c.text, c.path, section)?;
+        if let Some(st) = self.registers.status {
+            let bit = st.setpoint_error_bit;
+            if bit == hil::VALVE_FAULT_BIT || bit == hil::WATCHDOG_BIT {
+                return Err(TomlError::Invalid {
+                    path: c.path.to_path_buf(),
+                    line: toml_file::line_of(c.text, Some(section), "status")
+                        .or_else(|| toml_file::line_of(c.text, Some(section), ""))
+                        .unwrap_or(1),
+                    key: format!("{section}.status.setpoint_error_bit"),
+                    message: format!(
+                        "{bit} is taken: the daemon reports a valve fault in bit {} and the \
+                         watchdog in bit {} of the status register; use 0 or 3-15",
+                        hil::VALVE_FAULT_BIT,
+                        hil::WATCHDOG_BIT
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The O_P column of a recording (V_P is not read, so a log with failed reads replays too),
+/// held onto a grid of `period_s` from its first row.
+fn load_replay(file: &Path, period_s: f64) -> Result<Vec<f64>, RecordingError> {
+    let opts = ReadOptions {
+        columns: ColumnMap {
+            vp: None,
+            ..ColumnMap::default()
+        },
+        ..ReadOptions::default()
+    };
+    let rec = recording::read(file, &opts)?;
+    Ok(recording::resample_zoh(&rec.t, &rec.op, period_s))
+}

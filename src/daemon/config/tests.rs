@@ -1,0 +1,206 @@
+//! Tests of loading and checking whole config files.
+
+use super::*;
+use crate::model::ModelKind;
+
+fn err(text: &str) -> String {
+    Config::from_toml(text, Path::new("c.toml"))
+        .unwrap_err()
+        .to_string()
+}
+
+#[test]
+fn shipped_file_is_the_embedded_default_and_states_the_defaults() {
+    let on_disk =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/emulated.toml"))
+            .unwrap();
+    assert_eq!(on_disk, DEFAULT_TOML);
+    // Every value the file shows is the value an empty config gets.
+    let shipped = Config::embedded_default().unwrap();
+    let mut empty = Config::from_toml("", Path::new("empty.toml")).unwrap();
+    // No `model` means pin-cart II; the file says so explicitly.
+    empty.valve.emulated.model = Some(ModelKind::Pincart2);
+    assert_eq!(format!("{shipped:?}"), format!("{empty:?}"));
+    assert_eq!(shipped.loop_.rate_hz, 100.0);
+    assert_eq!(shipped.source.kind, SourceKind::RandomSteps);
+    assert_eq!(
+        shipped.valve.emulated.model_spec().unwrap().model,
+        ModelKind::Pincart2
+    );
+    assert_eq!(shipped.log.dir, PathBuf::from("./logs"));
+}
+
+#[test]
+fn commented_examples_in_the_shipped_file_are_valid() {
+    // Uncomment the example tables of the other sources and use each in turn.
+    let start = DEFAULT_TOML.find("# [source.steps]").unwrap();
+    let end = DEFAULT_TOML.find("[safety]").unwrap();
+    let examples: String = DEFAULT_TOML[start..end]
+        .lines()
+        .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let text = format!(
+        "{}{examples}\n{}",
+        &DEFAULT_TOML[..start],
+        &DEFAULT_TOML[end..]
+    );
+    for kind in ["random-steps", "steps", "ramp", "sine", "prbs", "constant"] {
+        let t = text.replace("kind = \"random-steps\"", &format!("kind = \"{kind}\""));
+        let c = Config::from_toml(&t, Path::new("examples.toml")).unwrap();
+        assert_eq!(c.source.kind.tag(), kind);
+    }
+    let t = text.replace("kind = \"random-steps\"", "kind = \"replay\"");
+    let e = Config::from_toml(&t, Path::new("examples.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("source.replay.file: cannot replay `recording.csv`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn errors_name_file_line_key_and_what_is_allowed() {
+    let e = err("[loop]\nrate_hz = 5000.0\n");
+    assert!(
+        e.starts_with("c.toml:2: loop.rate_hz: 5000 is out of range"),
+        "{e}"
+    );
+    assert!(e.contains("1 to 1000"), "{e}");
+    let e = err("[loop]\nrate_hz = 100.0\nrat = 1\n");
+    assert!(
+        e.starts_with("c.toml:3: loop.rat: unknown field `rat`"),
+        "{e}"
+    );
+    let e = err("[source.sine]\nperiod_s = \"long\"\n");
+    assert!(
+        e.starts_with("c.toml:2: source.sine.period_s: invalid type"),
+        "{e}"
+    );
+    let e = err("[valve.emulated]\nmodel_file = \"no/such/model.toml\"\n");
+    assert!(
+        e.starts_with(
+            "c.toml:2: valve.emulated.model_file: cannot use model file `no/such/model.toml`"
+        ),
+        "{e}"
+    );
+    let e = err("[source]\nkind = \"steps\"\n");
+    assert!(
+        e.starts_with("c.toml:2: source.kind: kind = \"steps\" needs a [source.steps] table"),
+        "{e}"
+    );
+    let e = err("[safety]\non_stop = \"go-to\"\n");
+    assert!(
+        e.starts_with("c.toml:2: safety.on_stop: on_stop = \"go-to\" needs go_to_pct"),
+        "{e}"
+    );
+    let e = err("[source]\nkind = \"noise\"\n");
+    assert!(
+        e.contains("source.kind: unknown variant `noise`, expected one of"),
+        "{e}"
+    );
+    let e = err("[source]\nop_min_pct = 60.0\nop_max_pct = 50.0\n");
+    assert!(
+        e.starts_with("c.toml:3: source.op_max_pct: must be above op_min_pct"),
+        "{e}"
+    );
+    let e = err("[source]\nkind = \"prbs\"\n[source.prbs]\nband_hz = 80.0\n");
+    assert!(
+        e.starts_with("c.toml:4: source.prbs.band_hz: 80 is out of range"),
+        "{e}"
+    );
+    assert!(!e.contains('\n'), "{e}");
+}
+
+#[test]
+fn modbus_server_and_metrics_errors_name_their_key() {
+    let hil = "[source]\nkind = \"modbus-server\"\n";
+    let cases = [
+        (
+            format!("{hil}[source.modbus-server]\nlisten = \"localhost:5020\"\n"),
+            "c.toml:4: source.modbus-server.listen: `localhost:5020` is not an IP address and port",
+        ),
+        (
+            format!("{hil}[source.modbus-server]\nwatchdog_s = 0.0\n"),
+            "c.toml:4: source.modbus-server.watchdog_s: 0 is not allowed",
+        ),
+        (
+            format!("{hil}[source.modbus-server]\ninitial_pct = 120.0\n"),
+            "c.toml:4: source.modbus-server.initial_pct: 120 is out of range",
+        ),
+        (
+            format!("{hil}op_min_pct = 50.0\nop_max_pct = 50.0\n"),
+            "c.toml:4: source.op_max_pct: must be above op_min_pct",
+        ),
+        (
+            format!("{hil}[source.modbus-server.registers]\nstatus = {{ address = 2, setpoint_error_bit = 2 }}\n"),
+            "c.toml:4: source.modbus-server.registers.status.setpoint_error_bit: 2 is taken",
+        ),
+        (
+            format!("{hil}[source.modbus-server.registers]\nposition = {{ address = 0, format = \"i16\" }}\n"),
+            "c.toml:4: source.modbus-server.registers.position.address: 0 overlaps setpoint",
+        ),
+        (
+            format!("[loop]\nclock = \"virtual\"\n{hil}"),
+            "c.toml:2: loop.clock: \"virtual\" cannot serve a process controller",
+        ),
+        (
+            "[metrics]\nlisten = \"9100\"\n".to_string(),
+            "c.toml:2: metrics.listen: `9100` is not an IP address and port",
+        ),
+        (
+            format!("{hil}[metrics]\nlisten = \"127.0.0.1:5020\"\n"),
+            "c.toml:4: metrics.listen: 127.0.0.1:5020 is also [source.modbus-server] listen",
+        ),
+    ];
+    for (text, want) in cases {
+        let e = err(&text);
+        assert!(e.starts_with(want), "{text}: {e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
+    // Defaults: loopback 5020, 1 s watchdog, per-mille map with a status register; no metrics.
+    let c = Config::from_toml(hil, Path::new("c.toml")).unwrap();
+    let m = &c.source.modbus_server;
+    assert_eq!(m.listen.0.to_string(), "127.0.0.1:5020");
+    assert_eq!(m.watchdog_s, 1.0);
+    assert_eq!(m.registers.status.map(|s| s.address), Some(2));
+    assert!(c.metrics.is_none());
+    let c = Config::from_toml("[metrics]\n", Path::new("c.toml")).unwrap();
+    assert_eq!(c.metrics.unwrap().listen.0.to_string(), "127.0.0.1:9100");
+}
+
+#[test]
+fn shipped_hil_config_serves_loopback_with_metrics() {
+    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/hil.toml"));
+    let c = Config::load(Some(path)).unwrap();
+    assert_eq!(c.source.kind, SourceKind::ModbusServer);
+    assert_eq!(c.valve.kind, ValveKind::Emulated);
+    let m = &c.source.modbus_server;
+    assert!(m.listen.0.ip().is_loopback());
+    // The map written out in the file is the default one.
+    assert_eq!(m.registers, ModbusServerConfig::default().registers);
+    assert_eq!(c.safety.on_stop, OnStop::GoTo);
+    assert_eq!(
+        c.metrics.map(|x| x.listen.0.to_string()).as_deref(),
+        Some("127.0.0.1:9100")
+    );
+}
+
+#[test]
+fn model_file_loads_any_model() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/models/stiction.toml");
+    let c = Config::from_toml(
+        &format!("[valve.emulated]\nmodel_file = \"{path}\"\n"),
+        Path::new("c.toml"),
+    )
+    .unwrap();
+    assert_eq!(
+        c.valve.emulated.model_spec().unwrap().model,
+        ModelKind::Stiction
+    );
+    let e = err(&format!(
+        "[valve.emulated]\nmodel = \"fopdt\"\nmodel_file = \"{path}\"\n"
+    ));
+    assert!(e.contains("not both"), "{e}");
+}

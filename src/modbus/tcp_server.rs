@@ -1,0 +1,188 @@
+//! A Modbus TCP server that stays up: the daemon's server for a process controller and
+//! sim-device's TCP side.
+//!
+//! Connections come from [`crate::net::serve`] (accept errors retried, connections capped).
+//! Each connection reads MBAP frames (transaction id, protocol 0, length, unit id, PDU),
+//! decodes the request with tokio-modbus, asks its [`Respond`] what to do and writes the
+//! reply with the request's transaction and unit id. A connection that sends no request for
+//! [`Limits::idle_timeout`] is closed (and counted in [`Health`]). Any unit id is answered.
+//!
+//! Written here rather than with tokio-modbus's `server::tcp::Server` because that one stops
+//! serving at the first `accept()` error (and cancels every open connection when it returns),
+//! and has no connection limit or idle timeout; its request decoding is still used.
+//!
+//! Not here: what a request does (the [`Respond`] implementation: a register bank, fault
+//! injection).
+
+use std::io;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio_modbus::bytes::Bytes;
+use tokio_modbus::{ExceptionCode, Request, Response};
+
+use super::server::response_pdu;
+use crate::net::{self, Health, Limits};
+
+/// What a server does with one request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reply {
+    /// Answer (a response or an exception) after `delay`.
+    Answer(Result<Response, ExceptionCode>, Duration),
+    /// Send nothing; keep reading requests.
+    Silent,
+    /// Send nothing and close the connection.
+    Close,
+}
+
+/// Answers the requests of one connection, in order.
+pub trait Respond: Send + 'static {
+    /// The reply to `request`.
+    fn respond(&mut self, request: &Request<'_>) -> Reply;
+}
+
+/// Serves Modbus TCP on `listener` forever (drop the task to stop); `what` names it in the log,
+/// `connected(peer)` makes the responder of each new connection.
+pub async fn serve<R, C>(
+    what: &'static str,
+    listener: TcpListener,
+    limits: Limits,
+    health: Arc<Health>,
+    connected: C,
+) where
+    R: Respond,
+    C: Fn(SocketAddr) -> R,
+{
+    let conn_health = Arc::clone(&health);
+    net::serve(what, listener, limits, health, move |stream, peer| {
+        connection(
+            what,
+            stream,
+            peer,
+            connected(peer),
+            limits.idle_timeout,
+            Arc::clone(&conn_health),
+        )
+    })
+    .await
+}
+
+/// Serves one connection until the client closes it, it idles or the responder closes it.
+async fn connection<R: Respond>(
+    what: &'static str,
+    mut stream: TcpStream,
+    peer: SocketAddr,
+    mut responder: R,
+    idle: Duration,
+    health: Arc<Health>,
+) -> io::Result<()> {
+    let mut header = [0u8; 7];
+    loop {
+        match tokio::time::timeout(idle, stream.read_exact(&mut header)).await {
+            Err(_) => {
+                health.idle_closed();
+                tracing::info!(
+                    "{what}: closing the connection from {peer}: no request for {:.0} s",
+                    idle.as_secs_f64()
+                );
+                return Ok(());
+            }
+            Ok(Err(e)) if e.kind() == io::ErrorKind::UnexpectedEof => return Ok(()),
+            Ok(read) => read?,
+        };
+        let protocol = u16::from_be_bytes([header[2], header[3]]);
+        let length = usize::from(u16::from_be_bytes([header[4], header[5]]));
+        if protocol != 0 || !(2..=254).contains(&length) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                format!("not a Modbus TCP request: protocol {protocol}, length {length}"),
+            ));
+        }
+        let mut pdu = vec![0u8; length - 1];
+        stream.read_exact(&mut pdu).await?;
+        let fc = pdu[0];
+        let reply = match Request::try_from(Bytes::from(pdu)) {
+            Ok(request) => responder.respond(&request),
+            Err(_) => Reply::Answer(Err(ExceptionCode::IllegalFunction), Duration::ZERO),
+        };
+        let (result, delay) = match reply {
+            Reply::Answer(result, delay) => (result, delay),
+            Reply::Silent => continue,
+            Reply::Close => return Ok(()),
+        };
+        if !delay.is_zero() {
+            tokio::time::sleep(delay).await;
+        }
+        let body = response_pdu(fc, &result);
+        let mut frame = Vec::with_capacity(7 + body.len());
+        frame.extend_from_slice(&header[..4]);
+        frame.extend_from_slice(&(body.len() as u16 + 1).to_be_bytes());
+        frame.push(header[6]);
+        frame.extend_from_slice(&body);
+        stream.write_all(&frame).await?;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::modbus::map::RegisterMap;
+    use crate::modbus::server::{OutOfRange, RegisterBank};
+    use tokio_modbus::client::{Reader, Writer};
+
+    struct Bank(Arc<RegisterBank>);
+
+    impl Respond for Bank {
+        fn respond(&mut self, request: &Request<'_>) -> Reply {
+            Reply::Answer(self.0.handle(request), Duration::ZERO)
+        }
+    }
+
+    #[tokio::test]
+    async fn answers_tokio_modbus_and_closes_idle_connections() {
+        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let bank = Arc::new(RegisterBank::new(
+            RegisterMap::default(),
+            0.0,
+            100.0,
+            OutOfRange::Exception,
+        ));
+        let health = Arc::new(Health::default());
+        let limits = Limits {
+            max_connections: 4,
+            idle_timeout: Duration::from_millis(200),
+        };
+        let served = Arc::clone(&bank);
+        let server = tokio::spawn(serve(
+            "test",
+            listener,
+            limits,
+            Arc::clone(&health),
+            move |_| Bank(Arc::clone(&served)),
+        ));
+        let mut ctx = tokio_modbus::client::tcp::connect(addr).await.unwrap();
+        ctx.write_multiple_registers(0, &[420])
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(bank.setpoint_pct(), 42.0);
+        assert_eq!(
+            ctx.read_holding_registers(0, 1).await.unwrap(),
+            Ok(vec![420])
+        );
+        assert_eq!(
+            ctx.read_holding_registers(9, 1).await.unwrap(),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        // Silent for longer than the idle timeout: the server closes the connection.
+        tokio::time::sleep(Duration::from_millis(400)).await;
+        assert!(ctx.read_holding_registers(0, 1).await.is_err());
+        let v = health.view();
+        assert_eq!((v.accepted, v.idle_closed, v.open), (1, 1, 0));
+        server.abort();
+    }
+}

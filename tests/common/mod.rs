@@ -1,0 +1,30 @@
+//! Helpers shared by the integration tests of `valve-bridge` (each test file uses a part).
+#![allow(dead_code)]
+
+pub mod sim;
+pub mod tools;
+
+/// Panics if `text`, meant for people, holds a number with a float artefact: seven or more
+/// decimals (`0.09999999999999999`, `49.400000000000006`).
+pub fn assert_for_people(text: &str) {
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'.' && i > 0 && bytes[i - 1].is_ascii_digit() {
+            let decimals = bytes[i + 1..]
+                .iter()
+                .take_while(|b| b.is_ascii_digit())
+                .count();
+            let start = text[..i]
+                .rfind(|c: char| !c.is_ascii_digit())
+                .map_or(0, |s| s + 1);
+            assert!(
+                decimals < 7,
+                "a number for people with {decimals} decimals: `{}` in\n{text}",
+                &text[start..i + 1 + decimals]
+            );
+            i += decimals;
+        }
+        i += 1;
+    }
+}

@@ -1,0 +1,161 @@
+//! `valve-bridge probe` against sim-device over Modbus TCP and RTU on a pseudo-terminal: every
+//! mapped register read once and shown raw and scaled, nothing written unless `--write-test`,
+//! an unmapped address shown as exception 02 with what to check, one-line errors otherwise.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+mod common;
+
+use common::sim::{SimDevice, BIN, RTU_CONFIG};
+
+fn probe(cfg: &Path, extra: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(["probe", "--config"])
+        .arg(cfg)
+        .args(extra)
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap()
+}
+
+fn text(out: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The row of `register` in the first (or, with `after`, the second) table.
+fn row<'a>(table: &'a str, register: &str, after: bool) -> &'a str {
+    let part = match table.split_once("after the write:") {
+        Some((_, rest)) if after => rest,
+        Some((before, _)) => before,
+        None => table,
+    };
+    part.lines()
+        .find(|l| l.trim_start().starts_with(register))
+        .unwrap_or_else(|| panic!("no {register} row in\n{table}"))
+}
+
+fn reads_and_writes_only_when_asked(device: &SimDevice) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = device.config(dir.path(), &[], "");
+    let out = probe(&cfg, &[]);
+    let (table, err) = text(&out);
+    assert!(out.status.success(), "{table}{err}");
+    assert!(table.contains("nothing written"), "{table}");
+    // sim-device starts closed with a 0 % set-point; the status word is clear.
+    for (register, want) in [
+        ("set-point", "holding        0  u16    0 (0x0000)"),
+        ("position", "holding        1  i16    0 (0x0000)"),
+        ("status", "holding        2  u16    0 (0x0000)"),
+    ] {
+        assert!(row(&table, register, false).contains(want), "{table}");
+    }
+    assert!(
+        row(&table, "set-point", false).contains("0.00 %"),
+        "{table}"
+    );
+    assert!(
+        row(&table, "status", false).contains("no bit set"),
+        "{table}"
+    );
+    // Nothing was written: a second probe still reads the 0 % set-point.
+    let (again, _) = text(&probe(&cfg, &[]));
+    assert!(
+        row(&again, "set-point", false).contains("0 (0x0000)"),
+        "{again}"
+    );
+    // --write-test writes once, shows what the device got, and reads again.
+    let out = probe(&cfg, &["--write-test", "45.67"]);
+    let (table, err) = text(&out);
+    assert!(out.status.success(), "{table}{err}");
+    assert!(
+        table.contains("write test: set-point 45.67 % written; the device received 45.70 %"),
+        "{table}"
+    );
+    assert!(
+        row(&table, "set-point", true).contains("457 (0x01C9)"),
+        "{table}"
+    );
+    assert!(
+        row(&table, "set-point", true).contains("45.70 %"),
+        "{table}"
+    );
+    common::assert_for_people(&table);
+}
+
+#[test]
+fn probes_sim_device_over_tcp() {
+    let device = SimDevice::start(&["--tcp", "127.0.0.1:0", "--model", "modelless"]);
+    reads_and_writes_only_when_asked(&device);
+}
+
+#[test]
+fn probes_sim_device_over_a_pty() {
+    let device = SimDevice::start(&["--pty", "--model", "modelless"]);
+    reads_and_writes_only_when_asked(&device);
+}
+
+#[test]
+fn an_address_the_device_lacks_is_exception_02_with_what_to_check() {
+    let device = SimDevice::start(&["--tcp", "127.0.0.1:0"]);
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = device.config(
+        dir.path(),
+        &[(
+            "status   = { table = \"holding\", address = 2",
+            "status   = { table = \"holding\", address = 9",
+        )],
+        "",
+    );
+    let out = probe(&cfg, &[]);
+    let (table, err) = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{table}{err}");
+    let status = row(&table, "status", false);
+    assert!(
+        status.contains("holding        9")
+            && status.contains("exception 02 (illegal data address: the device has no such register; check the addresses and tables in [valve.registers]"),
+        "{table}"
+    );
+    assert!(row(&table, "position", false).contains("0.00 %"), "{table}");
+    assert_eq!(
+        err.trim_end(),
+        "valve-bridge: error: 1 of the probe's requests failed (see the table)"
+    );
+}
+
+#[test]
+fn no_device_or_no_modbus_valve_is_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let (addr, cfg) = common::sim::nobody_listening(dir.path(), "");
+    let (out, err) = text(&probe(&cfg, &[]));
+    assert!(out.is_empty(), "{out}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "valve-bridge: error: cannot connect to Modbus TCP {addr}: Connection refused"
+        )),
+        "{err}"
+    );
+    let cfg = dir.path().join("emulated.toml");
+    std::fs::write(&cfg, "[valve]\nkind = \"emulated\"\n").unwrap();
+    let (_, err) = text(&probe(&cfg, &[]));
+    assert!(
+        err.contains("has no device to probe") && err.lines().count() == 1,
+        "{err}"
+    );
+    // The shipped RTU config on a serial port that is not there.
+    let cfg = common::sim::config(
+        dir.path(),
+        RTU_CONFIG.0,
+        &[(RTU_CONFIG.1, "/dev/ttyUSB-probe-missing")],
+        "",
+    );
+    let (_, err) = text(&probe(&cfg, &[]));
+    assert!(
+        err.starts_with("valve-bridge: error: cannot open serial port /dev/ttyUSB-probe-missing: No such file or directory"),
+        "{err}"
+    );
+}
