@@ -6,7 +6,7 @@
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
 use crate::fit::steps::{self, StepOptions};
-use crate::metrics::stats::quantile;
+use crate::metrics::stats::{median, quantile};
 use crate::recording::RecordingView;
 
 /// One step of O_P and how V_P answered it.
@@ -53,6 +53,9 @@ pub struct Facts {
     /// Levels V_P stops at while O_P asks to go beyond (travel stops short of 100 or 0 %).
     pub stop_high_pct: Option<f64>,
     pub stop_low_pct: Option<f64>,
+    /// How fast V_P closes in on where it settles after a step, against the distance left:
+    /// (distance %, speed toward it %/s), sorted by distance (see [`approach`]).
+    pub approach: Vec<(f64, f64)>,
 }
 
 /// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
@@ -72,7 +75,56 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         slip_scale,
         stop_high_pct: stop(op, vp, dt, true),
         stop_low_pct: stop(op, vp, dt, false),
+        approach: approach(op, vp, dt),
     }
+}
+
+impl Facts {
+    /// Median speed of V_P toward where it settles while `lo..hi` % away from it, %/s, when at
+    /// least 30 samples of step tails were that far.
+    pub fn approach_speed(&self, lo: f64, hi: f64) -> Option<f64> {
+        let from = self.approach.partition_point(|p| p.0 < lo);
+        let to = self.approach.partition_point(|p| p.0 < hi);
+        let speeds: Vec<f64> = self.approach[from..to].iter().map(|p| p.1).collect();
+        if speeds.len() < 30 {
+            return None;
+        }
+        median(&speeds)
+    }
+}
+
+/// The tails of steps of O_P of at least 1 % held for 2 s: for each sample after V_P started
+/// moving (less than 80 % of the step left), the distance to the level V_P settles at (its
+/// mean over the last half second of the hold) and the speed toward it (the difference of means
+/// over 0.05 s before and after). A proportional positioner slows in proportion to the
+/// distance; one with a minimum speed keeps it until it stops, which is what this shows.
+fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
+    let h = ((0.05 / dt).round() as usize).max(1);
+    let settle = ((0.5 / dt).round() as usize).max(1);
+    let min_hold = ((2.0 / dt).round() as usize).max(2 * h + settle + 1);
+    let s = running_sums(vp);
+    let mut out = Vec::new();
+    let mut a = 0;
+    for b in 1..=op.len() {
+        if b < op.len() && (op[b] - op[b - 1]).abs() <= 1e-9 {
+            continue;
+        }
+        let step = if a > 0 { op[a] - op[a - 1] } else { 0.0 };
+        if b - a >= min_hold && step.abs() >= 1.0 {
+            let settled = (s[b] - s[b - settle]) / settle as f64;
+            for k in a + h..b - settle - h {
+                let here = (s[k + h / 2 + 1] - s[k - h / 2]) / (2 * (h / 2) + 1) as f64;
+                let left = (settled - here) * step.signum();
+                let speed = step_at(&s, k, h) / (h as f64 * dt) * step.signum();
+                if left > 0.0 && left < 0.8 * step.abs() {
+                    out.push((left, speed));
+                }
+            }
+        }
+        a = b;
+    }
+    out.sort_by(|x, y| x.0.total_cmp(&y.0));
+    out
 }
 
 /// How far O_P must ask beyond a stop, %, and for how long in total, s, for it to count.
@@ -463,5 +515,41 @@ mod tests {
         assert_eq!(f.reversals, 1);
         assert_eq!(f.holds.len(), 2);
         assert_eq!(f.holds[1].approach, -1.0);
+    }
+
+    #[test]
+    fn step_tails_show_a_minimum_speed_and_proportional_slowing() {
+        // Steps of 5 % every 4 s; V_P moves at 5 |e| %/s, or at least `floor` until it is
+        // there, read with 0.05 % of noise.
+        let (dt, n) = (0.01, 8000);
+        let op: Vec<f64> = (0..n)
+            .map(|k| 40.0 + 5.0 * ((k / 400) % 2) as f64)
+            .collect();
+        let e = noise(n, 0.05);
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let tails = |floor: f64| {
+            let mut x = op[0];
+            let vp: Vec<f64> = (0..n)
+                .map(|k| {
+                    let err = op[k] - x;
+                    let v = (5.0 * err.abs()).max(floor).min(err.abs() / dt);
+                    x += err.signum() * v * dt;
+                    x + e[k]
+                })
+                .collect();
+            let rec = RecordingView {
+                t: &t,
+                op: &op,
+                vp: &vp,
+                dt,
+            };
+            measure(&rec, 0.05, 0.0)
+        };
+        // 0.25-0.5 % from rest: 1.25-2.5 %/s proportionally, 4 %/s with the floor.
+        let slowing = tails(0.0).approach_speed(0.25, 0.5).unwrap();
+        assert!((1.4..2.4).contains(&slowing), "{slowing}");
+        let floor = tails(4.0).approach_speed(0.25, 0.5).unwrap();
+        assert!((3.6..4.4).contains(&floor), "{floor}");
+        assert!(tails(0.0).approach_speed(6.0, 7.0).is_none());
     }
 }

@@ -39,6 +39,9 @@ const MIN_FRICTION_BAND_PCT: f64 = 0.3;
 /// worth naming, %: from a fifth of a percent to a few percent.
 const MIN_SPEED_BAND_PCT: f64 = 0.2;
 const MAX_SPEED_BAND_PCT: f64 = 5.0;
+/// Share of a fitted minimum speed the valve must keep in the tails of its steps, where a
+/// proportional positioner would have slowed to a quarter of it or less.
+const MIN_FLOOR_SHOWN: f64 = 0.7;
 /// Smallest slip worth naming, %.
 const MIN_SLIP_PCT: f64 = 0.2;
 /// Smallest positioner deadband worth naming, %: the valve then stops short by a tenth of a
@@ -206,9 +209,17 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
         }
         // The floor takes over from proportional action below an error of dy_min / P_k.
         // ... but only for small errors: a floor over several % is a constant-speed valve.
+        // Where the recording shows the tails of steps well inside that band (beyond the
+        // noise), V_P must still move at about the floor there, not slow down in proportion.
         Effect::MinSpeed => {
-            let band = g(Knob::MinSpeed) / g(Knob::Gain);
-            g(Knob::MinSpeed) >= 0.1 && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band)
+            let floor = g(Knob::MinSpeed);
+            let band = floor / g(Knob::Gain);
+            let lo = (2.5 * facts.noise_pct).max(band / 8.0);
+            let kept = match facts.approach_speed(lo, 2.0 * lo) {
+                Some(speed) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * floor,
+                _ => true,
+            };
+            floor >= 0.1 && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band) && kept
         }
         // Stick-slip needs the slip: a stickband without a jump is a deadband on the input.
         // A slip smaller than the reading's noise cannot be told from it.
@@ -279,6 +290,7 @@ mod tests {
             slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
             stop_high_pct: None,
             stop_low_pct: None,
+            approach: vec![],
         };
         let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
         let with = |knob, v| {
@@ -309,6 +321,25 @@ mod tests {
         assert!(!material(Effect::Stiction, &band, &f));
         composed::set(&mut band, Knob::JumpFraction, 0.5);
         assert!(material(Effect::Stiction, &band, &f));
+        // A floor of 5 %/s with P_k 5/s: a band of 1 %. Step tails 0.25-0.5 % from rest must
+        // still move at about 5 %/s; proportional action there moves at 1.25-2.5 %/s.
+        let mut floor = with(Knob::Slew, 100.0);
+        composed::set(&mut floor, Knob::MinSpeed, 5.0);
+        composed::set(&mut floor, Knob::Gain, 5.0);
+        let tails = |speed: fn(f64) -> f64| Facts {
+            approach: (0..1000)
+                .map(|i| 0.05 + 0.002 * i as f64)
+                .map(|e| (e, speed(e)))
+                .collect(),
+            ..f.clone()
+        };
+        assert!(material(Effect::MinSpeed, &floor, &f));
+        assert!(material(
+            Effect::MinSpeed,
+            &floor,
+            &tails(|e| (5.0 * e).max(5.0))
+        ));
+        assert!(!material(Effect::MinSpeed, &floor, &tails(|e| 5.0 * e)));
     }
 
     #[test]
