@@ -552,7 +552,10 @@ fn stick_slips(spec: &ModelSpec, rec: &Recording) -> Result<usize, SynthError> {
 }
 
 /// Whether the minimum flow shows: the noise-free position with it stands away from the same
-/// valve's without it by three sensor-noise sigmas (at least 0.1 %) for [`MIN_SPEED_SHOWN_S`].
+/// valve's without it by three sensor-noise sigmas (at least 0.1 %) for [`MIN_SPEED_SHOWN_S`],
+/// and the valve also moves faster than the floor ([`EXPOSED_SPEED_RATIO`] times it, over
+/// 0.1 s, for [`EXPOSED_S`]): a valve that only ever moves at its floor is a slew-limited valve
+/// as far as any recording can tell.
 fn floor_shown(spec: &ModelSpec, rec: &Recording) -> Result<bool, SynthError> {
     let Some(p) = spec.physical else {
         return Ok(false);
@@ -568,7 +571,15 @@ fn floor_shown(spec: &ModelSpec, rec: &Recording) -> Result<bool, SynthError> {
         .zip(&b)
         .filter(|(x, y)| (*x - *y).abs() >= least)
         .count();
-    Ok(apart as f64 * DT >= MIN_SPEED_SHOWN_S)
+    let w = 10;
+    let faster = a
+        .windows(w + 1)
+        .filter(|s| {
+            let speed = (s[w] - s[0]).abs() / (w as f64 * DT);
+            speed >= EXPOSED_SPEED_RATIO * p.min_rate_pct_per_s
+        })
+        .count();
+    Ok(apart as f64 * DT >= MIN_SPEED_SHOWN_S && faster as f64 * DT >= EXPOSED_S)
 }
 
 /// The effects whose physics in `spec` lies outside the healthy ranges (whatever the

@@ -119,6 +119,9 @@ pub struct Slips {
     /// Summed histogram distance, in slips, before and after.
     pub distance_before: f64,
     pub distance_after: f64,
+    /// Named by the number of slips the model before misses (the fitted model matches them
+    /// only in part).
+    pub by_count: bool,
 }
 
 /// What the data and the fit say, per effect.
@@ -257,6 +260,7 @@ impl Evidence {
             p_value: c.held.p_value,
             distance_before: c.held.distance_before,
             distance_after: c.held.distance_after,
+            by_count: c.by_count && !c.held.slips_alike(),
         };
         Evidence {
             located: located(windows),

@@ -43,7 +43,7 @@ const MAX_SPEED_BAND_PCT: f64 = 5.0;
 /// proportional positioner would have slowed to a quarter of it or less.
 const MIN_FLOOR_SHOWN: f64 = 0.7;
 /// Smallest slip worth naming, %.
-const MIN_SLIP_PCT: f64 = 0.2;
+pub(crate) const MIN_SLIP_PCT: f64 = 0.2;
 /// Smallest positioner deadband worth naming, %: the valve then stops short by a tenth of a
 /// percent or more.
 const MIN_DEADBAND_PCT: f64 = 0.2;

@@ -121,7 +121,7 @@ fn slips_text(s: &Slips, f: &Finding) -> String {
          (a slip is at least {:.2} %: five noise sigmas of {span:.2} s means, 1.5 sensor steps, 0.1 %), every {:.1} s on median, {} of {} successive slips \
          reversing (hunting); the model before slips {} times. {} slips {} times by {:.2} %. Judged by \
          the slip-size histograms of 10 s pieces of the held-out blocks: closer to the measured ones in {} of {} pieces (signed-rank test \
-         p = {:.3}), distance {:.0} -> {:.0} slips; the held-out SSE goes {:.1} -> {:.1} %², which cannot judge a \
+         p = {:.3}), distance {:.0} -> {:.0} slips{}; the held-out SSE goes {:.1} -> {:.1} %², which cannot judge a \
          limit cycle whose phase O_P does not set",
         s.size_pct,
         s.size_sd_pct,
@@ -139,6 +139,12 @@ fn slips_text(s: &Slips, f: &Finding) -> String {
         s.p_value,
         s.distance_before,
         s.distance_after,
+        if s.by_count {
+            " (this model matches the slips only in part; stick-slip is named for their number, \
+             which no smooth valve makes)"
+        } else {
+            ""
+        },
         f.heldout_sse_before,
         f.heldout_sse_after,
         span = s.within_s,
