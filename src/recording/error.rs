@@ -160,11 +160,24 @@ pub enum RecordingError {
     },
 }
 
-/// `` `a`, `b` `` for a list of names.
+/// `` `a`, `b` `` for a list of names, control characters escaped (one printable line).
 fn quoted(names: &[String]) -> String {
     names
         .iter()
-        .map(|n| format!("`{n}`"))
+        .map(|n| {
+            let shown: String = n
+                .chars()
+                .flat_map(|c| {
+                    let e: Vec<char> = if c.is_control() {
+                        c.escape_default().collect()
+                    } else {
+                        vec![c]
+                    };
+                    e
+                })
+                .collect();
+            format!("`{shown}`")
+        })
         .collect::<Vec<_>>()
         .join(", ")
 }

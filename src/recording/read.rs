@@ -514,4 +514,34 @@ mod tests {
             "{e}"
         );
     }
+
+    proptest::proptest! {
+        /// Arbitrary bytes give a recording or a one-line error naming the input; never a
+        /// panic, and a recording holds only finite times and O_P.
+        #[test]
+        fn any_bytes_load_or_fail_on_one_line(body in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..400)) {
+            let mut bytes = b"t_s,op_pct,vp_pct,status\n".to_vec();
+            bytes.extend(body);
+            match read_from(&bytes[..], "fuzz.csv", &ReadOptions::default()) {
+                Ok(r) => proptest::prop_assert!(r.t.iter().chain(&r.op).all(|v| v.is_finite())),
+                Err(e) => {
+                    let e = e.to_string();
+                    proptest::prop_assert!(!e.contains('\n') && e.starts_with("fuzz.csv"), "{e}");
+                }
+            }
+        }
+
+        /// Rows of plausible cells (numbers, blanks, NULL, huge values, timestamps) in any order.
+        #[test]
+        fn plausible_rows_load_or_fail_on_one_line(rows in proptest::collection::vec(
+            ("-?[0-9]{1,4}(\\.[0-9]{1,3})?|1e308|NULL||2024-01-01 00:00:0[0-9]", "-?[0-9]{1,3}|NaN|1e400|", "-?[0-9]{1,3}|"), 0..30)) {
+            let mut text = String::from("t_s,op_pct,vp_pct\n");
+            for (t, op, vp) in rows {
+                text += &format!("{t},{op},{vp}\n");
+            }
+            if let Err(e) = read_from(text.as_bytes(), "fuzz.csv", &ReadOptions::default()) {
+                proptest::prop_assert!(!e.to_string().contains('\n'), "{e}");
+            }
+        }
+    }
 }
