@@ -54,7 +54,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    tracing::info!(seconds = started.elapsed().as_secs_f64(), "diagnosis done");
+    tracing::info!(
+        seconds = %valve_bridge::human::num(started.elapsed().as_secs_f64()),
+        "diagnosis done"
+    );
     if let Some(dir) = &args.out {
         write_out(dir, &rec, &d)?;
     }

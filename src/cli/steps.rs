@@ -50,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "{}: {} samples at {} s; V_P noise {:.3} % (sd)",
         rec.source,
         rec.len(),
-        rec.sample_period,
+        valve_bridge::human::num(rec.sample_period),
         a.noise_pct
     );
     print!("{}", identify::steps_summary(&a));

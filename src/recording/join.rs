@@ -25,16 +25,14 @@ pub fn read_all(paths: &[PathBuf], opts: &ReadOptions) -> Result<Recording, Reco
         let (rows, warnings) = read_rows(file, &label, opts)?;
         parts.push((label, rows, warnings));
     }
-    let source = match files.as_slice() {
-        [one] => one.display().to_string(),
-        _ => format!(
-            "{} (+{} files)",
-            parts.first().map_or("", |p| p.0.as_str()),
-            files.len() - 1
-        ),
-    };
     let mut warnings = Vec::new();
     let rows = join(parts, files.len() > 1, &mut warnings)?;
+    // Named by the earliest file.
+    let first = rows.files.first().map_or(String::new(), |f| f.1.clone());
+    let source = match files.len() {
+        1 => first,
+        n => format!("{first} (+{} files)", n - 1),
+    };
     Ok(rows.into_recording(source, warnings))
 }
 
