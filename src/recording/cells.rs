@@ -10,8 +10,11 @@ use time::PrimitiveDateTime;
 
 use super::{ColumnMap, RecordingError};
 
-/// The daemon's status column: rows whose status is not `ok` carry no V_P.
+/// The daemon's status column.
 pub(super) const STATUS_COLUMN: &str = "status";
+/// Statuses of a row whose V_P read failed: it has no V_P whatever its cell holds. (Rows of the
+/// other statuses, `skipped`, `watchdog`, `safe-hold`, `safe-go-to`, carry the V_P read, if any.)
+const FAILED_READS: [&str; 3] = ["timeout", "error", "disconnected"];
 
 /// What one row holds.
 pub(super) struct Row {
@@ -109,7 +112,7 @@ impl<'m> Columns<'m> {
         let vp = match (self.vp, &self.map.vp) {
             (Some(i), Some(name)) => match number(name, cell(i), MAX_POSITION) {
                 Err(Problem::Missing { .. }) => Some(f64::NAN),
-                _ if status.as_deref().is_some_and(|s| s != "ok") => Some(f64::NAN),
+                _ if status.as_deref().is_some_and(|s| FAILED_READS.contains(&s)) => Some(f64::NAN),
                 v => Some(v?),
             },
             _ => None,
