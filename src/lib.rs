@@ -21,6 +21,7 @@
 pub mod daemon;
 pub mod diagnose;
 pub mod fit;
+pub mod human;
 pub mod metrics;
 pub mod modbus;
 pub mod model;

@@ -85,16 +85,6 @@ fn plant_loop_errors_say_which_option_fixes_them() {
         e,
         ": times decrease on every row (newest row first); --reverse reads the file oldest first"
     );
-    let reverse = ReadOptions {
-        reverse_sorted: true,
-        ..options("t=date+time,op=FV_211,vp=FT_211")
-    };
-    let e = error(&path, &reverse);
-    assert_eq!(
-        e,
-        ":1003: column `FT_211` has no value (`NULL`); expected a number; --skip-missing drops \
-         such rows"
-    );
 }
 
 #[test]
@@ -115,23 +105,23 @@ fn plant_loop_loads_oldest_first_as_op_only_or_with_the_flow() {
     assert_eq!(r.op[0], 34.4977989196777);
     assert_eq!(r.op[1999], 34.0732078552246);
 
-    // The flow as a stand-in for the position: its 93 NULL cells are dropped and counted. They
-    // come in a few runs, so the gaps they leave are too few intervals (< 1 %) to count as
-    // irregular sampling.
+    // The flow as a stand-in for the position: its 93 NULL cells keep their rows, without a
+    // value, counted in one warning; the grid stays whole.
     let flow = ReadOptions {
         reverse_sorted: true,
-        skip_missing: true,
         ..options("t=date+time,op=FV_211,vp=FT_211")
     };
     let r = read(&path, &flow).unwrap();
-    assert_eq!(r.len(), 2000 - 93);
-    assert_eq!(r.vp.len(), r.len());
+    assert_eq!(r.len(), 2000);
+    assert_eq!(r.vp.iter().filter(|v| v.is_nan()).count(), 93);
     assert_eq!(r.sample_period, 60.0);
-    assert_eq!(
-        r.warnings[0],
-        "dropped 93 row(s) with a missing value (first at line 1003)"
-    );
+    assert!(r.restarts.is_empty());
     assert_eq!(r.warnings.len(), 1, "{:?}", r.warnings);
+    assert!(
+        r.warnings[0].starts_with("93 row(s) have no V_P"),
+        "{:?}",
+        r.warnings
+    );
 }
 
 #[test]

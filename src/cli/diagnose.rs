@@ -13,8 +13,10 @@ use super::input::RecordingArgs;
 /// Arguments of `valve-bridge diagnose`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The recording to diagnose (t_s,op_pct,vp_pct; see --columns).
-    recording: PathBuf,
+    /// The recording to diagnose (t_s,op_pct,vp_pct; see --columns): one file, or several
+    /// (rotated logs) or a directory of them, joined in time order.
+    #[arg(required = true)]
+    recording: Vec<PathBuf>,
     /// Starting model (any model file); without it an FOPDT with unity gain is fitted.
     #[arg(long)]
     model: Option<PathBuf>,
@@ -30,7 +32,7 @@ pub struct Args {
 
 /// Runs the diagnosis and prints it.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let rec = recording::read(&args.recording, &args.read.options()?)?;
+    let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let base = args.model.as_deref().map(ModelSpec::load).transpose()?;
     let bar = super::progress_bar(
         1,
@@ -52,7 +54,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    tracing::info!(seconds = started.elapsed().as_secs_f64(), "diagnosis done");
+    tracing::info!(
+        seconds = %valve_bridge::human::num(started.elapsed().as_secs_f64()),
+        "diagnosis done"
+    );
     if let Some(dir) = &args.out {
         write_out(dir, &rec, &d)?;
     }

@@ -15,8 +15,10 @@ use super::input::RecordingArgs;
 /// Arguments of `valve-bridge identify`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The recording to identify (t_s,op_pct,vp_pct; see --columns).
-    recording: PathBuf,
+    /// The recording to identify (t_s,op_pct,vp_pct; see --columns): one file, or several
+    /// (rotated logs) or a directory of them, joined in time order.
+    #[arg(required = true)]
+    recording: Vec<PathBuf>,
     /// Models to fit, comma separated (modelless and delayed are always added as references).
     #[arg(
         long,
@@ -40,7 +42,7 @@ pub struct Args {
 
 /// Runs the identification and prints or writes the results.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let rec = recording::read(&args.recording, &args.read.options()?)?;
+    let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let opts = Options {
         windows: args.windows.map(|w| w.0),
         ..Options::for_models(&args.models)

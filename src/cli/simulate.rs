@@ -3,9 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use valve_bridge::metrics;
+use valve_bridge::fit::cost;
 use valve_bridge::model::{ModelSpec, Valve};
 use valve_bridge::recording;
+use valve_bridge::{human, metrics};
 
 use super::input::RecordingArgs;
 
@@ -15,9 +16,10 @@ pub struct Args {
     /// Model parameter file (TOML, e.g. config/models/pincart2.toml).
     #[arg(long)]
     model: PathBuf,
-    /// Recording whose O_P drives the model.
-    #[arg(long)]
-    input: PathBuf,
+    /// Recording whose O_P drives the model: one file, or several (rotated logs) or a
+    /// directory of them, joined in time order.
+    #[arg(long, required = true, num_args = 1..)]
+    input: Vec<PathBuf>,
     /// Where to write the simulated run (t_s,op_pct,vp_pct[,vp_meas_pct]).
     #[arg(long)]
     out: PathBuf,
@@ -28,11 +30,12 @@ pub struct Args {
 /// Simulates, writes the CSV and prints the Table 1 row against the measurement.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let spec = ModelSpec::load(&args.model)?;
-    let rec = recording::read(&args.input, &args.read.options()?)?;
-    let mut valve = Valve::new(&spec, rec.sample_period)
+    let rec = recording::read_all(&args.input, &args.read.options()?)?;
+    // Built here for its error (a sample period the model cannot run at); the simulation
+    // builds its own.
+    Valve::new(&spec, rec.sample_period)
         .with_context(|| format!("building {}", args.model.display()))?;
-    let vp0 = rec.vp.first().copied().unwrap_or(rec.op[0]);
-    let sim = valve.simulate(&rec.op, vp0);
+    let sim = cost::simulate(&spec, &rec.view());
     let has_vp = !rec.vp.is_empty();
     let mut names = vec!["t_s", "op_pct", "vp_pct"];
     let mut cols: Vec<&[f64]> = vec![&rec.t, &rec.op, &sim];
@@ -46,17 +49,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out = %args.out.display(),
         "simulated {} at {} s",
         spec.model.display_name(),
-        rec.sample_period
+        human::num(rec.sample_period)
     );
-    if has_vp {
-        let s = metrics::scores(&rec.vp, &sim, &rec.op, rec.sample_period);
+    let measured: Vec<bool> = (0..rec.len()).map(|k| rec.view().has_vp(k)).collect();
+    let s = metrics::scores_masked(&rec.vp, &sim, &rec.op, rec.sample_period, &measured);
+    if has_vp && s.n > 0 {
         println!("{}", metrics::table1_header());
         println!("{}", metrics::table1_row(spec.model.display_name(), &s));
     } else {
-        println!(
-            "no measured V_P in {}: nothing to score",
-            args.input.display()
-        );
+        println!("no measured V_P in {}: nothing to score", rec.source);
     }
     Ok(())
 }

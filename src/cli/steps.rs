@@ -14,8 +14,10 @@ use super::input::RecordingArgs;
 /// Arguments of `valve-bridge steps`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The recording (t_s,op_pct,vp_pct; see --columns).
-    recording: PathBuf,
+    /// The recording (t_s,op_pct,vp_pct; see --columns): one file, or several (rotated logs)
+    /// or a directory of them, joined in time order.
+    #[arg(required = true)]
+    recording: Vec<PathBuf>,
     /// Share of the step V_P must have covered for the delay to end (0-1).
     #[arg(long, default_value_t = 0.1)]
     fraction: f64,
@@ -38,7 +40,7 @@ pub struct Args {
 /// Runs the analysis and prints it.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = StepOptions::new(args.min_size, args.fraction, args.min_hold)?;
-    let rec = recording::read(&args.recording, &args.read.options()?)?;
+    let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let a = steps::analyse_recording(&rec.view(), &opts).with_context(|| rec.source.clone())?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&a)?);
@@ -48,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "{}: {} samples at {} s; V_P noise {:.3} % (sd)",
         rec.source,
         rec.len(),
-        rec.sample_period,
+        valve_bridge::human::num(rec.sample_period),
         a.noise_pct
     );
     print!("{}", identify::steps_summary(&a));

@@ -66,7 +66,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     Facts {
         reversals: count_reversals(op),
-        steps: step_responses(op, vp, dt),
+        steps: step_responses(rec),
         holds: holds(op, vp, dt),
         open_speed,
         close_speed,
@@ -174,13 +174,13 @@ fn count_reversals(op: &[f64]) -> usize {
 
 /// The step delays of the step analysis (`fit::steps`), for steps of at least 0.3 % held for
 /// a second that V_P answered.
-fn step_responses(op: &[f64], vp: &[f64], dt: f64) -> Vec<StepResponse> {
+fn step_responses(rec: &RecordingView) -> Vec<StepResponse> {
     let opts = StepOptions {
         min_size_pct: 0.3,
         fraction: 0.1,
         min_hold_s: 1.0,
     };
-    steps::analyse(op, vp, dt, &opts)
+    steps::analyse(rec, &opts)
         .steps
         .into_iter()
         .filter_map(|s| {
@@ -503,6 +503,7 @@ mod tests {
             .collect();
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         let rec = RecordingView {
+            restarts: &[],
             t: &t,
             op: &op,
             vp: &vp,
@@ -538,6 +539,7 @@ mod tests {
                 })
                 .collect();
             let rec = RecordingView {
+                restarts: &[],
                 t: &t,
                 op: &op,
                 vp: &vp,

@@ -172,6 +172,7 @@ mod tests {
             .map(|k| if (3000..3100).contains(&k) { 1.0 } else { 0.0 })
             .collect();
         let rec = RecordingView {
+            restarts: &[],
             t: &t,
             op: &op,
             vp: &vp,
@@ -192,6 +193,7 @@ mod tests {
             .map(|k| 0.05 * ((k * 7919 % 13) as f64 / 6.0 - 1.0))
             .collect();
         let rec = RecordingView {
+            restarts: &[],
             t: &t,
             op: &x,
             vp: &x,

@@ -24,7 +24,10 @@ pub const WARM_UP_S: f64 = 10.0;
 /// The data a refit scores against: O_P, V_P and the alternating fit / held-out blocks.
 pub(crate) struct Scorer<'a> {
     pub op: &'a [f64],
+    /// NaN where not measured (never in a mask).
     pub vp: &'a [f64],
+    /// Where simulations start again (after long gaps).
+    pub restarts: &'a [usize],
     pub dt: f64,
     /// Samples per block; even blocks are fitted, odd ones held out.
     pub block_len: usize,
@@ -51,16 +54,23 @@ impl<'a> Scorer<'a> {
         let (n, dt) = (rec.len(), rec.dt);
         let block_len = (((n as f64 * dt / 20.0).clamp(10.0, 120.0) / dt) as usize).max(1);
         let skip = (1.0 / dt) as usize;
-        let (fit_mask, held_mask) = windows::alternating(n, block_len, skip);
+        let (mut fit_mask, mut held_mask) = windows::alternating(n, block_len, skip);
+        for (k, (f, h)) in fit_mask.iter_mut().zip(&mut held_mask).enumerate() {
+            let measured = rec.has_vp(k);
+            *f &= measured;
+            *h &= measured;
+        }
         let warm = (WARM_UP_S / dt) as usize;
         Scorer {
             op: rec.op,
             vp: rec.vp,
+            restarts: rec.restarts,
             dt,
             block_len,
             skip,
             n_blocks: n.div_ceil(block_len),
-            fit: Problem::restarted(rec.op, rec.vp, &fit_mask, dt, warm),
+            fit: Problem::restarted(rec.op, rec.vp, &fit_mask, dt, warm)
+                .restarting_at(rec.restarts),
             fit_mask,
             held_mask,
         }
@@ -124,9 +134,21 @@ impl<'a> Scorer<'a> {
         out
     }
 
-    /// The free-run V_P of `spec` over the whole recording, from rest at the first sample.
+    /// The free-run V_P of `spec` over the whole recording, from rest at the first measured
+    /// sample (and again at each restart).
     pub fn simulate(&self, spec: &ModelSpec) -> Vec<f64> {
-        cost::simulate(spec, self.op, self.vp[0], self.dt)
+        cost::simulate(spec, &self.view())
+    }
+
+    /// The recording this scorer scores.
+    pub fn view(&self) -> RecordingView<'a> {
+        RecordingView {
+            t: &[],
+            op: self.op,
+            vp: self.vp,
+            restarts: self.restarts,
+            dt: self.dt,
+        }
     }
 
     /// Number of fitted samples.
@@ -152,9 +174,12 @@ mod tests {
             .map(|k| 30.0 + 10.0 * ((k / 700) % 4) as f64)
             .collect();
         let truth = bundled(ModelKind::Fopdt);
-        let vp = cost::simulate(&truth, &op, 30.0, dt);
+        let vp = crate::model::Valve::new(&truth, dt)
+            .unwrap()
+            .simulate(&op, 30.0);
         let t: Vec<f64> = (0..op.len()).map(|k| k as f64 * dt).collect();
         let rec = RecordingView {
+            restarts: &[],
             t: &t,
             op: &op,
             vp: &vp,

@@ -13,9 +13,14 @@
 //! work, and the held-out blocks stay unseen); the warm-up fills the dead-time line and lets the
 //! start from rest die out.
 //!
+//! Rows without a measured V_P (NaN) are simulated through and never scored: the mask drops
+//! them. A recording's restarts (after long gaps) end one run and start the next from the
+//! measured V_P there: nothing is known of what the valve did in the gap.
+//!
 //! Not here: choosing the mask ([`super::windows`]) or minimising ([`super::search`]).
 
 use crate::model::{ModelSpec, Valve};
+use crate::recording::RecordingView;
 
 /// O_P, measured V_P and a scoring mask, sampled every `dt`.
 #[derive(Debug, Clone)]
@@ -30,10 +35,12 @@ pub struct Problem {
     /// Samples simulated before each masked run when restarted (`None`: one run from the start).
     warm_up: Option<usize>,
     n_scored: usize,
+    /// Where simulations start again (see [`Problem::restarting_at`]).
+    restarts: Vec<usize>,
 }
 
 impl Problem {
-    /// A problem scoring the samples where `mask` is true.
+    /// A problem scoring the samples where `mask` is true and V_P was measured.
     ///
     /// # Panics
     /// If the three slices differ in length (a caller bug).
@@ -42,16 +49,42 @@ impl Problem {
             op.len() == vp.len() && vp.len() == mask.len(),
             "O_P, V_P and mask lengths differ"
         );
+        let mask: Vec<bool> = mask
+            .iter()
+            .zip(vp)
+            .map(|(&m, v)| m && v.is_finite())
+            .collect();
         let end = mask.iter().rposition(|&m| m).map_or(0, |k| k + 1);
         Problem {
             op: op.to_vec(),
             vp: vp.to_vec(),
-            mask: mask.to_vec(),
+            n_scored: mask.iter().filter(|&&m| m).count(),
+            mask,
             dt,
             runs: vec![(0, end)],
             warm_up: None,
-            n_scored: mask.iter().filter(|&&m| m).count(),
+            restarts: Vec::new(),
         }
+    }
+
+    /// The same problem with simulations starting again at `restarts` (increasing sample
+    /// indices, a recording's long gaps): a run that spans one is cut there, and the pieces
+    /// with nothing scored (a warm-up reaching back across one) are dropped.
+    pub fn restarting_at(mut self, restarts: &[usize]) -> Self {
+        self.restarts = restarts.to_vec();
+        let mut runs = Vec::with_capacity(self.runs.len() + restarts.len());
+        for &(from, end) in &self.runs {
+            let mut a = from;
+            for &r in restarts.iter().filter(|&&r| r > from && r < end) {
+                runs.push((a, r));
+                a = r;
+            }
+            runs.push((a, end));
+        }
+        // A piece with nothing scored (a warm-up cut off by a restart) is not simulated.
+        runs.retain(|&(a, b)| self.mask[a..b].iter().any(|&m| m));
+        self.runs = runs;
+        self
     }
 
     /// A problem scoring the samples where `mask` is true, each run of them simulated on its
@@ -75,11 +108,24 @@ impl Problem {
         let pick = |x: &[f64]| x.iter().step_by(m).copied().collect::<Vec<f64>>();
         // A decimated sample is scored when any sample it stands for is.
         let mask: Vec<bool> = self.mask.chunks(m).map(|c| c.iter().any(|&b| b)).collect();
-        let (op, vp, dt) = (pick(&self.op), pick(&self.vp), self.dt * m as f64);
+        // A decimated V_P sample stands for the first of its chunk: the first measured one.
+        let vp: Vec<f64> = self
+            .vp
+            .chunks(m)
+            .map(|c| {
+                c.iter()
+                    .copied()
+                    .find(|v| v.is_finite())
+                    .unwrap_or(f64::NAN)
+            })
+            .collect();
+        let (op, dt) = (pick(&self.op), self.dt * m as f64);
+        let restarts: Vec<usize> = self.restarts.iter().map(|r| r.div_ceil(m)).collect();
         match self.warm_up {
             None => Problem::new(&op, &vp, &mask, dt),
             Some(w) => Problem::restarted(&op, &vp, &mask, dt, w / m),
         }
+        .restarting_at(&restarts)
     }
 
     /// Sample period, s.
@@ -108,7 +154,7 @@ impl Problem {
             if from >= end {
                 continue;
             }
-            valve.reset(self.op[from], self.vp[from]);
+            valve.reset(self.op[from], first_measured(&self.vp, &self.op, from, end));
             for ((&u, &m), &keep) in self.op[from..end]
                 .iter()
                 .zip(&self.vp[from..end])
@@ -142,13 +188,32 @@ fn masked_runs(mask: &[bool]) -> impl Iterator<Item = (usize, usize)> + '_ {
     })
 }
 
-/// The free-run V_P of `spec` over `op` from rest at (`op[0]`, `vp0`); O_P itself when the
-/// spec cannot run.
-pub fn simulate(spec: &ModelSpec, op: &[f64], vp0: f64, dt: f64) -> Vec<f64> {
-    match Valve::new(spec, dt) {
-        Ok(mut v) => v.simulate(op, vp0),
-        Err(_) => op.to_vec(),
+/// The first measured V_P in `from..end`, or O_P at `from` when none was measured: where a run
+/// starts from rest.
+fn first_measured(vp: &[f64], op: &[f64], from: usize, end: usize) -> f64 {
+    vp.get(from..end)
+        .and_then(|v| v.iter().copied().find(|v| v.is_finite()))
+        .unwrap_or(op[from])
+}
+
+/// The free-run V_P of `spec` over a recording's O_P, from rest at its first measured V_P, and
+/// again from the measured V_P at each restart; O_P itself when the spec cannot run.
+pub fn simulate(spec: &ModelSpec, rec: &RecordingView) -> Vec<f64> {
+    let Ok(mut valve) = Valve::new(spec, rec.dt) else {
+        return rec.op.to_vec();
+    };
+    let n = rec.op.len();
+    let mut out = vec![0.0; n];
+    let bounds: Vec<usize> = std::iter::once(0)
+        .chain(rec.restarts.iter().copied().filter(|&r| r > 0 && r < n))
+        .chain(std::iter::once(n))
+        .collect();
+    for w in bounds.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let vp0 = first_measured(rec.vp, rec.op, a, b);
+        valve.simulate_into(&rec.op[a..b], vp0, &mut out[a..b]);
     }
+    out
 }
 
 #[cfg(test)]
@@ -162,7 +227,7 @@ mod tests {
         let op: Vec<f64> = (0..3000)
             .map(|k| if (k / 500) % 2 == 0 { 40.0 } else { 55.0 })
             .collect();
-        let vp = simulate(&spec, &op, 40.0, 0.01);
+        let vp = Valve::new(&spec, 0.01).unwrap().simulate(&op, 40.0);
         let all = vec![true; op.len()];
         let p = Problem::new(&op, &vp, &all, 0.01);
         assert_eq!(p.sse(&spec), 0.0);
@@ -187,7 +252,7 @@ mod tests {
         let op: Vec<f64> = (0..6000)
             .map(|k| 30.0 + 10.0 * ((k / 400) % 4) as f64)
             .collect();
-        let vp = simulate(&spec, &op, 30.0, 0.01);
+        let vp = Valve::new(&spec, 0.01).unwrap().simulate(&op, 30.0);
         let blocks: Vec<bool> = (0..op.len()).map(|k| (k / 1000) % 2 == 0).collect();
         let p = Problem::restarted(&op, &vp, &blocks, 0.01, 300);
         assert_eq!(p.runs, vec![(0, 1000), (1700, 3000), (3700, 5000)]);
@@ -204,5 +269,60 @@ mod tests {
         assert_eq!(p.decimated(10).runs, vec![(0, 100), (170, 300), (370, 500)]);
         let runs: Vec<_> = masked_runs(&[false, true, true, false, true]).collect();
         assert_eq!(runs, vec![(1, 3), (4, 5)]);
+    }
+
+    #[test]
+    fn missing_samples_are_not_scored_and_restarts_start_from_the_measurement() {
+        let spec = bundled(ModelKind::Fopdt);
+        let op: Vec<f64> = (0..4000)
+            .map(|k| if (k / 500) % 2 == 0 { 40.0 } else { 60.0 })
+            .collect();
+        let mut vp = Valve::new(&spec, 0.01).unwrap().simulate(&op, 40.0);
+        let all = vec![true; op.len()];
+        // The true model costs nothing whatever is missing: no NaN reaches the sum.
+        vp[100..300].iter_mut().for_each(|v| *v = f64::NAN);
+        vp[0] = f64::NAN;
+        let p = Problem::new(&op, &vp, &all, 0.01);
+        assert_eq!(p.n_scored(), 4000 - 201);
+        assert!(p.sse(&spec) < 1e-9, "{}", p.sse(&spec));
+        // After a long gap the valve is found elsewhere (at 90 %, O_P 40 %): the true model
+        // restarted from the measurement costs nothing, run through it costs much.
+        let second = Valve::new(&spec, 0.01).unwrap().simulate(&op[2000..], 90.0);
+        vp[2000..].copy_from_slice(&second);
+        let from_start = Problem::new(&op, &vp, &all, 0.01).sse(&spec);
+        let restarted = Problem::new(&op, &vp, &all, 0.01).restarting_at(&[2000]);
+        assert_eq!(restarted.runs, vec![(0, 2000), (2000, 4000)]);
+        assert!(
+            restarted.sse(&spec) < 1e-2 * from_start,
+            "{} {from_start}",
+            restarted.sse(&spec)
+        );
+        let view = RecordingView {
+            t: &[],
+            op: &op,
+            vp: &vp,
+            restarts: &[2000],
+            dt: 0.01,
+        };
+        let sim = simulate(&spec, &view);
+        let through = simulate(
+            &spec,
+            &RecordingView {
+                restarts: &[],
+                ..view
+            },
+        );
+        let after = |s: &[f64]| crate::metrics::sse(&s[2000..], &vp[2000..]);
+        assert!(sim.iter().all(|v| v.is_finite()));
+        assert!(
+            after(&sim) < 1e-2 * after(&through),
+            "{} {}",
+            after(&sim),
+            after(&through)
+        );
+        // A warm-up never reaches back across a restart.
+        let blocks: Vec<bool> = (0..4000).map(|k| k >= 2100).collect();
+        let w = Problem::restarted(&op, &vp, &blocks, 0.01, 300).restarting_at(&[2000]);
+        assert_eq!(w.runs, vec![(2000, 4000)]);
     }
 }

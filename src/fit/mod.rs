@@ -334,15 +334,19 @@ pub fn identify(
         Some(w) => (w.clone(), false),
         None => (windows::unsaturated(rec.t, vp, dt, 0.0, 100.0), true),
     };
-    let scored = windows::mask(rec.t, &wins);
+    let scored: Vec<bool> = windows::mask(rec.t, &wins)
+        .into_iter()
+        .enumerate()
+        .map(|(k, m)| m && rec.has_vp(k))
+        .collect();
     let n_scored = scored.iter().filter(|&&m| m).count();
     if n_scored < MIN_SCORED {
         return Err(too_few(rec, n_scored, auto));
     }
     let (fit_mask, held_mask) = opts.split.masks(&scored);
-    let steps = steps::analyse(op, vp, dt, &opts.steps);
+    let steps = steps::analyse(rec, &opts.steps);
     let physical = seeds::estimate(op, vp, dt, &steps);
-    let fit = Problem::new(op, vp, &fit_mask, dt);
+    let fit = Problem::new(op, vp, &fit_mask, dt).restarting_at(rec.restarts);
     let m = ((opts.effort.coarse_period_s / dt).round() as usize).max(1);
     let shared = Shared {
         rec,
@@ -358,7 +362,7 @@ pub fn identify(
         physical: &physical,
         coarse: fit.decimated(m),
         fit,
-        all: Problem::new(op, vp, &scored, dt),
+        all: Problem::new(op, vp, &scored, dt).restarting_at(rec.restarts),
     };
     let done = AtomicUsize::new(0);
     let total = opts.models.len();
@@ -416,15 +420,16 @@ fn too_few(rec: &RecordingView, scored: usize, auto: bool) -> FitError {
 /// scored samples for the Table 1 row and the model file.
 fn fit_model(sh: &Shared, kind: ModelKind, seed: u64) -> ModelFit {
     let (op, vp, dt) = (sh.rec.op, sh.rec.vp, sh.rec.dt);
+    let rec = sh.rec;
     let layout = Layout::new(kind, sh.limits);
     let seeds = seeds::starts(&layout, sh.physical);
     let (found, evals) = fit_vector(&layout, &sh.fit, &sh.coarse, &seeds, &sh.opts.effort, seed);
     let fit_spec = layout.spec(&found[0]);
     // Held-out: the fit-blocks model, scored where it was not fitted.
-    let sim_fit = cost::simulate(&fit_spec, op, vp[0], dt);
+    let sim_fit = cost::simulate(&fit_spec, rec);
     let heldout = metrics::scores_masked(vp, &sim_fit, op, dt, sh.held_mask);
     let (spec, refine_evals) = refine(sh, &layout, &found, &seeds).unwrap_or((fit_spec, 0));
-    let sim = cost::simulate(&spec, op, vp[0], dt);
+    let sim = cost::simulate(&spec, rec);
     let scores = metrics::scores_masked(vp, &sim, op, dt, sh.scored);
     let d = layout.len();
     ModelFit {

@@ -47,7 +47,11 @@ pub fn dead_time_xcorr(op: &[f64], vp: &[f64], dt: f64, max_lag_s: f64) -> f64 {
             if j >= n {
                 break;
             }
-            *rl += d * (vp[j] - vp[j - 1]);
+            // A missing V_P (NaN) adds nothing.
+            let dv = vp[j] - vp[j - 1];
+            if dv.is_finite() {
+                *rl += d * dv;
+            }
         }
     }
     let (best, _) =
@@ -88,6 +92,7 @@ pub fn estimate(op: &[f64], vp: &[f64], dt: f64, steps: &StepAnalysis) -> Physic
     let mut speeds: Vec<f64> = (h..vp.len())
         .step_by(h)
         .map(|k| (vp[k] - vp[k - h]).abs() / (h as f64 * dt))
+        .filter(|s| s.is_finite())
         .collect();
     Physical {
         dead_time_s: td,

@@ -180,11 +180,14 @@ pub fn analyse_recording(
     if rec.vp.len() != rec.op.len() || rec.vp.is_empty() {
         return Err(FitError::NoPosition);
     }
-    Ok(analyse(rec.op, rec.vp, rec.dt, opts))
+    Ok(analyse(rec, opts))
 }
 
-/// Analyses the steps of `op` and the answers in `vp`, sampled every `dt` seconds.
-pub fn analyse(op: &[f64], vp: &[f64], dt: f64, opts: &StepOptions) -> StepAnalysis {
+/// Analyses the steps of a recording's O_P and the answers in its V_P. A step counts only when
+/// V_P was measured from the sample before the jump to the end of the hold, and neither the jump
+/// nor the hold spans a restart (a long gap).
+pub fn analyse(rec: &RecordingView, opts: &StepOptions) -> StepAnalysis {
+    let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
     let n = op.len().min(vp.len());
     let sigma = noise_sd(&vp[..n], Differences::First);
     let op_tol = (4.0 * noise_sd(&op[..n], Differences::First)).max(1e-6);
@@ -194,17 +197,25 @@ pub fn analyse(op: &[f64], vp: &[f64], dt: f64, opts: &StepOptions) -> StepAnaly
     let mut k = 1;
     while k < n {
         let size = op[k] - op[k - 1];
-        if size.abs() <= op_tol {
+        if size.abs() <= op_tol || rec.restarts.contains(&k) {
             k += 1;
             continue;
         }
         let dir = size.signum();
         let a = k;
+        let segment_end = rec
+            .restarts
+            .iter()
+            .copied()
+            .find(|&r| r > a)
+            .unwrap_or(n)
+            .min(n);
         let mut end = a + 1;
-        while end < n && (op[end] - op[a]).abs() <= op_tol {
+        while end < segment_end && (op[end] - op[a]).abs() <= op_tol {
             end += 1;
         }
-        if size.abs() >= opts.min_size_pct && end - a >= min_hold {
+        let measured = vp[a - 1..end].iter().all(|v| v.is_finite());
+        if size.abs() >= opts.min_size_pct && end - a >= min_hold && measured {
             let v0 = vp[a - 1];
             let moved = |share: f64| {
                 let need = (share * size.abs()).max(4.0 * sigma);
@@ -215,7 +226,11 @@ pub fn analyse(op: &[f64], vp: &[f64], dt: f64, opts: &StepOptions) -> StepAnaly
             steps.push(Step {
                 index: a,
                 hold_end: end,
-                t_s: a as f64 * dt,
+                t_s: rec
+                    .t
+                    .get(a)
+                    .zip(rec.t.first())
+                    .map_or(a as f64 * dt, |(t, t0)| t - t0),
                 from_pct: v0,
                 size_pct: size,
                 reversal: (last_dir != 0.0).then_some(dir != last_dir),
@@ -352,7 +367,16 @@ mod tests {
             .collect();
         let mut valve = Valve::new(&spec, dt).unwrap();
         let vp = valve.simulate(&op, op[0]);
-        let a = analyse(&op, &vp, dt, &StepOptions::default());
+        let a = analyse(
+            &RecordingView {
+                t: &[],
+                op: &op,
+                vp: &vp,
+                restarts: &[],
+                dt,
+            },
+            &StepOptions::default(),
+        );
         assert!(
             a.same.count >= 40 && a.reversal.count >= 40,
             "{:?} {:?}",

@@ -26,7 +26,9 @@ pub struct Scores {
     /// Mean |measured − simulated|, in the data's units (%).
     pub mae: f64,
     /// Mean |filtered(measured) − simulated|, with the paper's filter ([`PAPER_FILTER_ORDER`],
-    /// [`PAPER_FILTER_CUTOFF_HZ`], zero phase); equal to `mae` when `filtered` is false.
+    /// [`PAPER_FILTER_CUTOFF_HZ`], zero phase) run over each stretch of measured samples, on
+    /// the scored samples of the stretches long enough to filter; equal to `mae` when
+    /// `filtered` is false.
     pub mae_filtered: f64,
     /// 1 − SSE / SST, SST taken around the mean of the measured samples scored.
     pub r2: f64,
@@ -37,7 +39,8 @@ pub struct Scores {
     /// Number of samples scored.
     pub n: usize,
     /// Whether the measurement could be filtered: false when 1.25 Hz is at or above the
-    /// Nyquist frequency (data at 2.5 Hz or slower) or the data are too short (≤ 18 samples).
+    /// Nyquist frequency (data at 2.5 Hz or slower) or every stretch of measured samples is too
+    /// short (≤ 18 samples).
     pub filtered: bool,
 }
 
@@ -82,30 +85,60 @@ fn score(
         "simulated and measured V_P lengths"
     );
     assert_eq!(op.len(), measured.len(), "O_P and measured V_P lengths");
-    // At absurd sample rates the filter's coefficients lose all precision: no filtered MAE
-    // then, rather than NaN.
-    let filtered = filter::filtfilt(
-        measured,
-        PAPER_FILTER_ORDER,
-        PAPER_FILTER_CUTOFF_HZ,
-        1.0 / sample_period,
-    )
-    .filter(|f| f.iter().all(|v| v.is_finite()));
-    let smooth = filtered.as_deref().unwrap_or(measured);
-    let kept = || (0..measured.len()).filter(|&i| keep(i));
+    let smooth = filtered_runs(measured, sample_period);
+    // Samples without a measurement (NaN) or a simulation are never scored.
+    let kept =
+        || (0..measured.len()).filter(|&i| keep(i) && (measured[i] - simulated[i]).is_finite());
     let n = kept().count();
     let sum = |f: &dyn Fn(usize) -> f64| kept().map(f).sum::<f64>();
     let mean = sum(&|i| measured[i]) / n as f64;
     let sse = sum(&|i| (measured[i] - simulated[i]).powi(2));
+    let smoothed = || kept().filter(|&i| smooth[i].is_finite());
+    let n_smooth = smoothed().count();
     Scores {
         mae: sum(&|i| (measured[i] - simulated[i]).abs()) / n as f64,
-        mae_filtered: sum(&|i| (smooth[i] - simulated[i]).abs()) / n as f64,
+        mae_filtered: if n_smooth > 0 {
+            smoothed()
+                .map(|i| (smooth[i] - simulated[i]).abs())
+                .sum::<f64>()
+                / n_smooth as f64
+        } else {
+            sum(&|i| (measured[i] - simulated[i]).abs()) / n as f64
+        },
         r2: 1.0 - sse / sum(&|i| (measured[i] - mean).powi(2)),
         sse,
         rel_sse: sse / sum(&|i| (measured[i] - op[i]).powi(2)),
         n,
-        filtered: filtered.is_some(),
+        filtered: n_smooth > 0,
     }
+}
+
+/// The measurement filtered run by run: each maximal run of measured (finite) samples on its
+/// own, NaN where a run is too short to filter or not measured. At absurd sample rates the
+/// filter's coefficients lose all precision: a run whose result is not finite stays NaN.
+fn filtered_runs(measured: &[f64], sample_period: f64) -> Vec<f64> {
+    let mut out = vec![f64::NAN; measured.len()];
+    let mut k = 0;
+    while k < measured.len() {
+        if !measured[k].is_finite() {
+            k += 1;
+            continue;
+        }
+        let a = k;
+        while k < measured.len() && measured[k].is_finite() {
+            k += 1;
+        }
+        let run = filter::filtfilt(
+            &measured[a..k],
+            PAPER_FILTER_ORDER,
+            PAPER_FILTER_CUTOFF_HZ,
+            1.0 / sample_period,
+        );
+        if let Some(f) = run.filter(|f| f.iter().all(|v| v.is_finite())) {
+            out[a..k].copy_from_slice(&f);
+        }
+    }
+    out
 }
 
 /// Σ (a − b)² over the common length.
@@ -148,22 +181,30 @@ pub fn table1_header() -> String {
     )
 }
 
-/// One line of Table 1 for `model`, percentages as in the paper; MAE filtered is `n/a` when the
-/// data could not be filtered.
+/// One line of Table 1 for `model`, percentages as in the paper; a figure that does not exist
+/// (MAE filtered of data that could not be filtered, R² of a constant measurement, anything of
+/// no samples) is `n/a`.
 pub fn table1_row(model: &str, s: &Scores) -> String {
-    let filtered = if s.filtered {
-        format!("{:.3}%", s.mae_filtered)
+    let pct = |x: f64, decimals: usize| {
+        if x.is_finite() {
+            format!("{x:.decimals$}%")
+        } else {
+            "n/a".into()
+        }
+    };
+    let sse = if s.sse.is_finite() && s.n > 0 {
+        format!("{:.3}", s.sse)
     } else {
         "n/a".into()
     };
     format!(
-        "{:<20} {:>8} {:>12} {:>8} {:>12.3} {:>9} {:>8}",
+        "{:<20} {:>8} {:>12} {:>8} {:>12} {:>9} {:>8}",
         model,
-        format!("{:.3}%", s.mae),
-        filtered,
-        format!("{:.2}%", 100.0 * s.r2),
-        s.sse,
-        format!("{:.2}%", 100.0 * s.rel_sse),
+        pct(s.mae, 3),
+        pct(if s.filtered { s.mae_filtered } else { f64::NAN }, 3),
+        pct(100.0 * s.r2, 2),
+        sse,
+        pct(100.0 * s.rel_sse, 2),
         s.n
     )
 }

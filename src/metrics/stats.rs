@@ -58,13 +58,22 @@ pub fn noise_sd(x: &[f64], order: Differences) -> f64 {
     if x.len() < 5 {
         return 0.0;
     }
+    // Differences that touch a missing sample (NaN) are left out.
     let mut d: Vec<f64> = match order {
-        Differences::First => x.windows(2).map(|w| (w[1] - w[0]).abs()).collect(),
+        Differences::First => x
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .filter(|d| d.is_finite())
+            .collect(),
         Differences::Second => x
             .windows(3)
             .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+            .filter(|d| d.is_finite())
             .collect(),
     };
+    if d.is_empty() {
+        return 0.0;
+    }
     let mid = d.len() / 2;
     let (_, med, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
     match order {

@@ -217,7 +217,20 @@ pub enum ModelError {
     /// The sample period is not a positive number.
     #[error("sample period {0} s: must be a positive number of seconds")]
     SamplePeriod(f64),
+    /// The dead time spans more samples than a delay line holds.
+    #[error("dead time {} s at a sample period of {} s needs a delay line of {} samples; at most {} fit (a sample period this short is not a recording's)", crate::human::num(*dead_time_s), crate::human::num(*sample_period_s), crate::human::num(*samples), crate::human::num(MAX_DELAY_SAMPLES))]
+    DelayTooLong {
+        /// T_d, s.
+        dead_time_s: f64,
+        /// The sample period, s.
+        sample_period_s: f64,
+        /// Samples the line would need.
+        samples: f64,
+    },
 }
+
+/// Most samples a dead-time delay line holds (80 MB): 10 s of dead time at 1 µs.
+pub const MAX_DELAY_SAMPLES: f64 = 1e7;
 
 impl ModelSpec {
     /// A spec of `kind` with no parameter tables yet (fill the one for the kind).
@@ -321,6 +334,14 @@ impl Valve {
         }
         spec.validate()?;
         let dt = sample_period_s;
+        let samples = spec.dead_time_s.max(0.0) / dt;
+        if samples > MAX_DELAY_SAMPLES {
+            return Err(ModelError::DelayTooLong {
+                dead_time_s: spec.dead_time_s,
+                sample_period_s: dt,
+                samples,
+            });
+        }
         let missing = || ModelError::Param {
             model: spec.model,
             key: spec.model.tag().into(),

@@ -54,8 +54,8 @@ pub enum RecordingError {
         /// Cells in the header.
         expected: usize,
     },
-    /// An empty, `NaN`, `NULL` or `NA` cell.
-    #[error("{file}:{line}: column `{column}` has no value (`{cell}`); expected a number; --skip-missing drops such rows")]
+    /// An empty, `NaN`, `NULL` or `NA` cell where a time or O_P is needed.
+    #[error("{file}:{line}: column `{column}` has no value (`{cell}`); expected a number; --skip-missing drops such rows (they leave a gap)")]
     MissingValue {
         /// Path or label.
         file: String,
@@ -118,6 +118,38 @@ pub enum RecordingError {
         /// Rows dropped (missing values, cut-off last line).
         dropped: usize,
     },
+    /// Two joined files cover the same time.
+    #[error("{first}:{first_line}: ends at {} s, after {second}:{second_line} starts at {} s; joined files must not overlap in time (files of separate daemon runs: read their `utc` column with --columns t=utc)", crate::human::num(*first_end), crate::human::num(*second_start))]
+    Overlap {
+        /// The earlier file.
+        first: String,
+        /// Its last line.
+        first_line: u64,
+        /// Its last time, s.
+        first_end: f64,
+        /// The later file.
+        second: String,
+        /// Its first data line.
+        second_line: u64,
+        /// Its first time, s.
+        second_start: f64,
+    },
+    /// Joined files where some have timestamps and others seconds.
+    #[error("{first} has wall-clock timestamps but {second} has times in seconds; join files of one kind")]
+    MixedTimes {
+        /// A file with timestamps.
+        first: String,
+        /// A file with seconds.
+        second: String,
+    },
+    /// A directory given as input holds no `.csv` file.
+    #[error(
+        "{dir}: no .csv file in this directory; give the recording files or a directory of them"
+    )]
+    NoFiles {
+        /// The directory.
+        dir: String,
+    },
     /// In-memory data that cannot form a recording, or columns of different lengths to write.
     #[error("{file}: {detail}")]
     Invalid {
@@ -128,11 +160,24 @@ pub enum RecordingError {
     },
 }
 
-/// `` `a`, `b` `` for a list of names.
+/// `` `a`, `b` `` for a list of names, control characters escaped (one printable line).
 fn quoted(names: &[String]) -> String {
     names
         .iter()
-        .map(|n| format!("`{n}`"))
+        .map(|n| {
+            let shown: String = n
+                .chars()
+                .flat_map(|c| {
+                    let e: Vec<char> = if c.is_control() {
+                        c.escape_default().collect()
+                    } else {
+                        vec![c]
+                    };
+                    e
+                })
+                .collect();
+            format!("`{shown}`")
+        })
         .collect::<Vec<_>>()
         .join(", ")
 }

@@ -21,47 +21,62 @@
 //! invented), unit conversion beyond a scale factor, time zones (timestamps are taken as given,
 //! without daylight-saving handling), and any analysis of the signals.
 
+mod cells;
 mod columns;
 mod error;
+pub mod grid;
+mod join;
 mod read;
 mod resample;
 mod write;
 
 pub use columns::{ColumnMap, ColumnMapError};
 pub use error::RecordingError;
+pub use join::read_all;
 pub use read::{read, read_from, ReadOptions};
 pub use resample::resample_zoh;
 pub use write::{write, write_columns};
 
-/// A checked recording: at least two samples, strictly increasing finite times, finite values.
+/// A checked recording: at least two rows, strictly increasing finite times, finite O_P; V_P
+/// finite or NaN (missing). Gaps in time are filled or kept as restarts (see [`grid`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Recording {
     /// Sample times, s. As in the file for numeric times; from the first row for timestamps.
     pub t: Vec<f64>,
     /// Wanted opening O_P, % (times [`ReadOptions::scale`]).
     pub op: Vec<f64>,
-    /// Valve position V_P, % (times the scale); empty when the file has no V_P (`vp=`).
+    /// Valve position V_P, % (times the scale); NaN where a row has none (an empty cell, a
+    /// status other than `ok`, a filled gap); empty when the file has no V_P (`vp=`).
     pub vp: Vec<f64>,
-    /// Interval between samples, s: the median interval, or the mean interval (span / (n − 1))
-    /// when the two agree to 1e-6, which averages out the rounding of times written as
-    /// decimals (0.01 rather than 0.009999999999990905).
+    /// The `status` column when the file has one (the daemon's logs), `gap` on rows that fill
+    /// a gap; empty otherwise.
+    pub status: Vec<String>,
+    /// Indices of the rows right after a long gap: simulations start again there from the
+    /// measured V_P. Increasing, never 0.
+    pub restarts: Vec<usize>,
+    /// Interval between samples, s: the median interval, or the mean interval when the two
+    /// agree to 1e-6, which averages out the rounding of times written as decimals (0.01
+    /// rather than 0.009999999999990905).
     pub sample_period: f64,
-    /// Where it came from: the path, a label, or `in-memory`.
+    /// Where it came from: the path (the first of several joined files), a label, or
+    /// `in-memory`.
     pub source: String,
     /// What was tolerated or looks odd (also logged with `tracing::warn!`).
     pub warnings: Vec<String>,
 }
 
-/// What analysis reads of a recording, borrowed: the columns and the sample period. Made by
-/// [`Recording::view`], or from plain slices (a simulation, a test).
+/// What analysis reads of a recording, borrowed: the columns, the restarts and the sample
+/// period. Made by [`Recording::view`], or from plain slices (a simulation, a test).
 #[derive(Debug, Clone, Copy)]
 pub struct RecordingView<'a> {
     /// Sample times, s.
     pub t: &'a [f64],
     /// Wanted opening O_P, %.
     pub op: &'a [f64],
-    /// Valve position V_P, % (empty when not measured).
+    /// Valve position V_P, % (NaN where missing; empty when not measured).
     pub vp: &'a [f64],
+    /// Rows where a simulation restarts from the measured V_P (after long gaps).
+    pub restarts: &'a [usize],
     /// Interval between samples, s.
     pub dt: f64,
 }
@@ -76,21 +91,27 @@ impl RecordingView<'_> {
     pub fn is_empty(&self) -> bool {
         self.op.is_empty()
     }
+
+    /// Whether sample `k` has a measured V_P.
+    pub fn has_vp(&self, k: usize) -> bool {
+        self.vp.get(k).is_some_and(|v| v.is_finite())
+    }
 }
 
 impl Recording {
-    /// The columns and sample period, borrowed, for analysis.
+    /// The columns, restarts and sample period, borrowed, for analysis.
     pub fn view(&self) -> RecordingView<'_> {
         RecordingView {
             t: &self.t,
             op: &self.op,
             vp: &self.vp,
+            restarts: &self.restarts,
             dt: self.sample_period,
         }
     }
 
-    /// A recording from in-memory columns (`vp` may be empty), with the same checks and
-    /// warnings as a file; `source` is `in-memory`.
+    /// A recording from in-memory columns (`vp` may be empty, and NaN where missing), with the
+    /// same checks, gap handling and warnings as a file; `source` is `in-memory`.
     pub fn from_vectors(t: Vec<f64>, op: Vec<f64>, vp: Vec<f64>) -> Result<Self, RecordingError> {
         let invalid = |detail: String| RecordingError::Invalid {
             file: "in-memory".into(),
@@ -111,13 +132,19 @@ impl Recording {
                 dropped: 0,
             });
         }
-        for (name, col) in [("t", &t), ("op", &op), ("vp", &vp)] {
+        for (name, col) in [("t", &t), ("op", &op)] {
             if let Some(i) = col.iter().position(|v| !v.is_finite()) {
                 return Err(invalid(format!(
                     "{name}[{i}] is {}; expected a finite number",
                     col[i]
                 )));
             }
+        }
+        if let Some(i) = vp.iter().position(|v| v.is_infinite()) {
+            return Err(invalid(format!(
+                "vp[{i}] is {}; expected a finite number or NaN (missing)",
+                vp[i]
+            )));
         }
         if let Some(i) = (1..t.len()).find(|&i| t[i] <= t[i - 1]) {
             return Err(invalid(format!(
@@ -127,7 +154,17 @@ impl Recording {
                 t[i - 1]
             )));
         }
-        Ok(Self::assemble(t, op, vp, "in-memory".into(), Vec::new()))
+        let n = t.len() as u64;
+        let rows = grid::Rows {
+            line: (0..n).collect(),
+            t,
+            op,
+            vp,
+            status: Vec::new(),
+            files: Vec::new(),
+            t_ref_ns: None,
+        };
+        Ok(rows.into_recording("in-memory".into(), Vec::new()))
     }
 
     /// Number of samples.
@@ -148,19 +185,16 @@ impl Recording {
         }
     }
 
-    /// Builds a recording from checked columns (at least two samples, strictly increasing
-    /// times): sets the sample period and adds the sampling and fraction warnings.
+    /// Builds a recording from the grid: adds the fraction warning and logs the warnings.
     fn assemble(
-        t: Vec<f64>,
-        op: Vec<f64>,
-        vp: Vec<f64>,
+        g: grid::Grid,
+        sample_period: f64,
         source: String,
         mut warnings: Vec<String>,
     ) -> Self {
-        let (sample_period, irregular) = sampling(&t);
-        warnings.extend(irregular);
-        if op.iter().chain(&vp).all(|v| (0.0..=1.05).contains(v)) {
-            let what = if vp.is_empty() {
+        let values = || g.op.iter().chain(g.vp.iter().filter(|v| !v.is_nan()));
+        if values().all(|v| (0.0..=1.05).contains(v)) {
+            let what = if g.vp.is_empty() {
                 "O_P lies"
             } else {
                 "O_P and V_P lie"
@@ -174,54 +208,16 @@ impl Recording {
             tracing::warn!(file = %source, "{w}");
         }
         Recording {
-            t,
-            op,
-            vp,
+            t: g.t,
+            op: g.op,
+            vp: g.vp,
+            status: g.status,
+            restarts: g.restarts,
             sample_period,
             source,
             warnings,
         }
     }
-}
-
-/// The sample period (see [`Recording::sample_period`]) and, when more than 1 % of the
-/// intervals differ from the median by more than 10 %, a warning with their count and the worst
-/// one. `t` has at least two samples.
-fn sampling(t: &[f64]) -> (f64, Option<String>) {
-    let mut dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let m = dt.len();
-    dt.sort_unstable_by(f64::total_cmp);
-    let median = if m % 2 == 1 {
-        dt[m / 2]
-    } else {
-        (dt[m / 2 - 1] + dt[m / 2]) / 2.0
-    };
-    let mut count = 0;
-    let mut worst = (0.0, 0.0, 0.0); // (|deviation|, interval, start time)
-    for w in t.windows(2) {
-        let d = w[1] - w[0];
-        let dev = (d - median).abs();
-        if dev > 0.1 * median {
-            count += 1;
-            if dev > worst.0 {
-                worst = (dev, d, w[0]);
-            }
-        }
-    }
-    let warning = (count * 100 > m).then(|| {
-        format!(
-            "irregular sampling: {count} of {m} intervals differ by more than 10 % from the \
-             median {median} s (worst: {} s after t = {} s)",
-            worst.1, worst.2
-        )
-    });
-    let mean = (t[m] - t[0]) / m as f64;
-    let period = if (mean - median).abs() <= 1e-6 * median {
-        mean
-    } else {
-        median
-    };
-    (period, warning)
 }
 
 #[cfg(test)]
@@ -243,9 +239,9 @@ mod tests {
             matches!(e, RecordingError::TooFewRows { rows: 1, .. }),
             "{e}"
         );
-        let e = Recording::from_vectors(vec![0.0, 1.0], vec![1.0, 2.0], vec![3.0, f64::NAN])
+        let e = Recording::from_vectors(vec![0.0, 1.0], vec![1.0, 2.0], vec![3.0, f64::INFINITY])
             .unwrap_err();
-        assert!(e.to_string().contains("vp[1] is NaN"), "{e}");
+        assert!(e.to_string().contains("vp[1] is inf"), "{e}");
         let e = Recording::from_vectors(vec![0.0, 1.0, 1.0], vec![5.0; 3], vec![]).unwrap_err();
         assert!(
             e.to_string().contains("t[2] = 1 s is not after t[1] = 1 s"),
@@ -255,11 +251,11 @@ mod tests {
 
     #[test]
     fn irregular_sampling_is_counted_with_the_worst_interval() {
-        // 200 intervals of 0.01 s, three of them 0.02 s or 0.015 s: 1.5 % deviate.
+        // 200 intervals of 0.01 s, three of them 0.014 s or 0.015 s (not gaps): 1.5 % deviate.
         let mut t = vec![0.0];
         for i in 0..200 {
             let dt = match i {
-                50 | 120 => 0.02,
+                50 | 120 => 0.014,
                 130 => 0.015,
                 _ => 0.01,
             };
@@ -274,7 +270,7 @@ mod tests {
             w.starts_with("irregular sampling: 3 of 200 intervals"),
             "{w}"
         );
-        assert!(w.contains("worst: 0.02"), "{w}");
+        assert!(w.contains("worst: 0.015 s"), "{w}");
         // Two deviating intervals in 200 (1 %) is still regular.
         let mut t: Vec<f64> = (0..=200).map(|k| k as f64 * 0.01).collect();
         t[100] = 0.995;

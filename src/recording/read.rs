@@ -9,9 +9,8 @@
 use std::io::Read;
 use std::path::Path;
 
-use time::macros::format_description;
-use time::PrimitiveDateTime;
-
+use super::cells::{Columns, Problem};
+use super::grid::Rows;
 use super::{ColumnMap, Recording, RecordingError};
 
 /// How to read a recording file. Each field matches the command-line flag named in the errors.
@@ -19,15 +18,17 @@ use super::{ColumnMap, Recording, RecordingError};
 pub struct ReadOptions {
     /// Which columns hold t, O_P and V_P (`--columns`). `vp=` reads O_P only.
     pub columns: ColumnMap,
-    /// Drop rows whose mapped cells are empty, `NaN`, `NULL`, `NA` or `N/A`, with a counted
+    /// Drop rows whose time or O_P cell is empty, `NaN`, `NULL`, `NA` or `N/A`, with a counted
     /// warning (`--skip-missing`); otherwise such a row is an error. The dropped rows leave
-    /// gaps in time, which the irregular-sampling warning reports if they are many.
+    /// gaps in time, handled as any gap. A missing V_P never needs it: the row stays, without
+    /// V_P.
     pub skip_missing: bool,
     /// The file runs newest row first: read it backwards (`--reverse`).
     pub reverse_sorted: bool,
-    /// The time column holds wall-clock timestamps `YYYY-MM-DD HH:MM:SS[.fff]` (or with `T`
-    /// between date and time) instead of seconds (`--timestamps`); implied by `t=DATE+TIME`.
-    /// Times become seconds from the first row, as written (no time zone).
+    /// The time column holds wall-clock timestamps `YYYY-MM-DD HH:MM:SS[.fff][Z]` (or with `T`
+    /// between date and time) instead of seconds (`--timestamps`); implied by `t=DATE+TIME`,
+    /// and by a first time cell that is a timestamp rather than a number (the daemon's `utc`
+    /// column). Times become seconds from the first row, as written (no time zone).
     pub timestamps: bool,
     /// Factor applied to O_P and V_P (`--scale`, e.g. 100 for fractions of full travel).
     pub scale: f64,
@@ -59,14 +60,28 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Recording, RecordingError
 /// Reads and checks a recording from any reader; `label` names it in errors and in
 /// [`Recording::source`].
 pub fn read_from<R: Read>(
-    mut reader: R,
+    reader: R,
     label: &str,
     opts: &ReadOptions,
 ) -> Result<Recording, RecordingError> {
-    if !(opts.scale.is_finite() && opts.scale != 0.0) {
+    let (rows, warnings) = read_rows(reader, label, opts)?;
+    Ok(rows.into_recording(label.into(), warnings))
+}
+
+/// The checked rows of one file in time order (times from its first row for timestamps, with
+/// that row's time in ns since 1970), and what was tolerated.
+pub(super) fn read_rows<R: Read>(
+    mut reader: R,
+    label: &str,
+    opts: &ReadOptions,
+) -> Result<(Rows, Vec<String>), RecordingError> {
+    if !(opts.scale.is_finite() && opts.scale != 0.0 && opts.scale.abs() <= MAX_SCALE) {
         return Err(RecordingError::Invalid {
             file: label.into(),
-            detail: format!("--scale {} must be a finite, non-zero factor", opts.scale),
+            detail: format!(
+                "--scale {} must be a finite, non-zero factor of magnitude at most {MAX_SCALE}",
+                opts.scale
+            ),
         });
     }
     let mut bytes = Vec::new();
@@ -96,16 +111,16 @@ pub fn read_from<R: Read>(
         .iter()
         .map(|h| String::from_utf8_lossy(h).into_owned())
         .collect();
-    let mut cols = Columns::find(&header, &opts.columns).map_err(|missing| {
+    let mut cols = Columns::find(&header, &opts.columns, opts.timestamps).map_err(|missing| {
         RecordingError::MissingColumns {
             file: label.into(),
             missing,
             found: header.clone(),
         }
     })?;
-    let timestamps = opts.timestamps || opts.columns.t_is_date_and_time();
 
     let mut rows = Rows::default();
+    rows.files.push((0, label.to_string()));
     let mut skipped = (0usize, 0u64); // (count, first line)
     let mut pending: Option<(u64, Problem)> = None; // a bad row, forgiven only if it is the last
     let mut record = csv::ByteRecord::new();
@@ -114,8 +129,12 @@ pub fn read_from<R: Read>(
         if let Some((line, problem)) = pending.take() {
             return Err(problem.into_error(label, line, header.len()));
         }
-        match cols.parse(&record, header.len(), timestamps) {
-            Ok((t, op, vp)) => rows.push(line, t, op * opts.scale, vp.map(|v| v * opts.scale)),
+        match cols.parse(&record, header.len()) {
+            Ok(mut row) => {
+                row.op *= opts.scale;
+                row.vp = row.vp.map(|v| v * opts.scale);
+                rows.push(line, row);
+            }
             Err(Problem::Missing { .. }) if opts.skip_missing => {
                 if skipped.0 == 0 {
                     skipped.1 = line;
@@ -128,9 +147,19 @@ pub fn read_from<R: Read>(
 
     let mut warnings = Vec::new();
     let mut dropped = skipped.0;
+    // A last line without its newline whose V_P is empty was cut inside its last cell.
+    let cut_vp =
+        !ends_with_newline && pending.is_none() && rows.vp.last().is_some_and(|v| v.is_nan());
+    if cut_vp {
+        let line = rows.pop();
+        warnings.push(format!(
+            "dropped line {line}: it looks cut off (no value in `vp`)"
+        ));
+        dropped += 1;
+    }
     if skipped.0 > 0 {
         warnings.push(format!(
-            "dropped {} row(s) with a missing value (first at line {})",
+            "dropped {} row(s) without a time or O_P (first at line {}); they leave gaps",
             skipped.0, skipped.1
         ));
     }
@@ -149,296 +178,17 @@ pub fn read_from<R: Read>(
         });
     }
     rows.order(label, opts.reverse_sorted)?;
-    if timestamps {
+    if let Some(t_ref) = cols.t_ref {
         let t0 = rows.t[0];
         rows.t.iter_mut().for_each(|t| *t -= t0);
+        rows.t_ref_ns = Some(t_ref + (t0 * 1e9).round() as i128);
     }
-    Ok(Recording::assemble(
-        rows.t,
-        rows.op,
-        rows.vp,
-        label.into(),
-        warnings,
-    ))
+    Ok((rows, warnings))
 }
 
-/// Header positions of the mapped columns, and the state for parsing timestamps.
-struct Columns<'m> {
-    /// One index, or two for `DATE+TIME`.
-    t: Vec<usize>,
-    op: usize,
-    vp: Option<usize>,
-    map: &'m ColumnMap,
-    /// Scratch space for joining date and time.
-    stamp: String,
-    /// The first timestamp read, ns since 1970: times are kept relative to it, exactly.
-    t_ref: Option<i128>,
-}
-
-impl<'m> Columns<'m> {
-    /// Finds the mapped names in the header, or lists those missing.
-    fn find(header: &[String], map: &'m ColumnMap) -> Result<Self, Vec<String>> {
-        let mut missing = Vec::new();
-        let mut index = |name: &str| {
-            let i = header.iter().position(|h| h == name);
-            if i.is_none() {
-                missing.push(name.to_string());
-            }
-            i.unwrap_or(0)
-        };
-        let t = map.t_columns().map(&mut index).collect();
-        let op = index(&map.op);
-        let vp = map.vp.as_deref().map(&mut index);
-        if missing.is_empty() {
-            Ok(Columns {
-                t,
-                op,
-                vp,
-                map,
-                stamp: String::new(),
-                t_ref: None,
-            })
-        } else {
-            Err(missing)
-        }
-    }
-
-    /// One row's (t, O_P, V_P). With timestamps, t is seconds from the first timestamp read
-    /// (as written, no time zone).
-    fn parse(
-        &mut self,
-        record: &csv::ByteRecord,
-        width: usize,
-        timestamps: bool,
-    ) -> Result<(f64, f64, Option<f64>), Problem> {
-        if record.len() < width {
-            return Err(Problem::Short {
-                cells: record.len(),
-            });
-        }
-        let cell =
-            |i: usize| std::str::from_utf8(record.get(i).unwrap_or(b"")).unwrap_or("\u{fffd}");
-        let t = if timestamps {
-            self.stamp.clear();
-            for (k, &i) in self.t.iter().enumerate() {
-                if k > 0 {
-                    self.stamp.push(' ');
-                }
-                self.stamp.push_str(cell(i));
-            }
-            let ns = parse_timestamp(&self.stamp).ok_or_else(|| Problem::BadTimestamp {
-                column: self.map.t.clone(),
-                cell: self.stamp.clone(),
-            })?;
-            (ns - *self.t_ref.get_or_insert(ns)) as f64 / 1e9
-        } else {
-            number(&self.map.t, cell(self.t[0]), MAX_TIME_S)?
-        };
-        let op = number(&self.map.op, cell(self.op), MAX_POSITION)?;
-        let vp = match (self.vp, &self.map.vp) {
-            (Some(i), Some(name)) => Some(number(name, cell(i), MAX_POSITION)?),
-            _ => None,
-        };
-        Ok((t, op, vp))
-    }
-}
-
-/// What is wrong with one row, before knowing whether it is the last.
-#[derive(Debug)]
-enum Problem {
-    Short {
-        cells: usize,
-    },
-    Missing {
-        column: String,
-        cell: String,
-    },
-    NotNumber {
-        column: String,
-        cell: String,
-    },
-    OutOfRange {
-        column: String,
-        cell: String,
-        max: f64,
-    },
-    BadTimestamp {
-        column: String,
-        cell: String,
-    },
-}
-
-impl std::fmt::Display for Problem {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Problem::Short { cells } => write!(f, "{cells} cells"),
-            Problem::Missing { column, .. } => write!(f, "no value in `{column}`"),
-            Problem::NotNumber { column, cell }
-            | Problem::OutOfRange { column, cell, .. }
-            | Problem::BadTimestamp { column, cell } => write!(f, "`{cell}` in `{column}`"),
-        }
-    }
-}
-
-impl Problem {
-    /// Whether this problem on the last line means the line was cut off mid-write.
-    fn looks_cut(&self, ends_with_newline: bool) -> bool {
-        matches!(self, Problem::Short { .. }) || !ends_with_newline
-    }
-
-    fn into_error(self, file: &str, line: u64, width: usize) -> RecordingError {
-        let file = file.to_string();
-        match self {
-            Problem::Short { cells } => RecordingError::ShortRow {
-                file,
-                line,
-                cells,
-                expected: width,
-            },
-            Problem::Missing { column, cell } => RecordingError::MissingValue {
-                file,
-                line,
-                column,
-                cell,
-            },
-            Problem::NotNumber { column, cell } => {
-                let hint = if looks_like_date_or_time(&cell) {
-                    "; it looks like a date or clock time: --timestamps reads wall-clock times \
-                     (t=DATE+TIME joins separate date and time columns)"
-                } else {
-                    ""
-                };
-                RecordingError::BadCell {
-                    file,
-                    line,
-                    column,
-                    cell,
-                    expected: "a finite number",
-                    hint,
-                }
-            }
-            Problem::OutOfRange { column, cell, max } => RecordingError::BadCell {
-                file,
-                line,
-                column,
-                cell,
-                expected: if max == MAX_TIME_S {
-                    "a time within ±1e11 s"
-                } else {
-                    "a value within ±1e6 (a position in %, or raw units scaled by --scale)"
-                },
-                hint: "",
-            },
-            Problem::BadTimestamp { column, cell } => {
-                let hint = if cell.parse::<f64>().is_ok() {
-                    "; it is a number: drop --timestamps to read times in seconds"
-                } else {
-                    ""
-                };
-                RecordingError::BadCell {
-                    file,
-                    line,
-                    column,
-                    cell,
-                    expected: "a timestamp YYYY-MM-DD HH:MM:SS[.fff]",
-                    hint,
-                }
-            }
-        }
-    }
-}
-
-/// Largest magnitude of an O_P or V_P value as written: no instrument reads beyond it in any
-/// unit, and squares of it stay finite (SSE, R²).
-const MAX_POSITION: f64 = 1e6;
-/// Largest magnitude of a time in seconds (3,000 years).
-const MAX_TIME_S: f64 = 1e11;
-
-/// A finite number of magnitude at most `max`, or the problem with the cell.
-fn number(column: &str, cell: &str, max: f64) -> Result<f64, Problem> {
-    let missing = cell.is_empty()
-        || ["nan", "null", "na", "n/a"]
-            .iter()
-            .any(|m| cell.eq_ignore_ascii_case(m));
-    if missing {
-        return Err(Problem::Missing {
-            column: column.into(),
-            cell: cell.into(),
-        });
-    }
-    match cell.parse::<f64>() {
-        Ok(v) if v.abs() <= max => Ok(v),
-        Ok(v) if v.is_finite() => Err(Problem::OutOfRange {
-            column: column.into(),
-            cell: cell.into(),
-            max,
-        }),
-        _ => Err(Problem::NotNumber {
-            column: column.into(),
-            cell: cell.into(),
-        }),
-    }
-}
-
-/// Nanoseconds since 1970-01-01 00:00:00 of `YYYY-MM-DD HH:MM:SS[.fff]` (space or `T` between).
-fn parse_timestamp(s: &str) -> Option<i128> {
-    let format = format_description!(
-        "[year]-[month]-[day][first [ ][T]][hour]:[minute]:[second][optional [.[subsecond]]]"
-    );
-    let dt = PrimitiveDateTime::parse(s, &format).ok()?;
-    Some(dt.assume_utc().unix_timestamp_nanos())
-}
-
-/// `2024-11-27`, `23:59:00` or both: worth suggesting `--timestamps`.
-fn looks_like_date_or_time(cell: &str) -> bool {
-    let b = cell.as_bytes();
-    cell.contains(':') || (b.len() >= 10 && b[4] == b'-' && b[7] == b'-')
-}
-
-/// The parsed columns, with each row's line for errors about time order.
-#[derive(Default)]
-struct Rows {
-    line: Vec<u64>,
-    t: Vec<f64>,
-    op: Vec<f64>,
-    vp: Vec<f64>,
-}
-
-impl Rows {
-    fn push(&mut self, line: u64, t: f64, op: f64, vp: Option<f64>) {
-        self.line.push(line);
-        self.t.push(t);
-        self.op.push(op);
-        self.vp.extend(vp);
-    }
-
-    /// Reverses a newest-first file when asked, then checks that time increases strictly.
-    fn order(&mut self, file: &str, reverse: bool) -> Result<(), RecordingError> {
-        let decreasing = self.t.windows(2).all(|w| w[1] < w[0]);
-        let increasing = self.t.windows(2).all(|w| w[1] > w[0]);
-        if reverse {
-            if increasing {
-                return Err(RecordingError::AlreadyForward { file: file.into() });
-            }
-            self.line.reverse();
-            self.t.reverse();
-            self.op.reverse();
-            self.vp.reverse();
-        } else if decreasing {
-            return Err(RecordingError::NewestFirst { file: file.into() });
-        }
-        match (1..self.t.len()).find(|&i| self.t[i] <= self.t[i - 1]) {
-            Some(i) => Err(RecordingError::NotIncreasing {
-                file: file.into(),
-                line: self.line[i],
-                t: self.t[i],
-                prev_line: self.line[i - 1],
-                prev_t: self.t[i - 1],
-            }),
-            None => Ok(()),
-        }
-    }
-}
+/// Largest magnitude of `--scale`: with values within ±1e6, scaled values stay far from
+/// overflow in any sum of squares.
+const MAX_SCALE: f64 = 1e6;
 
 #[cfg(test)]
 mod tests {
@@ -519,30 +269,91 @@ mod tests {
     }
 
     #[test]
-    fn missing_values_are_errors_or_counted_drops() {
+    fn missing_values_keep_their_rows_and_missing_times_are_errors_or_gaps() {
+        // A missing V_P keeps its row, without V_P.
         let text = "t_s,op_pct,vp_pct\n0,1,2\n1,2,\n2,3,NaN\n3,4,NULL\n4,5,6\n";
+        let r = load(text, &ReadOptions::default()).unwrap();
+        assert_eq!(r.t, [0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(r.vp.iter().filter(|v| v.is_nan()).count(), 3);
+        assert_eq!(
+            r.warnings,
+            ["3 row(s) have no V_P (first at rec.csv:3): simulated through, not scored"]
+        );
+        // A missing O_P is an error, or with --skip-missing a dropped row, which leaves a gap.
+        let text = "t_s,op_pct,vp_pct\n0,1,2\n1,,3\n2,3,4\n3,4,5\n4,5,6\n";
         let e = err(text, &ReadOptions::default());
         assert_eq!(
             e,
-            "rec.csv:3: column `vp_pct` has no value (``); expected a number; \
-             --skip-missing drops such rows"
+            "rec.csv:3: column `op_pct` has no value (``); expected a number; \
+             --skip-missing drops such rows (they leave a gap)"
         );
         let skip = ReadOptions {
             skip_missing: true,
             ..ReadOptions::default()
         };
         let r = load(text, &skip).unwrap();
-        assert_eq!(r.t, [0.0, 4.0]);
+        assert_eq!(r.t, [0.0, 1.0, 2.0, 3.0, 4.0], "the gap is filled");
+        assert_eq!(r.op[1], 1.0, "O_P held through the gap");
+        assert!(r.vp[1].is_nan());
         assert_eq!(
             r.warnings[0],
-            "dropped 3 row(s) with a missing value (first at line 3)"
+            "dropped 1 row(s) without a time or O_P (first at line 3); they leave gaps"
         );
         // Too few left.
-        let e = err("t_s,op_pct,vp_pct\n0,1,2\n1,2,na\n", &skip);
+        let e = err("t_s,op_pct,vp_pct\n0,1,2\n1,na,2\n", &skip);
         assert_eq!(
             e,
             "rec.csv: 1 usable data row(s) (1 dropped); a recording needs at least 2"
         );
+    }
+
+    #[test]
+    fn the_status_column_is_kept_and_rows_not_ok_have_no_position() {
+        let text =
+            "t_s,op_pct,vp_pct,status\n0,1,2,ok\n0.01,1,,timeout\n0.02,1,2.5,error\n0.03,1,3,ok\n";
+        let r = load(text, &ReadOptions::default()).unwrap();
+        assert_eq!(r.status, ["ok", "timeout", "error", "ok"]);
+        assert_eq!(r.vp[0], 2.0);
+        assert!(r.vp[1].is_nan() && r.vp[2].is_nan());
+        assert_eq!(r.vp[3], 3.0);
+    }
+
+    #[test]
+    fn gaps_in_time_are_filled_or_restart_with_a_warning_naming_the_line() {
+        // 10 Hz; a 0.5 s gap after line 4 (4 missing rows) is filled, a 3,600 s jump at
+        // line 8 is kept as a restart.
+        let mut text = String::from("t_s,op_pct,vp_pct,status\n");
+        for t in [0.0, 0.1, 0.2, 0.7, 0.8, 0.9, 3600.9, 3601.0, 3601.1] {
+            text += &format!("{t},50,50,ok\n");
+        }
+        let r = load(&text, &ReadOptions::default()).unwrap();
+        assert_eq!(r.len(), 13);
+        assert!(
+            (r.t[3] - 0.3).abs() < 1e-12 && (r.t[6] - 0.6).abs() < 1e-12,
+            "{:?}",
+            r.t
+        );
+        assert!(r.vp[3..7].iter().all(|v| v.is_nan()));
+        assert_eq!(&r.status[3..7], ["gap"; 4]);
+        assert_eq!(r.restarts, [10]);
+        assert_eq!(r.t[10], 3600.9, "never compressed");
+        assert_eq!(r.sample_period, 0.1);
+        assert_eq!(
+            r.warnings,
+            [
+                "1 gap(s) in time filled with 4 row(s) without V_P, O_P held (first before rec.csv:5)",
+                "time jumps by 3600 s before rec.csv:8: a gap, kept; simulation restarts from \
+                 the measured V_P after it"
+            ]
+        );
+    }
+
+    #[test]
+    fn the_daemons_utc_column_loads_as_timestamps() {
+        let text = "t_s,op_pct,vp_pct,utc\n0,1,2,2026-11-23T19:27:09.045Z\n0.01,1,2,2026-11-23T19:27:09.055Z\n";
+        let r = load(text, &opts("t=utc")).unwrap();
+        assert_eq!(r.len(), 2);
+        assert!((r.t[1] - 0.01).abs() < 1e-9, "{:?}", r.t);
     }
 
     #[test]
@@ -647,7 +458,7 @@ mod tests {
         let e = err("stamp,op_pct,vp_pct\n2024-13-01 00:00:00,1,2\n0,1,2\n", &ts);
         assert_eq!(
             e,
-            "rec.csv:2: column `stamp`: `2024-13-01 00:00:00` is not a timestamp YYYY-MM-DD HH:MM:SS[.fff]"
+            "rec.csv:2: column `stamp`: `2024-13-01 00:00:00` is not a timestamp YYYY-MM-DD HH:MM:SS[.fff][Z]"
         );
         let e = err("stamp,op_pct,vp_pct\n0,1,2\n1,1,2\n", &ts);
         assert!(
@@ -689,7 +500,10 @@ mod tests {
                 ..ReadOptions::default()
             },
         );
-        assert_eq!(e, "rec.csv: --scale 0 must be a finite, non-zero factor");
+        assert_eq!(
+            e,
+            "rec.csv: --scale 0 must be a finite, non-zero factor of magnitude at most 1000000"
+        );
     }
 
     #[test]
@@ -699,5 +513,35 @@ mod tests {
             e.to_string().starts_with("/no/such/rec.csv: cannot read: "),
             "{e}"
         );
+    }
+
+    proptest::proptest! {
+        /// Arbitrary bytes give a recording or a one-line error naming the input; never a
+        /// panic, and a recording holds only finite times and O_P.
+        #[test]
+        fn any_bytes_load_or_fail_on_one_line(body in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..400)) {
+            let mut bytes = b"t_s,op_pct,vp_pct,status\n".to_vec();
+            bytes.extend(body);
+            match read_from(&bytes[..], "fuzz.csv", &ReadOptions::default()) {
+                Ok(r) => proptest::prop_assert!(r.t.iter().chain(&r.op).all(|v| v.is_finite())),
+                Err(e) => {
+                    let e = e.to_string();
+                    proptest::prop_assert!(!e.contains('\n') && e.starts_with("fuzz.csv"), "{e}");
+                }
+            }
+        }
+
+        /// Rows of plausible cells (numbers, blanks, NULL, huge values, timestamps) in any order.
+        #[test]
+        fn plausible_rows_load_or_fail_on_one_line(rows in proptest::collection::vec(
+            ("-?[0-9]{1,4}(\\.[0-9]{1,3})?|1e308|NULL||2024-01-01 00:00:0[0-9]", "-?[0-9]{1,3}|NaN|1e400|", "-?[0-9]{1,3}|"), 0..30)) {
+            let mut text = String::from("t_s,op_pct,vp_pct\n");
+            for (t, op, vp) in rows {
+                text += &format!("{t},{op},{vp}\n");
+            }
+            if let Err(e) = read_from(text.as_bytes(), "fuzz.csv", &ReadOptions::default()) {
+                proptest::prop_assert!(!e.to_string().contains('\n'), "{e}");
+            }
+        }
     }
 }

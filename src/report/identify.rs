@@ -125,7 +125,7 @@ fn tables_html(h: &mut String, id: &Identification) {
         h,
         "<p>{} samples at {} s. Windows fitted and scored ({}): {}. {} samples scored; held out: {} ({}).</p>",
         id.n_samples,
-        id.sample_period_s,
+        crate::human::num(id.sample_period_s),
         if id.windows_auto {
             "saturation at 0/100 % left out automatically"
         } else {
@@ -399,7 +399,8 @@ pub fn text(source: &str, duration_s: f64, id: &Identification) -> String {
     let _ = writeln!(
         o,
         "{source}: {} samples at {} s ({duration_s:.1} s)",
-        id.n_samples, id.sample_period_s,
+        id.n_samples,
+        crate::human::num(id.sample_period_s),
     );
     let list: Vec<String> = id
         .windows

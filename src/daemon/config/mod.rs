@@ -234,7 +234,10 @@ impl Check<'_> {
             Err(self.bad(
                 table,
                 key,
-                format!("{value} is out of range: {what}, {lo} to {hi}"),
+                format!(
+                    "{} is out of range: {what}, {lo} to {hi}",
+                    crate::human::num(value)
+                ),
             ))
         }
     }

@@ -386,7 +386,7 @@ impl ModbusServerConfig {
                 return Err(c.bad(
                     t,
                     "initial_pct",
-                    format!("{v} is out of range: the O_P before the first write, an opening in %, 0 to 100"),
+                    format!("{} is out of range: the O_P before the first write, an opening in %, 0 to 100", crate::human::num(v)),
                 ));
             }
         }
@@ -423,8 +423,12 @@ impl ModbusServerConfig {
     }
 }
 
+/// Most grid slots a replay holds in memory (80 MB; 27.8 h at 10 ms).
+const MAX_REPLAY_SLOTS: f64 = 1e7;
+
 /// The O_P column of a recording (V_P is not read, so a log with failed reads replays too),
-/// held onto a grid of `period_s` from its first row.
+/// held onto a grid of `period_s` from its first row; refused when that grid would exceed
+/// [`MAX_REPLAY_SLOTS`].
 fn load_replay(file: &Path, period_s: f64) -> Result<Vec<f64>, RecordingError> {
     let opts = ReadOptions {
         columns: ColumnMap {
@@ -434,5 +438,18 @@ fn load_replay(file: &Path, period_s: f64) -> Result<Vec<f64>, RecordingError> {
         ..ReadOptions::default()
     };
     let rec = recording::read(file, &opts)?;
+    let slots = rec.duration() / period_s;
+    if slots > MAX_REPLAY_SLOTS {
+        return Err(RecordingError::Invalid {
+            file: file.display().to_string(),
+            detail: format!(
+                "spans {} h, {} slots of {} s; a replay holds at most {MAX_REPLAY_SLOTS:e} slots ({} h): cut the file or lengthen [loop] period",
+                crate::human::num(rec.duration() / 3600.0),
+                crate::human::num(slots),
+                crate::human::num(period_s),
+                crate::human::num(MAX_REPLAY_SLOTS * period_s / 3600.0)
+            ),
+        });
+    }
     Ok(recording::resample_zoh(&rec.t, &rec.op, period_s))
 }

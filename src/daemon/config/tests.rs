@@ -204,3 +204,24 @@ fn model_file_loads_any_model() {
     ));
     assert!(e.contains("not both"), "{e}");
 }
+
+proptest::proptest! {
+    /// Any text, valid TOML or not, gives a config or a one-line error; never a panic.
+    #[test]
+    fn any_text_loads_or_fails_on_one_line(text in "(\\PC|\n|\\[|\\]|=|\"){0,300}") {
+        if let Err(e) = Config::from_toml(&text, Path::new("fuzz.toml")) {
+            let e = e.to_string();
+            proptest::prop_assert!(!e.contains('\n'), "{e}");
+            proptest::prop_assert!(e.starts_with("fuzz.toml"), "{e}");
+        }
+    }
+
+    /// Keys of the real config with arbitrary values: checked, never a panic.
+    #[test]
+    fn known_keys_with_any_value(table in "loop|valve|source|safety|log|metrics", key in "[a-z_]{1,12}", value in "-?[0-9.e+]{1,12}|\"[a-z-]{0,12}\"|true|nan|inf") {
+        let text = format!("[{table}]\n{key} = {value}\n");
+        if let Err(e) = Config::from_toml(&text, Path::new("fuzz.toml")) {
+            proptest::prop_assert!(!e.to_string().contains('\n'), "{e}");
+        }
+    }
+}

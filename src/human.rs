@@ -1,0 +1,59 @@
+//! Numbers meant for people: a value with at most six significant digits and no binary
+//! floating-point artefacts (`0.1`, never `0.09999999999999999`; `1.823494`, never
+//! `1.8234943590000001`), and `n/a` for a value that does not exist (NaN), never `NaN%`.
+//!
+//! Files meant to be read back (recordings, model files) keep full round-trip precision; this is
+//! for messages, warnings and tables.
+
+/// `x` rounded to six significant digits, shortest form (`0.01`, `3600`, `1.5e-9`), `inf`,
+/// `-inf`, or `n/a` for NaN.
+pub fn num(x: f64) -> String {
+    if x.is_nan() {
+        return "n/a".into();
+    }
+    if x.is_infinite() || x == 0.0 {
+        return format!("{x}");
+    }
+    // Shortest round trip of the value rounded to six significant digits: `{:e}` with a
+    // precision rounds in decimal, and parsing it back gives the double nearest to that decimal.
+    let rounded: f64 = format!("{x:.5e}").parse().unwrap_or(x);
+    if (1e-4..1e15).contains(&rounded.abs()) {
+        format!("{rounded}")
+    } else {
+        format!("{rounded:e}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::num;
+    use proptest::prelude::*;
+
+    #[test]
+    fn no_artefacts_and_no_nan() {
+        assert_eq!(num(0.09999999999999999), "0.1");
+        assert_eq!(num(1.8234943590000001), "1.82349");
+        assert_eq!(num(49.400000000000006), "49.4");
+        assert_eq!(num(0.009999999999990905), "0.01");
+        assert_eq!(num(3600.0), "3600");
+        assert_eq!(num(-2.5), "-2.5");
+        assert_eq!(num(1.5e-9), "1.5e-9");
+        assert_eq!(num(1e300), "1e300");
+        assert_eq!(num(f64::NAN), "n/a");
+        assert_eq!(num(0.0), "0");
+        assert_eq!(num(f64::INFINITY), "inf");
+    }
+
+    proptest! {
+        /// Never more than six significant digits, and the text reads back close to the value.
+        #[test]
+        fn short_and_close(x in -1e12f64..1e12) {
+            let s = num(x);
+            let digits = s.trim_start_matches('-').split('e').next().unwrap_or("")
+                .chars().filter(char::is_ascii_digit).collect::<String>();
+            prop_assert!(digits.trim_start_matches('0').trim_end_matches('0').len() <= 6, "{s}");
+            let back: f64 = s.parse().unwrap();
+            prop_assert!((back - x).abs() <= 1e-5 * x.abs() + 1e-300, "{x} -> {s}");
+        }
+    }
+}
