@@ -1,7 +1,9 @@
 //! The Prometheus endpoint of `[metrics]`: the loop's figures, served as text on `GET /metrics`.
 //!
-//! Names follow Prometheus conventions (base units, `_total` for counters, ratios 0-1):
-//! - `valve_bridge_timing_error_seconds`: histogram of |actual - scheduled| cycle start;
+//! Names follow Prometheus conventions (base units, `_total` for counters, ratios 0-1); every
+//! figure of a valve carries its name as the label `valve`:
+//! - `valve_bridge_timing_error_seconds`: histogram of |actual - scheduled| cycle start (one
+//!   per cycle, shared by the valves of that cycle);
 //! - `valve_bridge_cycles_total`: cycles that ran a valve transaction;
 //! - `valve_bridge_cycle_failures_total{kind="timeout"|"error"|"disconnected"}`;
 //! - `valve_bridge_missed_cycles_total`: slots skipped because a cycle overran;
@@ -14,8 +16,8 @@
 //!   `valve_bridge_server_connections_accepted_total`, `..._refused_total` (closed at the
 //!   connection limit), `..._idle_closed_total` and `valve_bridge_server_accept_errors_total`.
 //!
-//! [`LoopMetrics`] registers every metric once at start-up and keeps the handles, so the loop
-//! updates its own with atomic operations only (no lookup by label, no allocation); the server
+//! [`LoopMetrics`] registers every metric once at start-up and keeps each valve's handles
+//! ([`ValveMetrics`]), so the loop updates its own with atomic operations only (no lookup by label, no allocation); the server
 //! figures are copied from their [`Health`] when the endpoint is scraped.
 //!
 //! [`serve`] answers HTTP on the daemon's network thread, as a [`crate::net`] server (accept
@@ -27,7 +29,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use prometheus::{
-    Gauge, Histogram, HistogramOpts, IntCounter, IntCounterVec, IntGaugeVec, Opts, Registry,
+    Gauge, GaugeVec, Histogram, HistogramOpts, IntCounter, IntCounterVec, IntGaugeVec, Opts,
+    Registry,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
@@ -60,6 +63,14 @@ struct ServerMetrics {
 pub struct LoopMetrics {
     registry: Registry,
     timing_s: Histogram,
+    /// Each valve's handles, in the order of the config.
+    valves: Vec<ValveMetrics>,
+    servers: ServerMetrics,
+}
+
+/// One valve's metrics (label `valve`), updated by the loop with atomic operations only.
+#[derive(Debug, Clone)]
+pub struct ValveMetrics {
     cycles: IntCounter,
     /// Failures by kind: timeout, error, disconnected.
     failures: [IntCounter; 3],
@@ -68,12 +79,11 @@ pub struct LoopMetrics {
     vp_ratio: Gauge,
     reconnects: IntCounter,
     watchdog_trips: IntCounter,
-    servers: ServerMetrics,
 }
 
 impl LoopMetrics {
-    /// Registers every metric in a new registry.
-    pub fn new() -> Result<LoopMetrics, prometheus::Error> {
+    /// Registers every metric in a new registry, for the valves named `valves`.
+    pub fn new(valves: &[&str]) -> Result<LoopMetrics, prometheus::Error> {
         let registry = Registry::new();
         let timing_s = Histogram::with_opts(
             HistogramOpts::new(
@@ -82,8 +92,9 @@ impl LoopMetrics {
             )
             .buckets(TIMING_BUCKETS_S.to_vec()),
         )?;
-        let counter = |name: &str, help: &str| IntCounter::new(name, help);
-        let gauge = |name: &str, help: &str| Gauge::new(name, help);
+        let counter =
+            |name: &str, help: &str| IntCounterVec::new(Opts::new(name, help), &["valve"]);
+        let gauge = |name: &str, help: &str| GaugeVec::new(Opts::new(name, help), &["valve"]);
         let cycles = counter(
             "valve_bridge_cycles_total",
             "Cycles that ran a valve transaction",
@@ -93,13 +104,8 @@ impl LoopMetrics {
                 "valve_bridge_cycle_failures_total",
                 "Valve transactions that gave no V_P, by kind",
             ),
-            &["kind"],
+            &["valve", "kind"],
         )?;
-        let failures = [
-            by_kind.get_metric_with_label_values(&["timeout"])?,
-            by_kind.get_metric_with_label_values(&["error"])?,
-            by_kind.get_metric_with_label_values(&["disconnected"])?,
-        ];
         let missed = counter(
             "valve_bridge_missed_cycles_total",
             "Slots skipped because the previous cycle overran",
@@ -121,25 +127,33 @@ impl LoopMetrics {
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
+        let valves = (valves.iter())
+            .map(|&v| {
+                let kind = |k| by_kind.get_metric_with_label_values(&[v, k]);
+                Ok(ValveMetrics {
+                    cycles: cycles.get_metric_with_label_values(&[v])?,
+                    failures: [kind("timeout")?, kind("error")?, kind("disconnected")?],
+                    missed: missed.get_metric_with_label_values(&[v])?,
+                    op_ratio: op_ratio.get_metric_with_label_values(&[v])?,
+                    vp_ratio: vp_ratio.get_metric_with_label_values(&[v])?,
+                    reconnects: reconnects.get_metric_with_label_values(&[v])?,
+                    watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
+                })
+            })
+            .collect::<Result<Vec<_>, prometheus::Error>>()?;
         registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
-        for c in [&cycles, &missed, &reconnects, &watchdog_trips] {
-            registry.register(Box::new(c.clone()))?;
+        for c in [cycles, missed, reconnects, watchdog_trips] {
+            registry.register(Box::new(c))?;
         }
-        for g in [&op_ratio, &vp_ratio] {
-            registry.register(Box::new(g.clone()))?;
+        for g in [op_ratio, vp_ratio] {
+            registry.register(Box::new(g))?;
         }
         servers.register(&registry)?;
         Ok(LoopMetrics {
             registry,
             timing_s,
-            cycles,
-            failures,
-            missed,
-            op_ratio,
-            vp_ratio,
-            reconnects,
-            watchdog_trips,
+            valves,
             servers,
         })
     }
@@ -149,11 +163,27 @@ impl LoopMetrics {
         &self.registry
     }
 
-    /// Counts a logged row and its timing error (None for a skipped slot).
-    pub fn record(&self, row: &Sample, lateness: Option<Duration>) {
-        if let Some(l) = lateness {
-            self.timing_s.observe(l.as_secs_f64());
+    /// The handles of the `i`-th valve of the config (None past the last).
+    pub fn valve(&self, i: usize) -> Option<ValveMetrics> {
+        self.valves.get(i).cloned()
+    }
+
+    /// Observes the timing error of a cycle that ran.
+    pub fn timing(&self, lateness: Duration) {
+        self.timing_s.observe(lateness.as_secs_f64());
+    }
+
+    /// Copies the servers' figures into their metrics (at scrape time, off the loop thread).
+    pub fn observe_servers(&self, servers: &[(&'static str, Arc<Health>)]) {
+        for (name, health) in servers {
+            self.servers.observe(name, &health.view());
         }
+    }
+}
+
+impl ValveMetrics {
+    /// Counts a logged row of this valve.
+    pub fn record(&self, row: &Sample) {
         match row.status {
             Status::Skipped => self.missed.inc(),
             Status::Timeout => self.failures[0].inc(),
@@ -179,13 +209,6 @@ impl LoopMetrics {
             (&self.watchdog_trips, watchdog_trips),
         ] {
             c.inc_by(total.saturating_sub(c.get()));
-        }
-    }
-
-    /// Copies the servers' figures into their metrics (at scrape time, off the loop thread).
-    pub fn observe_servers(&self, servers: &[(&'static str, Arc<Health>)]) {
-        for (name, health) in servers {
-            self.servers.observe(name, &health.view());
         }
     }
 }
@@ -361,15 +384,17 @@ mod tests {
 
     #[test]
     fn rows_update_counters_and_gauges() {
-        let m = LoopMetrics::new().unwrap();
-        m.record(
-            &row(Status::Ok, Some(41.5)),
-            Some(Duration::from_micros(30)),
-        );
-        m.record(&row(Status::Timeout, None), Some(Duration::from_micros(3)));
-        m.record(&row(Status::Skipped, None), None);
-        m.totals(2, 1);
-        m.totals(2, 1);
+        let m = LoopMetrics::new(&["a", "b"]).unwrap();
+        let (a, b) = (m.valve(0).unwrap(), m.valve(1).unwrap());
+        assert!(m.valve(2).is_none());
+        a.record(&row(Status::Ok, Some(41.5)));
+        m.timing(Duration::from_micros(30));
+        a.record(&row(Status::Timeout, None));
+        m.timing(Duration::from_micros(3));
+        a.record(&row(Status::Skipped, None));
+        b.record(&row(Status::Ok, Some(40.0)));
+        a.totals(2, 1);
+        a.totals(2, 1);
         let health = Arc::new(Health::default());
         health.idle_closed();
         m.observe_servers(&[("modbus-server", Arc::clone(&health))]);
@@ -378,14 +403,18 @@ mod tests {
             respond(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n", m.registry());
         assert_eq!((status, ctype), ("200 OK", prometheus::TEXT_FORMAT));
         for line in [
-            "valve_bridge_cycles_total 2",
-            "valve_bridge_cycle_failures_total{kind=\"timeout\"} 1",
-            "valve_bridge_cycle_failures_total{kind=\"error\"} 0",
-            "valve_bridge_missed_cycles_total 1",
-            "valve_bridge_op_ratio 0.42",
-            "valve_bridge_vp_ratio 0.415",
-            "valve_bridge_reconnects_total 2",
-            "valve_bridge_watchdog_trips_total 1",
+            "valve_bridge_cycles_total{valve=\"a\"} 2",
+            "valve_bridge_cycles_total{valve=\"b\"} 1",
+            "valve_bridge_cycle_failures_total{kind=\"timeout\",valve=\"a\"} 1",
+            "valve_bridge_cycle_failures_total{kind=\"error\",valve=\"a\"} 0",
+            "valve_bridge_cycle_failures_total{kind=\"timeout\",valve=\"b\"} 0",
+            "valve_bridge_missed_cycles_total{valve=\"a\"} 1",
+            "valve_bridge_op_ratio{valve=\"a\"} 0.42",
+            "valve_bridge_vp_ratio{valve=\"a\"} 0.415",
+            "valve_bridge_vp_ratio{valve=\"b\"} 0.4",
+            "valve_bridge_reconnects_total{valve=\"a\"} 2",
+            "valve_bridge_watchdog_trips_total{valve=\"a\"} 1",
+            "valve_bridge_watchdog_trips_total{valve=\"b\"} 0",
             "valve_bridge_server_up{server=\"modbus-server\"} 1",
             "valve_bridge_server_connections{server=\"modbus-server\"} 0",
             "valve_bridge_server_connections_idle_closed_total{server=\"modbus-server\"} 1",
@@ -400,7 +429,7 @@ mod tests {
 
     #[test]
     fn other_requests_are_refused() {
-        let m = LoopMetrics::new().unwrap();
+        let m = LoopMetrics::new(&["valve"]).unwrap();
         let r = m.registry();
         assert_eq!(respond(b"GET /metrics?x=1 HTTP/1.0\r\n\r\n", r).0, "200 OK");
         assert_eq!(respond(b"GET / HTTP/1.1\r\n\r\n", r).0, "404 Not Found");

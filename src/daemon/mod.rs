@@ -49,7 +49,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 pub use config::Config;
 pub use running::{start, Running};
-pub use stats::Summary;
+pub use stats::{Summary, ValveSummary};
 use valve::BackendError;
 
 use crate::toml_file::TomlError;

@@ -1,5 +1,6 @@
-//! Starting the daemon: checks the options, binds the listening sockets, opens the valve on the
-//! loop thread, starts the logger and the network thread, and hands the loop its parts.
+//! Starting the daemon: checks the options, binds the listening sockets, opens the valves on
+//! the loop thread, starts a logger per valve and the network thread, and hands the loop its
+//! parts.
 //! [`Running`] is the started daemon: stop it, watch it, and join it for the [`Summary`].
 //!
 //! Not here: what the loop does each slot ([`super::control`]), serving ([`super::net`]).
@@ -10,13 +11,13 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use super::config::{ClockKind, Config, SourceKind};
-use super::control::{self, Loop, LoopEnd};
+use super::config::{ClockKind, Config};
+use super::control::{self, Lane, Loop, LoopEnd};
 use super::exporter::LoopMetrics;
-use super::logger::{LogReport, Logger, Status};
+use super::logger::{LogReport, Logger};
 use super::net::{Listeners, Net};
 use super::source::Source;
-use super::stats::{Live, Stats, Summary};
+use super::stats::{Live, Summary, ValveSummary};
 use super::{DaemonError, RunOptions};
 use crate::net::Health;
 
@@ -26,30 +27,34 @@ pub struct Running {
     live: Arc<Live>,
     rate_hz: f64,
     control: JoinHandle<Result<LoopEnd, DaemonError>>,
-    logger: JoinHandle<Result<LogReport, DaemonError>>,
+    /// Each valve's name and logger, in the order of the config.
+    loggers: Vec<(String, JoinHandle<Result<LogReport, DaemonError>>)>,
     net: Option<Net>,
     endpoints: Vec<(&'static str, SocketAddr)>,
     servers: Vec<(&'static str, Arc<Health>)>,
 }
 
-/// Starts the loop and logger threads; the loop runs until stopped, the duration or the source ends.
+/// Starts the loop and logger threads; the loop runs until stopped, the duration or a source ends.
 pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let clock = checked_clock(&config, &opts)?;
     let rate_hz = config.loop_.rate_hz;
     let period = config.loop_.period();
-    // Sockets are bound before the valve is opened, so a taken port stops the start first.
-    let source = Source::new(&config.source, &config.safety, period.as_secs_f64());
+    // Sockets are bound before the valves are opened, so a taken port stops the start first.
+    let mut sources: Vec<Source> = (config.valves.iter())
+        .map(|v| Source::new(config.source_of(v), &config.safety, period.as_secs_f64()))
+        .collect();
+    let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
     let metrics = config
         .metrics
         .as_ref()
-        .map(|_| LoopMetrics::new())
+        .map(|_| LoopMetrics::new(&names))
         .transpose()?;
-    let listeners = Listeners::bind(&config, &source, metrics.as_ref())?;
-    // The backend is opened on the loop thread, inside the runtime that will drive its I/O; the
-    // rest of the loop is handed over once it is open, so a valve that cannot be reached stops
-    // the start before any log file is created.
+    let listeners = Listeners::bind(&config, sources.first(), metrics.as_ref())?;
+    // The backends are opened on the loop thread, inside the runtime that will drive their I/O;
+    // the rest of the loop is handed over once they are open, so a valve that cannot be reached
+    // stops the start before any log file is created.
     let spawned = control::spawn(
-        config.valve.clone(),
+        config.valves.clone(),
         period.as_secs_f64(),
         opts.require_device,
     )?;
@@ -65,23 +70,31 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
-    let logger = Logger::start(&config.log, &dir, stop.clone())?;
-    tracing::info!(
-        valve = %spawned.valve,
-        source = config.source.kind.tag(),
-        rate_hz,
-        clock = ?clock,
-        "starting the loop"
-    );
-    let tx = logger.tx;
+    let mut lanes = Vec::with_capacity(config.valves.len());
+    let mut loggers = Vec::with_capacity(config.valves.len());
+    for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
+        let logger = Logger::start(&config.log, &dir, valve.name.as_deref(), stop.clone())?;
+        tracing::info!(
+            valve = valve.label(),
+            described = %described,
+            source = config.source_of(valve).kind.tag(),
+            "valve"
+        );
+        loggers.push((valve.label().to_string(), logger.handle));
+        let source = sources.remove(0);
+        let m = metrics.as_ref().and_then(|m| m.valve(i));
+        lanes.push((valve.label().to_string(), source, m, logger.tx));
+    }
+    tracing::info!(valves = lanes.len(), rate_hz, clock = ?clock, "starting the loop");
     let (loop_stop, loop_live) = (stop.clone(), live.clone());
-    let control = spawned.run(move |backend| Loop {
+    let control = spawned.run(move |backends| Loop {
         clock,
         period,
         spin: Duration::from_micros(u64::from(config.loop_.spin_us)),
         realtime_priority: config.loop_.realtime_priority,
-        source,
-        backend,
+        lanes: (lanes.into_iter().zip(backends))
+            .map(|((name, source, m, tx), backend)| Lane::new(name, source, backend, m, tx))
+            .collect(),
         metrics,
         safe_action: config.safety.on_stop,
         go_to_pct: config.safety.go_to_pct,
@@ -90,18 +103,13 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
             .map(|d| (d * rate_hz).round().max(1.0) as u64),
         stop: loop_stop,
         live: loop_live,
-        tx,
-        stats: Stats::new(),
-        last_op: None,
-        last_status: Status::Ok,
-        last_skipped_k: None,
     })?;
     Ok(Running {
         stop,
         live,
         rate_hz,
         control,
-        logger: logger.handle,
+        loggers,
         net,
         endpoints,
         servers,
@@ -120,10 +128,11 @@ fn checked_clock(config: &Config, opts: &RunOptions) -> Result<ClockKind, Daemon
     } else {
         config.loop_.clock
     };
-    if clock == ClockKind::Virtual && !config.valve.kind.is_simulated() {
-        return Err(DaemonError::VirtualClock(config.valve.kind.tag().into()));
+    let real = config.valves.iter().find(|v| !v.kind.is_simulated());
+    if let (ClockKind::Virtual, Some(v)) = (clock, real) {
+        return Err(DaemonError::VirtualClock(v.kind.tag().into()));
     }
-    if clock == ClockKind::Virtual && config.source.kind == SourceKind::ModbusServer {
+    if clock == ClockKind::Virtual && config.controller_source().is_some() {
         return Err(DaemonError::VirtualClockController);
     }
     Ok(clock)
@@ -155,7 +164,7 @@ impl Running {
         &self.endpoints
     }
 
-    /// Waits for the loop and the logger to end and returns the summary.
+    /// Waits for the loop and the loggers to end and returns the summary.
     pub fn finish(self) -> Result<Summary, DaemonError> {
         let end = self
             .control
@@ -163,25 +172,33 @@ impl Running {
             .map_err(|_| DaemonError::Panicked("loop"));
         // The controller and the scraper are answered until the stop action has been applied.
         let net = self.net.map(Net::stop).transpose();
-        // The loop thread has dropped its sender: the logger drains, flushes and closes.
-        let log = self
-            .logger
-            .join()
-            .map_err(|_| DaemonError::Panicked("logger"))??;
+        // The loop thread has dropped its senders: each logger drains, flushes and closes.
+        let mut logs = Vec::with_capacity(self.loggers.len());
+        for (name, handle) in self.loggers {
+            let log = handle
+                .join()
+                .map_err(|_| DaemonError::Panicked("logger"))??;
+            logs.push((name, log));
+        }
         net?;
         let end = end??;
         Ok(Summary {
-            stats: end.stats,
+            valves: (end.valves.into_iter().zip(logs))
+                .map(|(lane, (name, log))| ValveSummary {
+                    name,
+                    stats: lane.stats,
+                    safe: lane.safe,
+                    reconnects: lane.reconnects,
+                    connection_attempts: lane.attempts,
+                    log,
+                })
+                .collect(),
             reason: end.reason,
             slots: end.slots,
             rate_hz: self.rate_hz,
-            safe: end.safe,
-            reconnects: end.reconnects,
-            connection_attempts: end.attempts,
             servers: (self.servers.iter())
                 .map(|(name, h)| (*name, h.view()))
                 .collect(),
-            log,
         })
     }
 }

@@ -199,7 +199,8 @@ mod tests {
         let rt = tokio::runtime::Builder::new_current_thread()
             .build()
             .unwrap();
-        rt.block_on(Backend::open(&cfg.valve, 0.01, true)).unwrap()
+        rt.block_on(Backend::open(&cfg.valves[0], 0.01, true))
+            .unwrap()
     }
 
     fn run(b: &mut Backend, ops: &[(u64, f64)]) -> Vec<f64> {
