@@ -59,7 +59,7 @@ fn per_cycle_calls_do_not_allocate() {
     .unwrap();
     let mut source = Source::new(&cfg.source, &cfg.safety, cfg.loop_.period_s());
     let bank = source.served_bank().unwrap().clone();
-    let metrics = LoopMetrics::new(&["level", "cyclone"]).unwrap();
+    let metrics = LoopMetrics::new(&["level", "cyclone"], false).unwrap();
     let valve = metrics.valve(1).unwrap();
     let mut counted = 0;
     for k in 0..500u64 {

@@ -11,6 +11,10 @@
 //!   fraction of full travel (0.45 = 45 %);
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
+//! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
+//!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
+//!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
+//!   `..._tracking_error_ratio` and `valve_bridge_health_alarm` (1 in alarm);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
 //!   `valve_bridge_server_connections_accepted_total`, `..._refused_total` (closed at the
@@ -35,6 +39,7 @@ use prometheus::{
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
+use super::health::Figures;
 use super::logger::{Sample, Status};
 use crate::net::{self, Health, Limits};
 
@@ -65,7 +70,87 @@ pub struct LoopMetrics {
     timing_s: Histogram,
     /// Each valve's handles, in the order of the config.
     valves: Vec<ValveMetrics>,
+    /// Each valve's health gauges, when `[health]` is on.
+    health: Vec<HealthMetrics>,
     servers: ServerMetrics,
+}
+
+/// One valve's health gauges (label `valve`), set by the health thread once per window.
+#[derive(Debug, Clone)]
+pub struct HealthMetrics {
+    dead_time_s: Gauge,
+    reversal_delay_s: Gauge,
+    opening_speed: Gauge,
+    closing_speed: Gauge,
+    tracking: Gauge,
+    alarm: Gauge,
+}
+
+impl HealthMetrics {
+    /// Publishes a window's figures (NaN for a delay it could not measure) and the alarm.
+    pub fn publish(&self, f: &Figures, alarm: bool) {
+        self.dead_time_s.set(f.dead_time_s.unwrap_or(f64::NAN));
+        self.reversal_delay_s
+            .set(f.reversal_delay_s.unwrap_or(f64::NAN));
+        self.opening_speed.set(f.opening_speed_pct_per_s / 100.0);
+        self.closing_speed.set(f.closing_speed_pct_per_s / 100.0);
+        self.tracking.set(f.tracking_rms_pct / 100.0);
+        self.alarm.set(f64::from(u8::from(alarm)));
+    }
+}
+
+/// The health gauges of `valves`, registered in `registry`.
+fn health_metrics(
+    registry: &Registry,
+    valves: &[&str],
+) -> Result<Vec<HealthMetrics>, prometheus::Error> {
+    let gauge = |name: &str, help: &str| -> Result<GaugeVec, prometheus::Error> {
+        let g = GaugeVec::new(Opts::new(name, help), &["valve"])?;
+        registry.register(Box::new(g.clone()))?;
+        Ok(g)
+    };
+    let gauges = [
+        gauge(
+            "valve_bridge_health_dead_time_seconds",
+            "Mean delay of same-direction steps over the health window",
+        )?,
+        gauge(
+            "valve_bridge_health_reversal_delay_seconds",
+            "Mean delay of reversals over the health window",
+        )?,
+        gauge(
+            "valve_bridge_health_opening_speed_ratio_per_second",
+            "Opening stroke speed over the health window, fraction of travel per second",
+        )?,
+        gauge(
+            "valve_bridge_health_closing_speed_ratio_per_second",
+            "Closing stroke speed over the health window, fraction of travel per second",
+        )?,
+        gauge(
+            "valve_bridge_health_tracking_error_ratio",
+            "RMS of O_P - V_P over the health window, fraction of travel",
+        )?,
+        gauge(
+            "valve_bridge_health_alarm",
+            "1 while a health figure is past its limit against the baseline",
+        )?,
+    ];
+    valves
+        .iter()
+        .map(|&v| {
+            let [d, r, o, c, t, a] = gauges
+                .each_ref()
+                .map(|g| g.get_metric_with_label_values(&[v]));
+            Ok(HealthMetrics {
+                dead_time_s: d?,
+                reversal_delay_s: r?,
+                opening_speed: o?,
+                closing_speed: c?,
+                tracking: t?,
+                alarm: a?,
+            })
+        })
+        .collect()
 }
 
 /// One valve's metrics (label `valve`), updated by the loop with atomic operations only.
@@ -82,8 +167,9 @@ pub struct ValveMetrics {
 }
 
 impl LoopMetrics {
-    /// Registers every metric in a new registry, for the valves named `valves`.
-    pub fn new(valves: &[&str]) -> Result<LoopMetrics, prometheus::Error> {
+    /// Registers every metric in a new registry, for the valves named `valves` (with their
+    /// health gauges when `health`).
+    pub fn new(valves: &[&str], health: bool) -> Result<LoopMetrics, prometheus::Error> {
         let registry = Registry::new();
         let timing_s = Histogram::with_opts(
             HistogramOpts::new(
@@ -127,6 +213,7 @@ impl LoopMetrics {
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
+        let valves_names = valves;
         let valves = (valves.iter())
             .map(|&v| {
                 let kind = |k| by_kind.get_metric_with_label_values(&[v, k]);
@@ -150,10 +237,16 @@ impl LoopMetrics {
             registry.register(Box::new(g))?;
         }
         servers.register(&registry)?;
+        let health = if health {
+            health_metrics(&registry, valves_names)?
+        } else {
+            Vec::new()
+        };
         Ok(LoopMetrics {
             registry,
             timing_s,
             valves,
+            health,
             servers,
         })
     }
@@ -166,6 +259,11 @@ impl LoopMetrics {
     /// The handles of the `i`-th valve of the config (None past the last).
     pub fn valve(&self, i: usize) -> Option<ValveMetrics> {
         self.valves.get(i).cloned()
+    }
+
+    /// The health gauges of the `i`-th valve (None without `[health]`).
+    pub fn health(&self, i: usize) -> Option<HealthMetrics> {
+        self.health.get(i).cloned()
     }
 
     /// Observes the timing error of a cycle that ran.
@@ -384,7 +482,7 @@ mod tests {
 
     #[test]
     fn rows_update_counters_and_gauges() {
-        let m = LoopMetrics::new(&["a", "b"]).unwrap();
+        let m = LoopMetrics::new(&["a", "b"], false).unwrap();
         let (a, b) = (m.valve(0).unwrap(), m.valve(1).unwrap());
         assert!(m.valve(2).is_none());
         a.record(&row(Status::Ok, Some(41.5)));
@@ -428,8 +526,37 @@ mod tests {
     }
 
     #[test]
+    fn health_gauges_carry_the_valve_label() {
+        let m = LoopMetrics::new(&["a"], true).unwrap();
+        assert!(m.health(1).is_none());
+        let f = Figures {
+            same_steps: 9,
+            reversals: 2,
+            dead_time_s: Some(0.45),
+            reversal_delay_s: None,
+            opening_speed_pct_per_s: 20.0,
+            closing_speed_pct_per_s: 10.0,
+            tracking_rms_pct: 5.0,
+        };
+        m.health(0).unwrap().publish(&f, true);
+        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        for line in [
+            "valve_bridge_health_dead_time_seconds{valve=\"a\"} 0.45",
+            "valve_bridge_health_reversal_delay_seconds{valve=\"a\"} NaN",
+            "valve_bridge_health_opening_speed_ratio_per_second{valve=\"a\"} 0.2",
+            "valve_bridge_health_closing_speed_ratio_per_second{valve=\"a\"} 0.1",
+            "valve_bridge_health_tracking_error_ratio{valve=\"a\"} 0.05",
+            "valve_bridge_health_alarm{valve=\"a\"} 1",
+        ] {
+            assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
+        }
+        let plain = LoopMetrics::new(&["a"], false).unwrap();
+        assert!(plain.health(0).is_none());
+    }
+
+    #[test]
     fn other_requests_are_refused() {
-        let m = LoopMetrics::new(&["valve"]).unwrap();
+        let m = LoopMetrics::new(&["valve"], true).unwrap();
         let r = m.registry();
         assert_eq!(respond(b"GET /metrics?x=1 HTTP/1.0\r\n\r\n", r).0, "200 OK");
         assert_eq!(respond(b"GET / HTTP/1.1\r\n\r\n", r).0, "404 Not Found");

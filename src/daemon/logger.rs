@@ -27,6 +27,8 @@
 //! percentages to 0.0001 % ([`PCT_DECIMALS`]; the loop rounds O_P to it before sending, so the
 //! logged O_P is the one sent), durations to 1 ns: never `49.400000000000006`.
 //!
+//! Rows written are passed on to the health thread when there is one ([`Forward`]).
+//!
 //! This module does not decide what is logged; the loop does.
 
 use std::fs::File;
@@ -197,6 +199,9 @@ pub struct LogReport {
     pub rows: u64,
 }
 
+/// Where a logger passes on the rows it wrote: the health thread, with the valve's index.
+pub type Forward = (usize, Sender<(usize, Sample)>);
+
 /// The running logger: the channel to send rows on, and its thread.
 pub struct Logger {
     /// Where the loop sends rows.
@@ -352,6 +357,7 @@ impl Logger {
         cfg: &LogConfig,
         dir: &Path,
         name: Option<&str>,
+        forward: Option<Forward>,
         stop: Arc<AtomicBool>,
     ) -> Result<Logger, DaemonError> {
         std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
@@ -372,7 +378,7 @@ impl Logger {
         let (tx, rx) = mpsc::channel();
         let handle = std::thread::Builder::new()
             .name("vb-logger".into())
-            .spawn(move || write_all(rx, files, flush_every, &stop))
+            .spawn(move || write_all(rx, files, flush_every, forward, &stop))
             .map_err(|source| DaemonError::Thread {
                 what: "logger",
                 source,
@@ -386,6 +392,7 @@ fn write_all(
     rx: Receiver<Sample>,
     mut files: Files,
     flush_every: Duration,
+    forward: Option<Forward>,
     stop: &AtomicBool,
 ) -> Result<LogReport, DaemonError> {
     let mut next_flush = Instant::now() + flush_every;
@@ -398,6 +405,10 @@ fn write_all(
             let mut step = || -> Result<(), DaemonError> {
                 if let Ok(sample) = &received {
                     files.write(sample)?;
+                    if let Some((i, tx)) = &forward {
+                        // The health thread only hangs up by failing; its join says why.
+                        let _ = tx.send((*i, *sample));
+                    }
                 }
                 if done {
                     files.close()?;
@@ -450,8 +461,14 @@ mod tests {
             rotate_after_s: 1.0,
             flush_interval_ms: 10,
         };
-        let logger =
-            Logger::start(&cfg, dir.path(), None, Arc::new(AtomicBool::new(false))).unwrap();
+        let logger = Logger::start(
+            &cfg,
+            dir.path(),
+            None,
+            None,
+            Arc::new(AtomicBool::new(false)),
+        )
+        .unwrap();
         for k in 0..250u32 {
             let status = if k == 7 { Status::Timeout } else { Status::Ok };
             let vp = (status == Status::Ok).then_some(f64::from(k) / 10.0);
@@ -514,8 +531,14 @@ mod tests {
             flush_interval_ms: 50,
             ..LogConfig::default()
         };
-        let logger =
-            Logger::start(&cfg, dir.path(), None, Arc::new(AtomicBool::new(false))).unwrap();
+        let logger = Logger::start(
+            &cfg,
+            dir.path(),
+            None,
+            None,
+            Arc::new(AtomicBool::new(false)),
+        )
+        .unwrap();
         logger.tx.send(sample(0.0, Status::Ok, Some(1.0))).unwrap();
         std::thread::sleep(Duration::from_millis(300));
         let path = std::fs::read_dir(dir.path())

@@ -14,11 +14,14 @@ use std::time::Duration;
 use super::config::{ClockKind, Config};
 use super::control::{self, Lane, Loop, LoopEnd};
 use super::exporter::LoopMetrics;
+use super::health::{self, HealthReport};
 use super::logger::{LogReport, Logger};
 use super::net::{Listeners, Net};
 use super::source::Source;
 use super::stats::{Live, Summary, ValveSummary};
+use super::valve::BackendError;
 use super::{DaemonError, RunOptions};
+use crate::model::{ModelSpec, Valve};
 use crate::net::Health;
 
 /// A started daemon: its threads and the stop flag.
@@ -29,6 +32,8 @@ pub struct Running {
     control: JoinHandle<Result<LoopEnd, DaemonError>>,
     /// Each valve's name and logger, in the order of the config.
     loggers: Vec<(String, JoinHandle<Result<LogReport, DaemonError>>)>,
+    /// The health thread, with `[health]`.
+    health: Option<JoinHandle<Result<Vec<HealthReport>, DaemonError>>>,
     net: Option<Net>,
     endpoints: Vec<(&'static str, SocketAddr)>,
     servers: Vec<(&'static str, Arc<Health>)>,
@@ -47,7 +52,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let metrics = config
         .metrics
         .as_ref()
-        .map(|_| LoopMetrics::new(&names))
+        .map(|_| LoopMetrics::new(&names, config.health.is_some()))
         .transpose()?;
     let listeners = Listeners::bind(&config, sources.first(), metrics.as_ref())?;
     // The backends are opened on the loop thread, inside the runtime that will drive their I/O;
@@ -70,10 +75,18 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
+    let health = start_health(&config, &dir, metrics.as_ref())?;
     let mut lanes = Vec::with_capacity(config.valves.len());
     let mut loggers = Vec::with_capacity(config.valves.len());
     for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
-        let logger = Logger::start(&config.log, &dir, valve.name.as_deref(), stop.clone())?;
+        let forward = health.as_ref().map(|h| (i, h.tx.clone()));
+        let logger = Logger::start(
+            &config.log,
+            &dir,
+            valve.name.as_deref(),
+            forward,
+            stop.clone(),
+        )?;
         tracing::info!(
             valve = valve.label(),
             described = %described,
@@ -110,10 +123,50 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         rate_hz,
         control,
         loggers,
+        health: health.map(|h| h.handle),
         net,
         endpoints,
         servers,
     })
+}
+
+/// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`.
+fn start_health(
+    config: &Config,
+    dir: &std::path::Path,
+    metrics: Option<&LoopMetrics>,
+) -> Result<Option<health::Health>, DaemonError> {
+    let Some(cfg) = &config.health else {
+        return Ok(None);
+    };
+    std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
+    let period_s = config.loop_.period_s();
+    let mut watched = Vec::with_capacity(config.valves.len());
+    for (i, v) in config.valves.iter().enumerate() {
+        let baseline_model = match &v.health_baseline_model {
+            Some(file) => Some(
+                Valve::new(
+                    &ModelSpec::load(file).map_err(BackendError::from)?,
+                    period_s,
+                )
+                .map_err(BackendError::from)?,
+            ),
+            None => None,
+        };
+        watched.push(health::Watched {
+            name: v.label().to_string(),
+            file_name: v
+                .name
+                .as_ref()
+                .map_or("health.csv".into(), |n| format!("health-{n}.csv")),
+            baseline_model,
+            metrics: metrics.and_then(|m| m.health(i)),
+        });
+    }
+    health::start(cfg, dir, period_s, watched).map(Some)
 }
 
 /// The clock the loop runs on, after checking that `--duration` and the clock fit the config.
@@ -180,6 +233,12 @@ impl Running {
                 .map_err(|_| DaemonError::Panicked("logger"))??;
             logs.push((name, log));
         }
+        // The loggers have dropped theirs: the health thread finishes its rows.
+        let mut health = match self.health {
+            Some(h) => h.join().map_err(|_| DaemonError::Panicked("health"))??,
+            None => Vec::new(),
+        }
+        .into_iter();
         net?;
         let end = end??;
         Ok(Summary {
@@ -191,6 +250,7 @@ impl Running {
                     reconnects: lane.reconnects,
                     connection_attempts: lane.attempts,
                     log,
+                    health: health.next(),
                 })
                 .collect(),
             reason: end.reason,

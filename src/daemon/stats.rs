@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use hdrhistogram::Histogram;
 
+use super::health::HealthReport;
 use super::logger::{LogReport, Sample, Status};
 use super::valve::Fault;
 use crate::net::HealthView;
@@ -211,6 +212,8 @@ pub struct ValveSummary {
     pub connection_attempts: Option<u64>,
     /// What the logger wrote.
     pub log: LogReport,
+    /// What the live health check did, with `[health]`.
+    pub health: Option<HealthReport>,
 }
 
 /// A run in which a valve never gave a V_P: it did not do its job, whatever stopped it.
@@ -322,6 +325,17 @@ impl ValveSummary {
                     .map_or("not read".into(), |v| format!("{v:.2} %"))
             )?,
             None => writeln!(f, "{indent}stop action: none (no O_P was ever sent)")?,
+        }
+        if let Some(h) = &self.health {
+            writeln!(
+                f,
+                "{indent}health: {} windows, {} alarms{}, in {}",
+                h.windows,
+                h.alarms,
+                h.first_alarm_t_s
+                    .map_or(String::new(), |t| format!(" (first at {t:.0} s)")),
+                h.file.display()
+            )?;
         }
         let files: Vec<String> = self
             .log

@@ -214,7 +214,10 @@ impl Emulated {
     fn step_model(&mut self, op_pct: f64, k: u64) -> f64 {
         let op = match &mut self.drift {
             Some(d) => {
-                d.line.set_delay(d.per_slot_s * k as f64, d.period_s);
+                // Whole samples: the model sees only O_Ps that were sent, never a blend (a
+                // blend that changes every slot would look like a new step to pin-cart II).
+                d.line
+                    .set_samples((d.per_slot_s * k as f64 / d.period_s) as usize);
                 d.line.push(op_pct)
             }
             None => op_pct,
@@ -268,12 +271,13 @@ mod tests {
         // Modelless: V_P is O_P delayed by the drift alone, 360 s/h = 1 ms more per 10 ms slot.
         let toml = "[valve.emulated]\nmodel = \"modelless\"\ndead_time_drift_s_per_h = 360.0\ndead_time_drift_max_s = 0.5\n";
         let mut b = backend(toml);
-        // A step at slot 300 shows when k - k / 10 passes 300 (the delay grows meanwhile).
+        // A step at slot 300 shows when k - floor(k / 10) reaches 300 (the delay grows
+        // meanwhile, by whole slots).
         let mut ops: Vec<(u64, f64)> = (0..300).map(|k| (k, 10.0)).collect();
         ops.extend((300..400).map(|k| (k, 20.0)));
         let vp = run(&mut b, &ops);
         let first = vp.iter().position(|&v| v > 10.0).unwrap();
-        assert!((333..=334).contains(&first), "{first}");
+        assert_eq!(first, 333);
         // The growth stops at the most the drift adds (0.5 s, reached at 5 s).
         let mut ops: Vec<(u64, f64)> = (400..2000).map(|k| (k, 20.0)).collect();
         ops.extend((2000..2100).map(|k| (k, 30.0)));

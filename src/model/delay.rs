@@ -36,7 +36,7 @@ impl DelayLine {
     }
 
     /// A line that can delay by up to `max_delay_s` at `sample_period_s`, starting with no
-    /// delay; [`DelayLine::set_delay`] changes the delay without allocating.
+    /// delay; [`DelayLine::set_samples`] changes the delay without allocating.
     pub fn with_capacity(max_delay_s: f64, sample_period_s: f64) -> Self {
         let mut line = DelayLine::new(max_delay_s, sample_period_s);
         line.whole = 0;
@@ -44,17 +44,11 @@ impl DelayLine {
         line
     }
 
-    /// Sets the delay to `delay_s` seconds at `sample_period_s`, within the line's capacity
-    /// (cut to the whole samples of the capacity; negative delays are zero). The stored history is kept, so a
-    /// growing delay repeats recent inputs instead of jumping.
-    pub fn set_delay(&mut self, delay_s: f64, sample_period_s: f64) {
-        let most = (self.buf.len() - 2) as f64;
-        let samples = (delay_s / sample_period_s).clamp(0.0, most);
-        self.whole = samples.floor() as usize;
-        self.frac = samples - self.whole as f64;
-        if self.whole as f64 == most {
-            self.frac = 0.0;
-        }
+    /// Sets the delay to `samples` whole samples, at most the line's capacity. The stored
+    /// history is kept, so a growing delay repeats the last input instead of jumping.
+    pub fn set_samples(&mut self, samples: usize) {
+        self.whole = samples.min(self.buf.len() - 2);
+        self.frac = 0.0;
     }
 
     /// Fills the history with `value`, as if the input had been constant forever.
@@ -100,12 +94,12 @@ mod tests {
         let mut d = DelayLine::with_capacity(0.03, 0.01);
         d.reset(0.0);
         assert_eq!(d.push(1.0), 1.0);
-        d.set_delay(0.02, 0.01);
+        d.set_samples(2);
         assert_eq!(d.push(2.0), 0.0);
         assert_eq!(d.push(3.0), 1.0);
-        d.set_delay(0.015, 0.01);
-        assert_eq!(d.push(4.0), 2.5);
-        d.set_delay(1.0, 0.01);
+        d.set_samples(1);
+        assert_eq!(d.push(4.0), 3.0);
+        d.set_samples(100);
         assert_eq!(d.push(5.0), 2.0);
     }
 

@@ -1,7 +1,8 @@
 //! The daemon's TOML configuration: types, defaults, range checks and the embedded default.
 //!
-//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]` and `[metrics]`,
-//! all optional (no `[metrics]`: no Prometheus endpoint). Several valves are several
+//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]`, `[metrics]`
+//! and `[health]`, all optional (no `[metrics]`: no Prometheus endpoint; no `[health]`: no live
+//! health check). Several valves are several
 //! `[[valve]]` tables, each with a `name` and, optionally, a `[valve.source]` of its own.
 //! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
 //! each kind live in their own sub-table (`[valve.emulated]`, `[source.sine]`, ...), so a file
@@ -18,6 +19,7 @@
 //!
 //! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
 
+mod health;
 mod source;
 mod valve;
 
@@ -28,6 +30,7 @@ use serde::Deserialize;
 
 use crate::toml_file::{self, TomlError};
 
+pub use health::HealthConfig;
 pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
     SineConfig, SourceConfig, SourceKind, StepsConfig,
@@ -69,6 +72,8 @@ pub struct Config {
     pub log: LogConfig,
     /// The Prometheus endpoint, if any.
     pub metrics: Option<MetricsConfig>,
+    /// The live health check of every valve, if any.
+    pub health: Option<HealthConfig>,
 }
 
 /// `[loop]`: rate and clock.
@@ -339,6 +344,9 @@ impl Config {
         }
         self.safety.check_in(&c)?;
         self.log.check_in(&c)?;
+        if let Some(h) = &self.health {
+            h.check_in(&c, self.loop_.period_s())?;
+        }
         if let Some(m) = &self.metrics {
             c.max_connections("metrics", m.max_connections)?;
         }

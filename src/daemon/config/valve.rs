@@ -44,6 +44,10 @@ pub struct ValveConfig {
     /// `[valve.registers]`: the positioner's register map (Modbus kinds).
     #[serde(default)]
     pub registers: RegisterMap,
+    /// A model file whose answer to each window's O_P is the health baseline (default: the
+    /// first window with enough steps).
+    #[serde(default)]
+    pub health_baseline_model: Option<PathBuf>,
 }
 
 /// Valve backends.
@@ -224,6 +228,15 @@ impl ValveConfig {
     /// The checks of `[valve]` and its sub-tables, for a loop of `[loop]` `timing`.
     fn check_in(&self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
         self.emulated.check_in(c)?;
+        if let Some(file) = &self.health_baseline_model {
+            if let Err(err) = ModelSpec::load(file) {
+                return Err(c.bad(
+                    "valve",
+                    "health_baseline_model",
+                    format!("cannot use model file `{}`: {err} (a model file looks like config/models/pincart2.toml; `identify --out` writes them)", file.display()),
+                ));
+            }
+        }
         self.registers
             .check_in(c.text, c.path, "valve.registers")
             .map_err(|e| c.shift(e))?;
