@@ -14,7 +14,8 @@
 //!
 //! It runs on a thread of its own (`vb-health`), fed by the loggers with the rows they write:
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
-//! valve) beside the log and to the Prometheus gauges; an alarm is a warning in the log, the
+//! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
+//! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge and, per valve, a flag others can read ([`Alarms`]).
 
 use std::collections::VecDeque;
@@ -33,6 +34,7 @@ use crate::fit::seeds::travel_speed;
 use crate::fit::steps::{analyse, StepOptions};
 use crate::metrics::stats::median;
 use crate::model::Valve;
+use crate::report::plot;
 
 /// What counts as a step for the health delays: a jump of 0.5 % held 1 s, as for `steps`; its
 /// delay ends when V_P has moved 2 % of it (and four noise sigmas), so the slewing of a large
@@ -182,7 +184,19 @@ struct Monitor {
     report: HealthReport,
     csv: csv::Writer<File>,
     metrics: Option<HealthMetrics>,
+    /// Loop time of each compared window and its figures over the baseline's, for the plot.
+    history: Vec<(f64, [f64; 6])>,
 }
+
+/// The figures of the plot, in the order of [`Monitor::history`].
+const PLOTTED: [&str; 6] = [
+    "dead time",
+    "reversal delay",
+    "opening speed",
+    "closing speed",
+    "tracking error",
+    "alarm",
+];
 
 /// The header of the health CSV.
 pub const HEADER: [&str; 10] = [
@@ -252,6 +266,7 @@ pub fn start(
             },
             csv,
             metrics: w.metrics,
+            history: Vec::new(),
         });
     }
     let alarms: Alarms = monitors.iter().map(|_| AtomicBool::new(false)).collect();
@@ -300,6 +315,9 @@ fn watch(
                 flag.store(m.alarm, Ordering::Relaxed);
             }
         }
+    }
+    for m in &monitors {
+        m.plot()?;
     }
     Ok(monitors.into_iter().map(|m| m.report).collect())
 }
@@ -367,6 +385,29 @@ impl Monitor {
             tracing::info!(valve = %self.name, t_s, "health back within its limits");
         }
         self.alarm = alarm;
+        if let Some(b) = base {
+            let ratio = |now: Option<f64>, then: Option<f64>| match (now, then) {
+                (Some(n), Some(t)) if t > 0.0 => n / t,
+                _ => f64::NAN,
+            };
+            self.history.push((
+                t_s / 3600.0,
+                [
+                    ratio(fig.dead_time_s, b.dead_time_s),
+                    ratio(fig.reversal_delay_s, b.reversal_delay_s),
+                    ratio(
+                        Some(fig.opening_speed_pct_per_s),
+                        Some(b.opening_speed_pct_per_s),
+                    ),
+                    ratio(
+                        Some(fig.closing_speed_pct_per_s),
+                        Some(b.closing_speed_pct_per_s),
+                    ),
+                    ratio(Some(fig.tracking_rms_pct), Some(b.tracking_rms_pct)),
+                    f64::from(u8::from(alarm)),
+                ],
+            ));
+        }
         notes.extend(drifts);
         if base.is_none() {
             notes.push("no baseline yet".into());
@@ -375,6 +416,42 @@ impl Monitor {
             m.publish(&fig, alarm);
         }
         self.write(t_s, Some(&fig), &notes.join("; "))
+    }
+
+    /// `health*.svg` beside the CSV: each figure over its baseline's, and the alarm, against
+    /// loop time (nothing when no window was compared).
+    fn plot(&self) -> Result<(), DaemonError> {
+        if self.history.is_empty() {
+            return Ok(());
+        }
+        let t: Vec<f64> = self.history.iter().map(|h| h.0).collect();
+        let ys: Vec<Vec<f64>> = (0..PLOTTED.len())
+            .map(|i| self.history.iter().map(|h| h.1[i]).collect())
+            .collect();
+        let colors = [
+            plot::AFTER,
+            plot::EXTRA,
+            plot::MEASURED,
+            plot::GREY,
+            plot::PURPLE,
+            plot::BEFORE,
+        ];
+        let series: Vec<plot::Series> = (PLOTTED.iter().zip(&ys).zip(colors))
+            .map(|((name, y), color)| plot::Series { name, y, color })
+            .collect();
+        let svg = plot::lines(
+            &format!(
+                "valve {}: health figures over the baseline's (1 = as the baseline; alarm 0/1)",
+                self.name
+            ),
+            "figure / baseline",
+            "loop time (h)",
+            &t,
+            &series,
+            0..t.len(),
+        );
+        let path = self.report.file.with_extension("svg");
+        std::fs::write(&path, svg).map_err(|source| DaemonError::LogWrite { path, source })
     }
 
     /// One row of the health CSV, flushed.
