@@ -32,7 +32,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         std::hint::black_box(Figures::of(&op, &vp, dt, 5));
         with_model.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    for (what, mut ms) in [("first-window baseline", plain), ("model baseline", with_model)] {
+    for (what, mut ms) in [
+        ("first-window baseline", plain),
+        ("model baseline", with_model),
+    ] {
         ms.sort_by(f64::total_cmp);
         println!(
             "health window (60,000 samples), {what}: median {:.2} ms, max {:.2} ms over {runs} runs",

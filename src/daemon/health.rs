@@ -16,14 +16,12 @@
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
 //! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
-//! `valve_bridge_health_alarm` gauge and, per valve, a flag others can read ([`Alarms`]).
+//! `valve_bridge_health_alarm` gauge and the summary.
 
 use std::collections::VecDeque;
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
-use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::config::HealthConfig;
@@ -148,9 +146,6 @@ impl Figures {
     }
 }
 
-/// Each valve's alarm flag, in the order of the config, set while its health is in alarm.
-pub type Alarms = Arc<[AtomicBool]>;
-
 /// What the health check of one valve did, for the summary.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HealthReport {
@@ -220,11 +215,10 @@ pub struct Watched {
     pub metrics: Option<HealthMetrics>,
 }
 
-/// The running health thread: where the loggers send rows (with the valve's index), each
-/// valve's alarm flag, and the thread.
+/// The running health thread: where the loggers send rows (with the valve's index), and the
+/// thread.
 pub struct Health {
     pub tx: Sender<(usize, Sample)>,
-    pub alarms: Alarms,
     pub handle: JoinHandle<Result<Vec<HealthReport>, DaemonError>>,
 }
 
@@ -269,17 +263,16 @@ pub fn start(
             history: Vec::new(),
         });
     }
-    let alarms: Alarms = monitors.iter().map(|_| AtomicBool::new(false)).collect();
     let (tx, rx) = std::sync::mpsc::channel();
-    let (cfg, flags) = (cfg.clone(), Arc::clone(&alarms));
+    let cfg = cfg.clone();
     let handle = std::thread::Builder::new()
         .name("vb-health".into())
-        .spawn(move || watch(rx, monitors, &cfg, period_s, cap, &flags))
+        .spawn(move || watch(rx, monitors, &cfg, period_s, cap))
         .map_err(|source| DaemonError::Thread {
             what: "health thread",
             source,
         })?;
-    Ok(Health { tx, alarms, handle })
+    Ok(Health { tx, handle })
 }
 
 fn write_error(path: &Path, e: csv::Error) -> DaemonError {
@@ -296,7 +289,6 @@ fn watch(
     cfg: &HealthConfig,
     period_s: f64,
     cap: usize,
-    alarms: &[AtomicBool],
 ) -> Result<Vec<HealthReport>, DaemonError> {
     for (i, row) in rx {
         let Some(m) = monitors.get_mut(i) else {
@@ -311,9 +303,6 @@ fn watch(
         if row.t_s >= m.next_at_s && m.op.len() == cap {
             m.next_at_s += cfg.every_s;
             m.estimate(row.t_s, cfg, period_s)?;
-            if let Some(flag) = alarms.get(i) {
-                flag.store(m.alarm, Ordering::Relaxed);
-            }
         }
     }
     for m in &monitors {

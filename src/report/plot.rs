@@ -315,6 +315,7 @@ mod tests {
         let svg = lines(
             "x",
             "%",
+            "time (s)",
             &t,
             &[Series {
                 name: "sin",
