@@ -1,6 +1,8 @@
 //! Loop timing benchmark: runs the real daemon loop (embedded default config: emulated pin-cart
 //! II, random steps, 100 Hz, real clock, logging to a temporary directory) for a fixed time and
-//! reports the timing error |actual - scheduled| (p50, p99, max) and the missed cycles.
+//! reports the timing error |actual - scheduled| (p50, p99, max) and the missed cycles; then the
+//! same with the two valves of `config/two-valves.toml` in each cycle, and the ratio of the two
+//! p99s (the two-valve loop should stay within 2x of the single one on an idle machine).
 //!
 //! `cargo bench --bench loop_timing`; `VB_BENCH_SECS` sets the run time (default 60 s);
 //! `VB_BENCH_PRIORITY=N` runs the loop thread under SCHED_FIFO priority N (`[loop] realtime_priority`).
@@ -17,38 +19,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(v) => v.parse().map_err(|e| format!("VB_BENCH_SECS={v}: {e}"))?,
         Err(_) => 60.0,
     };
-    let mut config = Config::embedded_default()?;
-    if let Ok(v) = std::env::var("VB_BENCH_PRIORITY") {
-        config.loop_.realtime_priority = v
+    let priority: u8 = match std::env::var("VB_BENCH_PRIORITY") {
+        Ok(v) => v
             .parse()
-            .map_err(|e| format!("VB_BENCH_PRIORITY={v}: {e}"))?;
+            .map_err(|e| format!("VB_BENCH_PRIORITY={v}: {e}"))?,
+        Err(_) => 0,
+    };
+    println!("loop_timing: {secs} s at 100 Hz, real clock, SCHED_FIFO priority {priority}");
+    let one = Config::embedded_default()?;
+    let two = Config::from_toml(
+        include_str!("../config/two-valves.toml"),
+        std::path::Path::new("config/two-valves.toml"),
+    )?;
+    let mut p99 = Vec::new();
+    for (what, mut config) in [("one valve", one), ("two valves", two)] {
+        config.loop_.realtime_priority = priority;
+        p99.push(timed(what, config, secs)?);
     }
-    let dir = tempfile::tempdir()?;
     println!(
-        "loop_timing: {secs} s at 100 Hz, embedded default config, real clock, SCHED_FIFO priority {}",
-        config.loop_.realtime_priority
+        "p99 two valves / one valve: {:.2}",
+        p99[1] / p99[0].max(f64::MIN_POSITIVE)
     );
-    let summary = daemon::start(
-        config,
-        RunOptions {
-            duration_s: Some(secs),
-            log_dir: Some(dir.path().to_path_buf()),
-            virtual_clock: false,
-            progress: false,
-            require_device: false,
-        },
-    )?
-    .finish()?;
-    let s = &summary.stats;
-    println!(
-        "daemon loop: {} samples, {} missed cycles, timing error p50 {:.2} us, p99 {:.2} us, max {:.2} us",
-        summary.samples(),
-        summary.missed(),
-        s.lateness_us(0.5),
-        s.lateness_us(0.99),
-        s.max_lateness_us()
-    );
-
     if std::env::var("VB_BENCH_TOKIO").is_ok_and(|v| v == "1") {
         let (hist, missed) = tokio_interval(secs)?;
         println!(
@@ -61,6 +52,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// Runs `config` for `secs`, prints its timing and returns its p99, µs.
+fn timed(what: &str, config: Config, secs: f64) -> Result<f64, Box<dyn std::error::Error>> {
+    let dir = tempfile::tempdir()?;
+    let summary = daemon::start(
+        config,
+        RunOptions {
+            duration_s: Some(secs),
+            log_dir: Some(dir.path().to_path_buf()),
+            virtual_clock: false,
+            progress: false,
+            require_device: false,
+        },
+    )?
+    .finish()?;
+    let v = summary.valves.first().ok_or("the run has no valve")?;
+    let s = &v.stats;
+    println!(
+        "daemon loop, {what}: {} samples per valve, {} missed cycles, timing error p50 {:.2} us, p99 {:.2} us, max {:.2} us",
+        v.samples(),
+        v.missed(),
+        s.lateness_us(0.5),
+        s.lateness_us(0.99),
+        s.max_lateness_us()
+    );
+    Ok(s.lateness_us(0.99))
 }
 
 /// |tick - scheduled| of a 10 ms `tokio::time::interval` over `secs`, and the ticks it skipped.

@@ -136,7 +136,7 @@ fn inline_key(line_head: &str) -> Option<&str> {
 }
 
 /// The table name of a `[table]` or `[[array]]` header line.
-fn header(line: &str) -> Option<String> {
+pub fn header(line: &str) -> Option<String> {
     let inner = line.strip_prefix('[')?;
     let end = inner.find(']')?;
     Some(inner[..end].trim_matches(['[', ']', ' ']).to_string())

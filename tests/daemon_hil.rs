@@ -436,7 +436,7 @@ fn watchdog_sends_the_safe_o_p_while_the_controller_is_quiet() {
     let metrics = http_get(daemon.metrics.as_deref().unwrap(), "/metrics");
     let trips: u64 = metrics
         .lines()
-        .find_map(|l| l.strip_prefix("valve_bridge_watchdog_trips_total "))
+        .find_map(|l| l.strip_prefix("valve_bridge_watchdog_trips_total{valve=\"valve\"} "))
         .and_then(|v| v.parse().ok())
         .unwrap_or_else(|| panic!("{metrics}"));
     assert!(trips >= 1, "{metrics}");
@@ -520,10 +520,10 @@ fn metrics_endpoint_answers_get_metrics() {
     for name in [
         "valve_bridge_timing_error_seconds_bucket",
         "valve_bridge_timing_error_seconds_count",
-        "valve_bridge_cycles_total",
-        "valve_bridge_cycle_failures_total{kind=\"timeout\"}",
-        "valve_bridge_cycle_failures_total{kind=\"error\"}",
-        "valve_bridge_cycle_failures_total{kind=\"disconnected\"}",
+        "valve_bridge_cycles_total{valve=\"valve\"}",
+        "valve_bridge_cycle_failures_total{kind=\"timeout\",valve=\"valve\"}",
+        "valve_bridge_cycle_failures_total{kind=\"error\",valve=\"valve\"}",
+        "valve_bridge_cycle_failures_total{kind=\"disconnected\",valve=\"valve\"}",
         "valve_bridge_missed_cycles_total",
         "valve_bridge_op_ratio",
         "valve_bridge_vp_ratio",
@@ -539,7 +539,7 @@ fn metrics_endpoint_answers_get_metrics() {
     }
     let cycles: u64 = body
         .lines()
-        .find_map(|l| l.strip_prefix("valve_bridge_cycles_total "))
+        .find_map(|l| l.strip_prefix("valve_bridge_cycles_total{valve=\"valve\"} "))
         .and_then(|v| v.parse().ok())
         .unwrap();
     assert!(cycles > 0, "{body}");

@@ -59,7 +59,8 @@ fn per_cycle_calls_do_not_allocate() {
     .unwrap();
     let mut source = Source::new(&cfg.source, &cfg.safety, cfg.loop_.period_s());
     let bank = source.served_bank().unwrap().clone();
-    let metrics = LoopMetrics::new().unwrap();
+    let metrics = LoopMetrics::new(&["level", "cyclone"], false).unwrap();
+    let valve = metrics.valve(1).unwrap();
     let mut counted = 0;
     for k in 0..500u64 {
         if k % 50 == 0 {
@@ -87,8 +88,11 @@ fn per_cycle_calls_do_not_allocate() {
             };
             source.feedback(&row);
             let lateness = (status != Status::Skipped).then(|| Duration::from_micros(k));
-            metrics.record(&row, lateness);
-            metrics.totals(k / 100, source.watchdog_trips());
+            if let Some(l) = lateness {
+                metrics.timing(l);
+            }
+            valve.record(&row);
+            valve.totals(k / 100, source.watchdog_trips());
         });
         let op = source.op_at(t_s).unwrap();
         assert!((op - (k / 50) as f64).abs() < 1e-9, "{op} at cycle {k}");

@@ -50,7 +50,7 @@ fn emulated_valve_takes_the_physical_model_by_name_and_file() {
     )
     .unwrap();
     assert_eq!(
-        c.valve.emulated.model_spec().unwrap().model,
+        c.valves[0].emulated.model_spec().unwrap().model,
         ModelKind::Physical
     );
     let file = root("config/models/physical.toml");
@@ -63,7 +63,7 @@ fn emulated_valve_takes_the_physical_model_by_name_and_file() {
     )
     .unwrap();
     assert_eq!(
-        c.valve.emulated.model_spec().unwrap().model,
+        c.valves[0].emulated.model_spec().unwrap().model,
         ModelKind::Physical
     );
 }

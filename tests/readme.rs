@@ -388,12 +388,18 @@ fn check_prints(s: &Started, problems: &mut Vec<String>) {
     }
 }
 
-/// The share of ok cycles in a `run` summary (`samples: N (M ok, ...`).
+/// The share of ok cycles in a `run` summary (`samples: N (M ok, ...`), the lowest of its
+/// valves'.
 fn ok_share(summary: &str) -> Option<f64> {
-    let rest = summary.lines().find_map(|l| l.strip_prefix("samples: "))?;
-    let (n, rest) = rest.split_once(" (")?;
-    let ok = rest.split_whitespace().next()?;
-    Some(ok.parse::<f64>().ok()? / n.parse::<f64>().ok()?.max(1.0))
+    let shares: Option<Vec<f64>> = (summary.lines())
+        .filter_map(|l| l.trim_start().strip_prefix("samples: "))
+        .map(|rest| {
+            let (n, rest) = rest.split_once(" (")?;
+            let ok = rest.split_whitespace().next()?;
+            Some(ok.parse::<f64>().ok()? / n.parse::<f64>().ok()?.max(1.0))
+        })
+        .collect();
+    shares?.into_iter().reduce(f64::min)
 }
 
 /// Runs one block; returns what happened to each command, adding problems found.

@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 
 use common::{percentile, Sim};
 use valve_bridge::daemon::logger::Status;
-use valve_bridge::daemon::{self, Config, RunOptions, Summary};
+use valve_bridge::daemon::{self, Config, RunOptions, ValveSummary};
 
 /// The shipped daemon config for sim-device over TCP.
 const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/sim-device-tcp.toml");
@@ -43,7 +43,7 @@ const SWEEP_SECS: f64 = 3.0;
 
 /// One run: its summary and the round trips of its `ok` rows, µs, ascending.
 struct Run {
-    summary: Summary,
+    summary: ValveSummary,
     round_trips_us: Vec<f64>,
 }
 
@@ -149,10 +149,8 @@ fn main() -> Result<(), Box<dyn Error>> {
 fn config(addr: &str, rate_hz: f64, shipped_deadline: bool) -> Result<Config, Box<dyn Error>> {
     let mut config = Config::load(Some(Path::new(SHIPPED)))?;
     config.loop_.rate_hz = rate_hz;
-    let tcp = config
-        .valve
-        .tcp
-        .as_mut()
+    let tcp = (config.valves.first_mut())
+        .and_then(|v| v.tcp.as_mut())
         .ok_or("the shipped config has no [valve.modbus-tcp]")?;
     tcp.address = addr.to_string();
     if !shipped_deadline {
@@ -174,7 +172,11 @@ fn run(config: Config, secs: f64) -> Result<Run, Box<dyn Error>> {
             require_device: true,
         },
     )?
-    .finish()?;
+    .finish()?
+    .valves
+    .into_iter()
+    .next()
+    .ok_or("the run has no valve")?;
     let round_trips_us = ok_latencies_us(&summary.log.files)?;
     Ok(Run {
         summary,

@@ -25,6 +25,9 @@ pub struct Args {
     /// Deadline of each request, ms (a probe waits longer than a loop cycle would).
     #[arg(long, value_name = "MS", default_value_t = 1000.0)]
     timeout_ms: f64,
+    /// The valve to probe, by `name`, in a config with several `[[valve]]` tables.
+    #[arg(long, value_name = "NAME")]
+    valve: Option<String>,
 }
 
 /// Connects, probes and prints the table; fails if a register could not be read.
@@ -41,9 +44,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let config = Config::load(Some(&args.config))?;
-    let link = match config.valve.kind {
-        ValveKind::ModbusTcp => config.valve.tcp.clone().map(Link::Tcp),
-        ValveKind::ModbusRtu => config.valve.rtu.clone().map(Link::Rtu),
+    let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
+    let picked = match &args.valve {
+        Some(name) => config.valves.iter().find(|v| v.label() == name),
+        None if config.valves.len() == 1 => config.valves.first(),
+        None => None,
+    };
+    let Some(valve) = picked else {
+        bail!(
+            "{}: name the valve to probe with --valve (one of {})",
+            args.config.display(),
+            names.join(", ")
+        );
+    };
+    let link = match valve.kind {
+        ValveKind::ModbusTcp => valve.tcp.clone().map(Link::Tcp),
+        ValveKind::ModbusRtu => valve.rtu.clone().map(Link::Rtu),
         ValveKind::Emulated => bail!(
             "{}: [valve] kind = \"emulated\" has no device to probe: use a config with kind = \
              \"modbus-tcp\" or \"modbus-rtu\" (e.g. config/sim-device-tcp.toml)",
@@ -56,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .build()
         .context("cannot start the async runtime")?;
     let report = rt.block_on(async {
-        let mut valve = ModbusValve::new(link, config.valve.registers, config.loop_.period_s())?;
+        let mut valve = ModbusValve::new(link, valve.registers, config.loop_.period_s())?;
         if let Some(b) = valve.budget() {
             println!("bus budget of the loop: {}", b.describe());
         }

@@ -1,7 +1,8 @@
-//! The loop thread (`vb-loop`): each slot of the schedule, O_P from the source, one valve
-//! transaction, a row to the logger; on stop, the safe action.
+//! The loop thread (`vb-loop`): each slot of the schedule, for every valve in the order of the
+//! config, O_P from its source, one valve transaction, a row to its logger; on stop, the safe
+//! action. A valve whose transaction fails logs its own row as failed; the others run on.
 //!
-//! [`spawn`] starts the thread and opens the valve on it (inside the runtime that drives the
+//! [`spawn`] starts the thread and opens the valves on it (inside the runtime that drives the
 //! valve's I/O); [`Spawned::run`] hands it the rest of the loop. Not here: starting the other
 //! threads ([`super::running`]), the valve protocols ([`super::valve`]).
 
@@ -12,7 +13,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
 use super::config::{ClockKind, OnStop, ValveConfig};
-use super::exporter::LoopMetrics;
+use super::exporter::{LoopMetrics, ValveMetrics};
 use super::logger::{round_pct, Sample, Status};
 use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
@@ -22,9 +23,15 @@ use super::DaemonError;
 
 /// What the loop thread hands back.
 pub(super) struct LoopEnd {
-    pub(super) stats: Stats,
     pub(super) reason: StopReason,
     pub(super) slots: u64,
+    /// Each valve's end, in the order of the config.
+    pub(super) valves: Vec<LaneEnd>,
+}
+
+/// What one valve's lane hands back.
+pub(super) struct LaneEnd {
+    pub(super) stats: Stats,
     pub(super) safe: Option<Sample>,
     pub(super) reconnects: Option<u64>,
     pub(super) attempts: Option<u64>,
@@ -36,37 +43,73 @@ pub(super) struct Loop {
     pub(super) period: Duration,
     pub(super) spin: Duration,
     pub(super) realtime_priority: u8,
-    pub(super) source: Source,
-    pub(super) backend: Backend,
+    /// The valves, driven in this order within each cycle.
+    pub(super) lanes: Vec<Lane>,
     pub(super) metrics: Option<LoopMetrics>,
     pub(super) safe_action: OnStop,
     pub(super) go_to_pct: Option<f64>,
     pub(super) max_slots: Option<u64>,
     pub(super) stop: Arc<AtomicBool>,
+    /// The first valve's figures, for the progress display and the service watchdog.
     pub(super) live: Arc<Live>,
+}
+
+/// One valve of the loop: its source, backend, log channel and figures.
+pub(super) struct Lane {
+    /// The valve's name, in the log's messages.
+    pub(super) name: String,
+    pub(super) source: Source,
+    pub(super) backend: Backend,
+    pub(super) metrics: Option<ValveMetrics>,
     pub(super) tx: Sender<Sample>,
     pub(super) stats: Stats,
+    /// The O_P this cycle sends (taken from the source before any valve transacts).
+    pub(super) op: f64,
     pub(super) last_op: Option<f64>,
     pub(super) last_status: Status,
     pub(super) last_skipped_k: Option<u64>,
 }
 
-/// Builds the loop around the opened backend.
-type Build = Box<dyn FnOnce(Backend) -> Loop + Send>;
+impl Lane {
+    /// A lane for `backend`, fed by `source`, logging to `tx`.
+    pub(super) fn new(
+        name: String,
+        source: Source,
+        backend: Backend,
+        metrics: Option<ValveMetrics>,
+        tx: Sender<Sample>,
+    ) -> Self {
+        Lane {
+            name,
+            source,
+            backend,
+            metrics,
+            tx,
+            stats: Stats::new(),
+            op: 0.0,
+            last_op: None,
+            last_status: Status::Ok,
+            last_skipped_k: None,
+        }
+    }
+}
 
-/// The loop thread, its valve open, waiting for the rest of the loop.
+/// Builds the loop around the opened backends.
+type Build = Box<dyn FnOnce(Vec<Backend>) -> Loop + Send>;
+
+/// The loop thread, its valves open, waiting for the rest of the loop.
 pub(super) struct Spawned {
-    /// The valve, described for the log.
-    pub valve: String,
+    /// The valves, described for the log.
+    pub valves: Vec<String>,
     handle: JoinHandle<Result<LoopEnd, DaemonError>>,
     parts: Sender<Build>,
 }
 
-/// Starts the loop thread and opens the valve `[valve]` describes on it, for a loop of period
-/// `period_s`; the error of a valve that cannot be opened (or, with `require_device`, reached)
-/// is returned here.
+/// Starts the loop thread and opens the valves `valves` describe on it, in order, for a loop of
+/// period `period_s`; the error of a valve that cannot be opened (or, with `require_device`,
+/// reached) is returned here.
 pub(super) fn spawn(
-    valve: ValveConfig,
+    valves: Vec<ValveConfig>,
     period_s: f64,
     require_device: bool,
 ) -> Result<Spawned, DaemonError> {
@@ -77,23 +120,26 @@ pub(super) fn spawn(
         .spawn(move || {
             // On an error here `ready_tx` is dropped unsent and spawn() reads the error from the join.
             let rt = current_thread_runtime("loop runtime")?;
-            let backend = rt.block_on(Backend::open(&valve, period_s, require_device))?;
+            let mut backends = Vec::with_capacity(valves.len());
+            for valve in &valves {
+                backends.push(rt.block_on(Backend::open(valve, period_s, require_device))?);
+            }
             ready_tx
-                .send(backend.describe())
+                .send(backends.iter().map(Backend::describe).collect())
                 .map_err(|_| DaemonError::Panicked("calling"))?;
-            // No parts: start() failed after the valve opened (the logger); nothing runs.
+            // No parts: start() failed after the valves opened (the logger); nothing runs.
             let build = parts_rx
                 .recv()
                 .map_err(|_| DaemonError::Panicked("calling"))?;
-            build(backend).run(rt)
+            build(backends).run(rt)
         })
         .map_err(|source| DaemonError::Thread {
             what: "loop thread",
             source,
         })?;
     match ready_rx.recv() {
-        Ok(valve) => Ok(Spawned {
-            valve,
+        Ok(valves) => Ok(Spawned {
+            valves,
             handle,
             parts,
         }),
@@ -105,10 +151,10 @@ pub(super) fn spawn(
 }
 
 impl Spawned {
-    /// Hands the loop thread the rest of the loop (`build` gets the opened backend); it runs.
+    /// Hands the loop thread the rest of the loop (`build` gets the opened backends); it runs.
     pub(super) fn run(
         self,
-        build: impl FnOnce(Backend) -> Loop + Send + 'static,
+        build: impl FnOnce(Vec<Backend>) -> Loop + Send + 'static,
     ) -> Result<JoinHandle<Result<LoopEnd, DaemonError>>, DaemonError> {
         self.parts
             .send(Box::new(build))
@@ -147,22 +193,7 @@ impl Loop {
                 // Past the end, a missed slot is not logged: the stop action takes the next one.
                 Slot::Skipped { .. } if ending => continue,
                 Slot::Skipped { .. } => {
-                    let row = Sample {
-                        t_s: schedule.t_s(k),
-                        op_pct: self.last_op,
-                        vp_pct: None,
-                        status: Status::Skipped,
-                        lateness_us: None,
-                        latency_us: None,
-                        op_sent_pct: None,
-                        utc: schedule.wall(k),
-                    };
-                    // One warning per run of consecutive missed slots, not one per slot.
-                    if self.last_skipped_k.is_none_or(|last| last + 1 != k) {
-                        tracing::warn!(k, "cycle missed: the previous one overran");
-                    }
-                    self.last_skipped_k = Some(k);
-                    self.emit(row, None)?;
+                    self.skipped(k, schedule.t_s(k), schedule.wall(k))?;
                     continue;
                 }
                 Slot::Run { lateness, .. } => lateness,
@@ -176,57 +207,144 @@ impl Loop {
                 break (reason, k, lateness);
             }
             let t_s = schedule.t_s(k);
+            // Every valve's O_P first: a source that ends stops the loop before any is sent.
             // Rounded to the log's precision: the O_P sent is the O_P logged.
-            let Some(op) = self.source.op_at(t_s).map(round_pct) else {
+            let mut ended = false;
+            for lane in &mut self.lanes {
+                match lane.source.op_at(t_s) {
+                    Some(op) => lane.op = round_pct(op),
+                    None => ended = true,
+                }
+            }
+            if ended {
                 break (StopReason::SourceEnded, k, lateness);
-            };
-            let mut row = self.transact(&rt, op, (k, t_s, schedule.wall(k)), lateness, None);
-            // A failed transaction keeps its failure status; the O_P column shows the safe O_P.
-            if row.status == Status::Ok && self.source.watchdog_tripped() {
-                row.status = Status::Watchdog;
             }
-            self.source.feedback(&row);
-            self.emit(row, Some(lateness))?;
+            if let Some(m) = &self.metrics {
+                m.timing(lateness);
+            }
+            for i in 0..self.lanes.len() {
+                let lane = &mut self.lanes[i];
+                let mut row =
+                    lane.transact(&rt, lane.op, (k, t_s, schedule.wall(k)), lateness, None);
+                // A failed transaction keeps its failure status; the O_P column shows the safe O_P.
+                if row.status == Status::Ok && lane.source.watchdog_tripped() {
+                    row.status = Status::Watchdog;
+                }
+                lane.source.feedback(&row);
+                self.emit(i, row, Some(lateness))?;
+            }
             if k.is_multiple_of(100) {
-                self.live.publish_p99(&self.stats);
+                if let Some(lane) = self.lanes.first() {
+                    self.live.publish_p99(&lane.stats);
+                }
             }
         };
-        let safe_op = match self.safe_action {
-            OnStop::Hold => self.last_op.map(|op| (op, Status::SafeHold)),
-            OnStop::GoTo => self.go_to_pct.map(|op| (op, Status::SafeGoTo)),
-        };
-        let safe = match safe_op {
-            Some((op, status)) => {
-                let row = self.transact(
-                    &rt,
-                    op,
-                    (k_end, schedule.t_s(k_end), schedule.wall(k_end)),
-                    lateness_end,
-                    Some(status),
-                );
-                tracing::info!(
-                    "stop action applied: {}, O_P {op:.2} %, V_P {}",
-                    status.as_str(),
-                    row.vp_pct
-                        .map_or("not read".into(), |v| format!("{v:.2} %"))
-                );
-                self.source.feedback(&row);
-                self.emit(row, Some(lateness_end))?;
-                Some(row)
-            }
-            None => None,
-        };
+        let mut safe = Vec::with_capacity(self.lanes.len());
+        for i in 0..self.lanes.len() {
+            let row = self.stop_action(i, &rt, (k_end, &schedule), lateness_end)?;
+            safe.push(row);
+        }
         tracing::info!(%reason, slots = k_end, "loop stopped");
         Ok(LoopEnd {
-            stats: self.stats,
             reason,
             slots: k_end,
-            safe,
-            reconnects: self.backend.reconnects(),
-            attempts: self.backend.connection_attempts(),
+            valves: (self.lanes.into_iter().zip(safe))
+                .map(|(lane, safe)| LaneEnd {
+                    reconnects: lane.backend.reconnects(),
+                    attempts: lane.backend.connection_attempts(),
+                    stats: lane.stats,
+                    safe,
+                })
+                .collect(),
         })
     }
 
+    /// Logs slot `k` as missed for every valve (the O_P column shows the O_P it holds).
+    fn skipped(&mut self, k: u64, t_s: f64, utc: SystemTime) -> Result<(), DaemonError> {
+        for i in 0..self.lanes.len() {
+            let lane = &mut self.lanes[i];
+            let row = Sample {
+                t_s,
+                op_pct: lane.last_op,
+                vp_pct: None,
+                status: Status::Skipped,
+                lateness_us: None,
+                latency_us: None,
+                op_sent_pct: None,
+                utc,
+            };
+            // One warning per run of consecutive missed slots, not one per slot.
+            if i == 0 && lane.last_skipped_k.is_none_or(|last| last + 1 != k) {
+                tracing::warn!(k, "cycle missed: the previous one overran");
+            }
+            lane.last_skipped_k = Some(k);
+            self.emit(i, row, None)?;
+        }
+        Ok(())
+    }
+
+    /// Applies the safe action to valve `i` in slot `k_end`, logs it and returns its row.
+    fn stop_action(
+        &mut self,
+        i: usize,
+        rt: &tokio::runtime::Runtime,
+        (k_end, schedule): (u64, &Schedule),
+        lateness_end: Duration,
+    ) -> Result<Option<Sample>, DaemonError> {
+        let lane = &mut self.lanes[i];
+        let safe_op = match self.safe_action {
+            OnStop::Hold => lane.last_op.map(|op| (op, Status::SafeHold)),
+            OnStop::GoTo => self.go_to_pct.map(|op| (op, Status::SafeGoTo)),
+        };
+        let Some((op, status)) = safe_op else {
+            return Ok(None);
+        };
+        let row = lane.transact(
+            rt,
+            op,
+            (k_end, schedule.t_s(k_end), schedule.wall(k_end)),
+            lateness_end,
+            Some(status),
+        );
+        tracing::info!(
+            valve = %lane.name,
+            "stop action applied: {}, O_P {op:.2} %, V_P {}",
+            status.as_str(),
+            row.vp_pct
+                .map_or("not read".into(), |v| format!("{v:.2} %"))
+        );
+        self.lanes[i].source.feedback(&row);
+        self.emit(i, row, Some(lateness_end))?;
+        Ok(Some(row))
+    }
+
+    /// Counts, publishes and logs a row of valve `i`.
+    fn emit(
+        &mut self,
+        i: usize,
+        row: Sample,
+        lateness: Option<Duration>,
+    ) -> Result<(), DaemonError> {
+        let lane = &mut self.lanes[i];
+        lane.stats.record(&row, lateness);
+        if i == 0 {
+            self.live.publish(&row);
+        }
+        if let Some(m) = &lane.metrics {
+            m.record(&row);
+            m.totals(
+                lane.backend.reconnects().unwrap_or(0),
+                lane.source.watchdog_trips(),
+            );
+        }
+        // The logger only hangs up by panicking; its join reports that.
+        lane.tx
+            .send(row)
+            .map_err(|_| DaemonError::Panicked("logger"))
+    }
+}
+
+impl Lane {
     /// One valve transaction for slot `k` at `t_s`; `safe` marks the stop action's row.
     fn transact(
         &mut self,
@@ -253,8 +371,10 @@ impl Loop {
         };
         if status != self.last_status {
             match &result {
-                Err(fault) => tracing::warn!(k, "valve transaction failed: {fault}"),
-                Ok(_) => tracing::info!(k, "valve transactions succeed again"),
+                Err(fault) => {
+                    tracing::warn!(k, valve = %self.name, "valve transaction failed: {fault}")
+                }
+                Ok(_) => tracing::info!(k, valve = %self.name, "valve transactions succeed again"),
             }
             self.last_status = status;
         }
@@ -271,23 +391,6 @@ impl Loop {
             op_sent_pct: self.backend.sent_pct(),
             utc,
         }
-    }
-
-    /// Counts, publishes and logs a row.
-    fn emit(&mut self, row: Sample, lateness: Option<Duration>) -> Result<(), DaemonError> {
-        self.stats.record(&row, lateness);
-        self.live.publish(&row);
-        if let Some(m) = &self.metrics {
-            m.record(&row, lateness);
-            m.totals(
-                self.backend.reconnects().unwrap_or(0),
-                self.source.watchdog_trips(),
-            );
-        }
-        // The logger only hangs up by panicking; its join reports that.
-        self.tx
-            .send(row)
-            .map_err(|_| DaemonError::Panicked("logger"))
     }
 }
 

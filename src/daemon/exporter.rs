@@ -1,7 +1,9 @@
 //! The Prometheus endpoint of `[metrics]`: the loop's figures, served as text on `GET /metrics`.
 //!
-//! Names follow Prometheus conventions (base units, `_total` for counters, ratios 0-1):
-//! - `valve_bridge_timing_error_seconds`: histogram of |actual - scheduled| cycle start;
+//! Names follow Prometheus conventions (base units, `_total` for counters, ratios 0-1); every
+//! figure of a valve carries its name as the label `valve`:
+//! - `valve_bridge_timing_error_seconds`: histogram of |actual - scheduled| cycle start (one
+//!   per cycle, shared by the valves of that cycle);
 //! - `valve_bridge_cycles_total`: cycles that ran a valve transaction;
 //! - `valve_bridge_cycle_failures_total{kind="timeout"|"error"|"disconnected"}`;
 //! - `valve_bridge_missed_cycles_total`: slots skipped because a cycle overran;
@@ -9,13 +11,17 @@
 //!   fraction of full travel (0.45 = 45 %);
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
+//! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
+//!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
+//!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
+//!   `..._tracking_error_ratio` and `valve_bridge_health_alarm` (1 in alarm);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
 //!   `valve_bridge_server_connections_accepted_total`, `..._refused_total` (closed at the
 //!   connection limit), `..._idle_closed_total` and `valve_bridge_server_accept_errors_total`.
 //!
-//! [`LoopMetrics`] registers every metric once at start-up and keeps the handles, so the loop
-//! updates its own with atomic operations only (no lookup by label, no allocation); the server
+//! [`LoopMetrics`] registers every metric once at start-up and keeps each valve's handles
+//! ([`ValveMetrics`]), so the loop updates its own with atomic operations only (no lookup by label, no allocation); the server
 //! figures are copied from their [`Health`] when the endpoint is scraped.
 //!
 //! [`serve`] answers HTTP on the daemon's network thread, as a [`crate::net`] server (accept
@@ -27,11 +33,13 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use prometheus::{
-    Gauge, Histogram, HistogramOpts, IntCounter, IntCounterVec, IntGaugeVec, Opts, Registry,
+    Gauge, GaugeVec, Histogram, HistogramOpts, IntCounter, IntCounterVec, IntGaugeVec, Opts,
+    Registry,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
+use super::health::Figures;
 use super::logger::{Sample, Status};
 use crate::net::{self, Health, Limits};
 
@@ -60,6 +68,94 @@ struct ServerMetrics {
 pub struct LoopMetrics {
     registry: Registry,
     timing_s: Histogram,
+    /// Each valve's handles, in the order of the config.
+    valves: Vec<ValveMetrics>,
+    /// Each valve's health gauges, when `[health]` is on.
+    health: Vec<HealthMetrics>,
+    servers: ServerMetrics,
+}
+
+/// One valve's health gauges (label `valve`), set by the health thread once per window.
+#[derive(Debug, Clone)]
+pub struct HealthMetrics {
+    dead_time_s: Gauge,
+    reversal_delay_s: Gauge,
+    opening_speed: Gauge,
+    closing_speed: Gauge,
+    tracking: Gauge,
+    alarm: Gauge,
+}
+
+impl HealthMetrics {
+    /// Publishes a window's figures (NaN for a delay it could not measure) and the alarm.
+    pub fn publish(&self, f: &Figures, alarm: bool) {
+        self.dead_time_s.set(f.dead_time_s.unwrap_or(f64::NAN));
+        self.reversal_delay_s
+            .set(f.reversal_delay_s.unwrap_or(f64::NAN));
+        self.opening_speed.set(f.opening_speed_pct_per_s / 100.0);
+        self.closing_speed.set(f.closing_speed_pct_per_s / 100.0);
+        self.tracking.set(f.tracking_rms_pct / 100.0);
+        self.alarm.set(f64::from(u8::from(alarm)));
+    }
+}
+
+/// The health gauges of `valves`, registered in `registry`.
+fn health_metrics(
+    registry: &Registry,
+    valves: &[&str],
+) -> Result<Vec<HealthMetrics>, prometheus::Error> {
+    let gauge = |name: &str, help: &str| -> Result<GaugeVec, prometheus::Error> {
+        let g = GaugeVec::new(Opts::new(name, help), &["valve"])?;
+        registry.register(Box::new(g.clone()))?;
+        Ok(g)
+    };
+    let gauges = [
+        gauge(
+            "valve_bridge_health_dead_time_seconds",
+            "Mean delay of same-direction steps over the health window",
+        )?,
+        gauge(
+            "valve_bridge_health_reversal_delay_seconds",
+            "Mean delay of reversals over the health window",
+        )?,
+        gauge(
+            "valve_bridge_health_opening_speed_ratio_per_second",
+            "Opening stroke speed over the health window, fraction of travel per second",
+        )?,
+        gauge(
+            "valve_bridge_health_closing_speed_ratio_per_second",
+            "Closing stroke speed over the health window, fraction of travel per second",
+        )?,
+        gauge(
+            "valve_bridge_health_tracking_error_ratio",
+            "RMS of O_P - V_P over the health window, fraction of travel",
+        )?,
+        gauge(
+            "valve_bridge_health_alarm",
+            "1 while a health figure is past its limit against the baseline",
+        )?,
+    ];
+    valves
+        .iter()
+        .map(|&v| {
+            let [d, r, o, c, t, a] = gauges
+                .each_ref()
+                .map(|g| g.get_metric_with_label_values(&[v]));
+            Ok(HealthMetrics {
+                dead_time_s: d?,
+                reversal_delay_s: r?,
+                opening_speed: o?,
+                closing_speed: c?,
+                tracking: t?,
+                alarm: a?,
+            })
+        })
+        .collect()
+}
+
+/// One valve's metrics (label `valve`), updated by the loop with atomic operations only.
+#[derive(Debug, Clone)]
+pub struct ValveMetrics {
     cycles: IntCounter,
     /// Failures by kind: timeout, error, disconnected.
     failures: [IntCounter; 3],
@@ -68,12 +164,12 @@ pub struct LoopMetrics {
     vp_ratio: Gauge,
     reconnects: IntCounter,
     watchdog_trips: IntCounter,
-    servers: ServerMetrics,
 }
 
 impl LoopMetrics {
-    /// Registers every metric in a new registry.
-    pub fn new() -> Result<LoopMetrics, prometheus::Error> {
+    /// Registers every metric in a new registry, for the valves named `valves` (with their
+    /// health gauges when `health`).
+    pub fn new(valves: &[&str], health: bool) -> Result<LoopMetrics, prometheus::Error> {
         let registry = Registry::new();
         let timing_s = Histogram::with_opts(
             HistogramOpts::new(
@@ -82,8 +178,9 @@ impl LoopMetrics {
             )
             .buckets(TIMING_BUCKETS_S.to_vec()),
         )?;
-        let counter = |name: &str, help: &str| IntCounter::new(name, help);
-        let gauge = |name: &str, help: &str| Gauge::new(name, help);
+        let counter =
+            |name: &str, help: &str| IntCounterVec::new(Opts::new(name, help), &["valve"]);
+        let gauge = |name: &str, help: &str| GaugeVec::new(Opts::new(name, help), &["valve"]);
         let cycles = counter(
             "valve_bridge_cycles_total",
             "Cycles that ran a valve transaction",
@@ -93,13 +190,8 @@ impl LoopMetrics {
                 "valve_bridge_cycle_failures_total",
                 "Valve transactions that gave no V_P, by kind",
             ),
-            &["kind"],
+            &["valve", "kind"],
         )?;
-        let failures = [
-            by_kind.get_metric_with_label_values(&["timeout"])?,
-            by_kind.get_metric_with_label_values(&["error"])?,
-            by_kind.get_metric_with_label_values(&["disconnected"])?,
-        ];
         let missed = counter(
             "valve_bridge_missed_cycles_total",
             "Slots skipped because the previous cycle overran",
@@ -121,25 +213,40 @@ impl LoopMetrics {
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
+        let valves_names = valves;
+        let valves = (valves.iter())
+            .map(|&v| {
+                let kind = |k| by_kind.get_metric_with_label_values(&[v, k]);
+                Ok(ValveMetrics {
+                    cycles: cycles.get_metric_with_label_values(&[v])?,
+                    failures: [kind("timeout")?, kind("error")?, kind("disconnected")?],
+                    missed: missed.get_metric_with_label_values(&[v])?,
+                    op_ratio: op_ratio.get_metric_with_label_values(&[v])?,
+                    vp_ratio: vp_ratio.get_metric_with_label_values(&[v])?,
+                    reconnects: reconnects.get_metric_with_label_values(&[v])?,
+                    watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
+                })
+            })
+            .collect::<Result<Vec<_>, prometheus::Error>>()?;
         registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
-        for c in [&cycles, &missed, &reconnects, &watchdog_trips] {
-            registry.register(Box::new(c.clone()))?;
+        for c in [cycles, missed, reconnects, watchdog_trips] {
+            registry.register(Box::new(c))?;
         }
-        for g in [&op_ratio, &vp_ratio] {
-            registry.register(Box::new(g.clone()))?;
+        for g in [op_ratio, vp_ratio] {
+            registry.register(Box::new(g))?;
         }
         servers.register(&registry)?;
+        let health = if health {
+            health_metrics(&registry, valves_names)?
+        } else {
+            Vec::new()
+        };
         Ok(LoopMetrics {
             registry,
             timing_s,
-            cycles,
-            failures,
-            missed,
-            op_ratio,
-            vp_ratio,
-            reconnects,
-            watchdog_trips,
+            valves,
+            health,
             servers,
         })
     }
@@ -149,11 +256,32 @@ impl LoopMetrics {
         &self.registry
     }
 
-    /// Counts a logged row and its timing error (None for a skipped slot).
-    pub fn record(&self, row: &Sample, lateness: Option<Duration>) {
-        if let Some(l) = lateness {
-            self.timing_s.observe(l.as_secs_f64());
+    /// The handles of the `i`-th valve of the config (None past the last).
+    pub fn valve(&self, i: usize) -> Option<ValveMetrics> {
+        self.valves.get(i).cloned()
+    }
+
+    /// The health gauges of the `i`-th valve (None without `[health]`).
+    pub fn health(&self, i: usize) -> Option<HealthMetrics> {
+        self.health.get(i).cloned()
+    }
+
+    /// Observes the timing error of a cycle that ran.
+    pub fn timing(&self, lateness: Duration) {
+        self.timing_s.observe(lateness.as_secs_f64());
+    }
+
+    /// Copies the servers' figures into their metrics (at scrape time, off the loop thread).
+    pub fn observe_servers(&self, servers: &[(&'static str, Arc<Health>)]) {
+        for (name, health) in servers {
+            self.servers.observe(name, &health.view());
         }
+    }
+}
+
+impl ValveMetrics {
+    /// Counts a logged row of this valve.
+    pub fn record(&self, row: &Sample) {
         match row.status {
             Status::Skipped => self.missed.inc(),
             Status::Timeout => self.failures[0].inc(),
@@ -179,13 +307,6 @@ impl LoopMetrics {
             (&self.watchdog_trips, watchdog_trips),
         ] {
             c.inc_by(total.saturating_sub(c.get()));
-        }
-    }
-
-    /// Copies the servers' figures into their metrics (at scrape time, off the loop thread).
-    pub fn observe_servers(&self, servers: &[(&'static str, Arc<Health>)]) {
-        for (name, health) in servers {
-            self.servers.observe(name, &health.view());
         }
     }
 }
@@ -361,15 +482,17 @@ mod tests {
 
     #[test]
     fn rows_update_counters_and_gauges() {
-        let m = LoopMetrics::new().unwrap();
-        m.record(
-            &row(Status::Ok, Some(41.5)),
-            Some(Duration::from_micros(30)),
-        );
-        m.record(&row(Status::Timeout, None), Some(Duration::from_micros(3)));
-        m.record(&row(Status::Skipped, None), None);
-        m.totals(2, 1);
-        m.totals(2, 1);
+        let m = LoopMetrics::new(&["a", "b"], false).unwrap();
+        let (a, b) = (m.valve(0).unwrap(), m.valve(1).unwrap());
+        assert!(m.valve(2).is_none());
+        a.record(&row(Status::Ok, Some(41.5)));
+        m.timing(Duration::from_micros(30));
+        a.record(&row(Status::Timeout, None));
+        m.timing(Duration::from_micros(3));
+        a.record(&row(Status::Skipped, None));
+        b.record(&row(Status::Ok, Some(40.0)));
+        a.totals(2, 1);
+        a.totals(2, 1);
         let health = Arc::new(Health::default());
         health.idle_closed();
         m.observe_servers(&[("modbus-server", Arc::clone(&health))]);
@@ -378,14 +501,18 @@ mod tests {
             respond(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n", m.registry());
         assert_eq!((status, ctype), ("200 OK", prometheus::TEXT_FORMAT));
         for line in [
-            "valve_bridge_cycles_total 2",
-            "valve_bridge_cycle_failures_total{kind=\"timeout\"} 1",
-            "valve_bridge_cycle_failures_total{kind=\"error\"} 0",
-            "valve_bridge_missed_cycles_total 1",
-            "valve_bridge_op_ratio 0.42",
-            "valve_bridge_vp_ratio 0.415",
-            "valve_bridge_reconnects_total 2",
-            "valve_bridge_watchdog_trips_total 1",
+            "valve_bridge_cycles_total{valve=\"a\"} 2",
+            "valve_bridge_cycles_total{valve=\"b\"} 1",
+            "valve_bridge_cycle_failures_total{kind=\"timeout\",valve=\"a\"} 1",
+            "valve_bridge_cycle_failures_total{kind=\"error\",valve=\"a\"} 0",
+            "valve_bridge_cycle_failures_total{kind=\"timeout\",valve=\"b\"} 0",
+            "valve_bridge_missed_cycles_total{valve=\"a\"} 1",
+            "valve_bridge_op_ratio{valve=\"a\"} 0.42",
+            "valve_bridge_vp_ratio{valve=\"a\"} 0.415",
+            "valve_bridge_vp_ratio{valve=\"b\"} 0.4",
+            "valve_bridge_reconnects_total{valve=\"a\"} 2",
+            "valve_bridge_watchdog_trips_total{valve=\"a\"} 1",
+            "valve_bridge_watchdog_trips_total{valve=\"b\"} 0",
             "valve_bridge_server_up{server=\"modbus-server\"} 1",
             "valve_bridge_server_connections{server=\"modbus-server\"} 0",
             "valve_bridge_server_connections_idle_closed_total{server=\"modbus-server\"} 1",
@@ -399,8 +526,37 @@ mod tests {
     }
 
     #[test]
+    fn health_gauges_carry_the_valve_label() {
+        let m = LoopMetrics::new(&["a"], true).unwrap();
+        assert!(m.health(1).is_none());
+        let f = Figures {
+            same_steps: 9,
+            reversals: 2,
+            dead_time_s: Some(0.45),
+            reversal_delay_s: None,
+            opening_speed_pct_per_s: 20.0,
+            closing_speed_pct_per_s: 10.0,
+            tracking_rms_pct: 5.0,
+        };
+        m.health(0).unwrap().publish(&f, true);
+        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        for line in [
+            "valve_bridge_health_dead_time_seconds{valve=\"a\"} 0.45",
+            "valve_bridge_health_reversal_delay_seconds{valve=\"a\"} NaN",
+            "valve_bridge_health_opening_speed_ratio_per_second{valve=\"a\"} 0.2",
+            "valve_bridge_health_closing_speed_ratio_per_second{valve=\"a\"} 0.1",
+            "valve_bridge_health_tracking_error_ratio{valve=\"a\"} 0.05",
+            "valve_bridge_health_alarm{valve=\"a\"} 1",
+        ] {
+            assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
+        }
+        let plain = LoopMetrics::new(&["a"], false).unwrap();
+        assert!(plain.health(0).is_none());
+    }
+
+    #[test]
     fn other_requests_are_refused() {
-        let m = LoopMetrics::new().unwrap();
+        let m = LoopMetrics::new(&["valve"], true).unwrap();
         let r = m.registry();
         assert_eq!(respond(b"GET /metrics?x=1 HTTP/1.0\r\n\r\n", r).0, "200 OK");
         assert_eq!(respond(b"GET / HTTP/1.1\r\n\r\n", r).0, "404 Not Found");

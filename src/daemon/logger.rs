@@ -4,7 +4,8 @@
 //! logger thread writes the rows through a buffered CSV writer, flushes (and syncs) at least every
 //! `flush_interval_ms`, and rotates to a new file by size or by covered loop time. Each file
 //! starts with the header and is named by the time of its first row, `vb-YYYYMMDDTHHMMSSZ.csv`
-//! (UTC; `-1`, `-2`, ... added if that name is taken). A crash loses at most the last flush
+//! (UTC; `-1`, `-2`, ... added if that name is taken; `vb-NAME-...` for a named valve). Each
+//! valve has its own logger. A crash loses at most the last flush
 //! interval, and a file cut mid-line still loads with the recording reader.
 //!
 //! Columns: `t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc` (the first six
@@ -25,6 +26,8 @@
 //! Numbers are written with a fixed precision, trailing zeros dropped: times to 1 µs (`t_s`),
 //! percentages to 0.0001 % ([`PCT_DECIMALS`]; the loop rounds O_P to it before sending, so the
 //! logged O_P is the one sent), durations to 1 ns: never `49.400000000000006`.
+//!
+//! Rows written are passed on to the health thread when there is one ([`Forward`]).
 //!
 //! This module does not decide what is logged; the loop does.
 
@@ -196,6 +199,9 @@ pub struct LogReport {
     pub rows: u64,
 }
 
+/// Where a logger passes on the rows it wrote: the health thread, with the valve's index.
+pub type Forward = (usize, Sender<(usize, Sample)>);
+
 /// The running logger: the channel to send rows on, and its thread.
 pub struct Logger {
     /// Where the loop sends rows.
@@ -232,6 +238,8 @@ struct OpenFile {
 /// Writes rows into rotating files in one directory.
 struct Files {
     dir: PathBuf,
+    /// `vb-`, or `vb-NAME-` for a named valve.
+    prefix: String,
     started_wall: SystemTime,
     max_bytes: u64,
     max_span_s: f64,
@@ -247,9 +255,9 @@ impl Files {
         let mut n = 0;
         loop {
             let name = if n == 0 {
-                format!("vb-{stamp}.csv")
+                format!("{}{stamp}.csv", self.prefix)
             } else {
-                format!("vb-{stamp}-{n}.csv")
+                format!("{}{stamp}-{n}.csv", self.prefix)
             };
             let path = self.dir.join(name);
             match File::options().write(true).create_new(true).open(&path) {
@@ -339,13 +347,17 @@ fn file_stamp(t: SystemTime) -> String {
 }
 
 impl Logger {
-    /// Creates the directory and the first file, then starts the logger thread.
+    /// Creates the directory and the first file, then starts the logger thread. The files of a
+    /// valve named `name` are `vb-NAME-YYYYMMDDTHHMMSSZ.csv`, those of an unnamed one
+    /// `vb-YYYYMMDDTHHMMSSZ.csv`.
     ///
     /// On a write error the thread logs it, sets `stop` (the loop then ends cleanly) and keeps
     /// draining the channel so the loop never blocks; the error is returned by the join.
     pub fn start(
         cfg: &LogConfig,
         dir: &Path,
+        name: Option<&str>,
+        forward: Option<Forward>,
         stop: Arc<AtomicBool>,
     ) -> Result<Logger, DaemonError> {
         std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
@@ -354,6 +366,7 @@ impl Logger {
         })?;
         let mut files = Files {
             dir: dir.to_path_buf(),
+            prefix: name.map_or("vb-".into(), |n| format!("vb-{n}-")),
             started_wall: SystemTime::now(),
             max_bytes: (cfg.rotate_size_mb * 1e6) as u64,
             max_span_s: cfg.rotate_after_s,
@@ -365,7 +378,7 @@ impl Logger {
         let (tx, rx) = mpsc::channel();
         let handle = std::thread::Builder::new()
             .name("vb-logger".into())
-            .spawn(move || write_all(rx, files, flush_every, &stop))
+            .spawn(move || write_all(rx, files, flush_every, forward, &stop))
             .map_err(|source| DaemonError::Thread {
                 what: "logger",
                 source,
@@ -379,6 +392,7 @@ fn write_all(
     rx: Receiver<Sample>,
     mut files: Files,
     flush_every: Duration,
+    forward: Option<Forward>,
     stop: &AtomicBool,
 ) -> Result<LogReport, DaemonError> {
     let mut next_flush = Instant::now() + flush_every;
@@ -391,6 +405,10 @@ fn write_all(
             let mut step = || -> Result<(), DaemonError> {
                 if let Ok(sample) = &received {
                     files.write(sample)?;
+                    if let Some((i, tx)) = &forward {
+                        // The health thread only hangs up by failing; its join says why.
+                        let _ = tx.send((*i, *sample));
+                    }
                 }
                 if done {
                     files.close()?;
@@ -443,7 +461,14 @@ mod tests {
             rotate_after_s: 1.0,
             flush_interval_ms: 10,
         };
-        let logger = Logger::start(&cfg, dir.path(), Arc::new(AtomicBool::new(false))).unwrap();
+        let logger = Logger::start(
+            &cfg,
+            dir.path(),
+            None,
+            None,
+            Arc::new(AtomicBool::new(false)),
+        )
+        .unwrap();
         for k in 0..250u32 {
             let status = if k == 7 { Status::Timeout } else { Status::Ok };
             let vp = (status == Status::Ok).then_some(f64::from(k) / 10.0);
@@ -506,7 +531,14 @@ mod tests {
             flush_interval_ms: 50,
             ..LogConfig::default()
         };
-        let logger = Logger::start(&cfg, dir.path(), Arc::new(AtomicBool::new(false))).unwrap();
+        let logger = Logger::start(
+            &cfg,
+            dir.path(),
+            None,
+            None,
+            Arc::new(AtomicBool::new(false)),
+        )
+        .unwrap();
         logger.tx.send(sample(0.0, Status::Ok, Some(1.0))).unwrap();
         std::thread::sleep(Duration::from_millis(300));
         let path = std::fs::read_dir(dir.path())

@@ -10,7 +10,8 @@
 //! Threads: the loop runs on its own OS thread (`vb-loop`) that sleeps to absolute deadlines
 //! ([`schedule`]) and runs each valve transaction on a current-thread tokio runtime it owns, so
 //! async backends need no other thread and no cross-thread hop. The logger writes on its own
-//! thread. The network thread (`vb-net`, only when there is something to serve) runs the
+//! thread, and passes the rows on to the health thread (`vb-health`, with `[health]`,
+//! [`health`]), which estimates each valve's health off the loop. The network thread (`vb-net`, only when there is something to serve) runs the
 //! process controller's Modbus server ([`hil`]) and the Prometheus endpoint ([`exporter`]) on a
 //! runtime of its own: the loop shares only a register bank and atomic metric handles with it and
 //! never waits on a socket. The calling thread waits for signals (tokio), drives the progress
@@ -30,6 +31,7 @@
 pub mod config;
 mod control;
 pub mod exporter;
+pub mod health;
 pub mod hil;
 pub mod logger;
 mod net;
@@ -49,7 +51,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 pub use config::Config;
 pub use running::{start, Running};
-pub use stats::Summary;
+pub use stats::{Summary, ValveSummary};
 use valve::BackendError;
 
 use crate::toml_file::TomlError;

@@ -35,16 +35,19 @@ pub(super) struct Listeners {
 }
 
 impl Listeners {
-    /// Binds the Modbus server (when `source` serves a bank) and the metrics endpoint (when
+    /// Binds the Modbus server (when `source`, the first valve's, serves a bank) and the metrics endpoint (when
     /// there are `metrics`).
     pub(super) fn bind(
         config: &Config,
-        source: &Source,
+        source: Option<&Source>,
         metrics: Option<&LoopMetrics>,
     ) -> Result<Listeners, DaemonError> {
-        let modbus = match source.served_bank() {
-            Some(bank) => {
-                let cfg = &config.source.modbus_server;
+        let served = source
+            .and_then(Source::served_bank)
+            .zip(config.controller_source());
+        let modbus = match served {
+            Some((bank, source_cfg)) => {
+                let cfg = &source_cfg.modbus_server;
                 let (listener, addr) = bind("[source.modbus-server] listen", cfg.listen.0)?;
                 Some(Served {
                     listener,

@@ -1,5 +1,6 @@
-//! Starting the daemon: checks the options, binds the listening sockets, opens the valve on the
-//! loop thread, starts the logger and the network thread, and hands the loop its parts.
+//! Starting the daemon: checks the options, binds the listening sockets, opens the valves on
+//! the loop thread, starts a logger per valve and the network thread, and hands the loop its
+//! parts.
 //! [`Running`] is the started daemon: stop it, watch it, and join it for the [`Summary`].
 //!
 //! Not here: what the loop does each slot ([`super::control`]), serving ([`super::net`]).
@@ -10,14 +11,17 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use super::config::{ClockKind, Config, SourceKind};
-use super::control::{self, Loop, LoopEnd};
+use super::config::{ClockKind, Config};
+use super::control::{self, Lane, Loop, LoopEnd};
 use super::exporter::LoopMetrics;
-use super::logger::{LogReport, Logger, Status};
+use super::health::{self, HealthReport};
+use super::logger::{LogReport, Logger};
 use super::net::{Listeners, Net};
 use super::source::Source;
-use super::stats::{Live, Stats, Summary};
+use super::stats::{Live, Summary, ValveSummary};
+use super::valve::BackendError;
 use super::{DaemonError, RunOptions};
+use crate::model::{ModelSpec, Valve};
 use crate::net::Health;
 
 /// A started daemon: its threads and the stop flag.
@@ -26,30 +30,36 @@ pub struct Running {
     live: Arc<Live>,
     rate_hz: f64,
     control: JoinHandle<Result<LoopEnd, DaemonError>>,
-    logger: JoinHandle<Result<LogReport, DaemonError>>,
+    /// Each valve's name and logger, in the order of the config.
+    loggers: Vec<(String, JoinHandle<Result<LogReport, DaemonError>>)>,
+    /// The health thread, with `[health]`.
+    health: Option<JoinHandle<Result<Vec<HealthReport>, DaemonError>>>,
     net: Option<Net>,
     endpoints: Vec<(&'static str, SocketAddr)>,
     servers: Vec<(&'static str, Arc<Health>)>,
 }
 
-/// Starts the loop and logger threads; the loop runs until stopped, the duration or the source ends.
+/// Starts the loop and logger threads; the loop runs until stopped, the duration or a source ends.
 pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let clock = checked_clock(&config, &opts)?;
     let rate_hz = config.loop_.rate_hz;
     let period = config.loop_.period();
-    // Sockets are bound before the valve is opened, so a taken port stops the start first.
-    let source = Source::new(&config.source, &config.safety, period.as_secs_f64());
+    // Sockets are bound before the valves are opened, so a taken port stops the start first.
+    let mut sources: Vec<Source> = (config.valves.iter())
+        .map(|v| Source::new(config.source_of(v), &config.safety, period.as_secs_f64()))
+        .collect();
+    let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
     let metrics = config
         .metrics
         .as_ref()
-        .map(|_| LoopMetrics::new())
+        .map(|_| LoopMetrics::new(&names, config.health.is_some()))
         .transpose()?;
-    let listeners = Listeners::bind(&config, &source, metrics.as_ref())?;
-    // The backend is opened on the loop thread, inside the runtime that will drive its I/O; the
-    // rest of the loop is handed over once it is open, so a valve that cannot be reached stops
-    // the start before any log file is created.
+    let listeners = Listeners::bind(&config, sources.first(), metrics.as_ref())?;
+    // The backends are opened on the loop thread, inside the runtime that will drive their I/O;
+    // the rest of the loop is handed over once they are open, so a valve that cannot be reached
+    // stops the start before any log file is created.
     let spawned = control::spawn(
-        config.valve.clone(),
+        config.valves.clone(),
         period.as_secs_f64(),
         opts.require_device,
     )?;
@@ -65,23 +75,39 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
-    let logger = Logger::start(&config.log, &dir, stop.clone())?;
-    tracing::info!(
-        valve = %spawned.valve,
-        source = config.source.kind.tag(),
-        rate_hz,
-        clock = ?clock,
-        "starting the loop"
-    );
-    let tx = logger.tx;
+    let health = start_health(&config, &dir, metrics.as_ref())?;
+    let mut lanes = Vec::with_capacity(config.valves.len());
+    let mut loggers = Vec::with_capacity(config.valves.len());
+    for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
+        let forward = health.as_ref().map(|h| (i, h.tx.clone()));
+        let logger = Logger::start(
+            &config.log,
+            &dir,
+            valve.name.as_deref(),
+            forward,
+            stop.clone(),
+        )?;
+        tracing::info!(
+            valve = valve.label(),
+            described = %described,
+            source = config.source_of(valve).kind.tag(),
+            "valve"
+        );
+        loggers.push((valve.label().to_string(), logger.handle));
+        let source = sources.remove(0);
+        let m = metrics.as_ref().and_then(|m| m.valve(i));
+        lanes.push((valve.label().to_string(), source, m, logger.tx));
+    }
+    tracing::info!(valves = lanes.len(), rate_hz, clock = ?clock, "starting the loop");
     let (loop_stop, loop_live) = (stop.clone(), live.clone());
-    let control = spawned.run(move |backend| Loop {
+    let control = spawned.run(move |backends| Loop {
         clock,
         period,
         spin: Duration::from_micros(u64::from(config.loop_.spin_us)),
         realtime_priority: config.loop_.realtime_priority,
-        source,
-        backend,
+        lanes: (lanes.into_iter().zip(backends))
+            .map(|((name, source, m, tx), backend)| Lane::new(name, source, backend, m, tx))
+            .collect(),
         metrics,
         safe_action: config.safety.on_stop,
         go_to_pct: config.safety.go_to_pct,
@@ -90,22 +116,57 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
             .map(|d| (d * rate_hz).round().max(1.0) as u64),
         stop: loop_stop,
         live: loop_live,
-        tx,
-        stats: Stats::new(),
-        last_op: None,
-        last_status: Status::Ok,
-        last_skipped_k: None,
     })?;
     Ok(Running {
         stop,
         live,
         rate_hz,
         control,
-        logger: logger.handle,
+        loggers,
+        health: health.map(|h| h.handle),
         net,
         endpoints,
         servers,
     })
+}
+
+/// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`.
+fn start_health(
+    config: &Config,
+    dir: &std::path::Path,
+    metrics: Option<&LoopMetrics>,
+) -> Result<Option<health::Health>, DaemonError> {
+    let Some(cfg) = &config.health else {
+        return Ok(None);
+    };
+    std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
+    let period_s = config.loop_.period_s();
+    let mut watched = Vec::with_capacity(config.valves.len());
+    for (i, v) in config.valves.iter().enumerate() {
+        let baseline_model = match &v.health_baseline_model {
+            Some(file) => Some(
+                Valve::new(
+                    &ModelSpec::load(file).map_err(BackendError::from)?,
+                    period_s,
+                )
+                .map_err(BackendError::from)?,
+            ),
+            None => None,
+        };
+        watched.push(health::Watched {
+            name: v.label().to_string(),
+            file_name: v
+                .name
+                .as_ref()
+                .map_or("health.csv".into(), |n| format!("health-{n}.csv")),
+            baseline_model,
+            metrics: metrics.and_then(|m| m.health(i)),
+        });
+    }
+    health::start(cfg, dir, period_s, watched).map(Some)
 }
 
 /// The clock the loop runs on, after checking that `--duration` and the clock fit the config.
@@ -120,10 +181,11 @@ fn checked_clock(config: &Config, opts: &RunOptions) -> Result<ClockKind, Daemon
     } else {
         config.loop_.clock
     };
-    if clock == ClockKind::Virtual && !config.valve.kind.is_simulated() {
-        return Err(DaemonError::VirtualClock(config.valve.kind.tag().into()));
+    let real = config.valves.iter().find(|v| !v.kind.is_simulated());
+    if let (ClockKind::Virtual, Some(v)) = (clock, real) {
+        return Err(DaemonError::VirtualClock(v.kind.tag().into()));
     }
-    if clock == ClockKind::Virtual && config.source.kind == SourceKind::ModbusServer {
+    if clock == ClockKind::Virtual && config.controller_source().is_some() {
         return Err(DaemonError::VirtualClockController);
     }
     Ok(clock)
@@ -155,7 +217,7 @@ impl Running {
         &self.endpoints
     }
 
-    /// Waits for the loop and the logger to end and returns the summary.
+    /// Waits for the loop and the loggers to end and returns the summary.
     pub fn finish(self) -> Result<Summary, DaemonError> {
         let end = self
             .control
@@ -163,25 +225,40 @@ impl Running {
             .map_err(|_| DaemonError::Panicked("loop"));
         // The controller and the scraper are answered until the stop action has been applied.
         let net = self.net.map(Net::stop).transpose();
-        // The loop thread has dropped its sender: the logger drains, flushes and closes.
-        let log = self
-            .logger
-            .join()
-            .map_err(|_| DaemonError::Panicked("logger"))??;
+        // The loop thread has dropped its senders: each logger drains, flushes and closes.
+        let mut logs = Vec::with_capacity(self.loggers.len());
+        for (name, handle) in self.loggers {
+            let log = handle
+                .join()
+                .map_err(|_| DaemonError::Panicked("logger"))??;
+            logs.push((name, log));
+        }
+        // The loggers have dropped theirs: the health thread finishes its rows.
+        let mut health = match self.health {
+            Some(h) => h.join().map_err(|_| DaemonError::Panicked("health"))??,
+            None => Vec::new(),
+        }
+        .into_iter();
         net?;
         let end = end??;
         Ok(Summary {
-            stats: end.stats,
+            valves: (end.valves.into_iter().zip(logs))
+                .map(|(lane, (name, log))| ValveSummary {
+                    name,
+                    stats: lane.stats,
+                    safe: lane.safe,
+                    reconnects: lane.reconnects,
+                    connection_attempts: lane.attempts,
+                    log,
+                    health: health.next(),
+                })
+                .collect(),
             reason: end.reason,
             slots: end.slots,
             rate_hz: self.rate_hz,
-            safe: end.safe,
-            reconnects: end.reconnects,
-            connection_attempts: end.attempts,
             servers: (self.servers.iter())
                 .map(|(name, h)| (*name, h.view()))
                 .collect(),
-            log,
         })
     }
 }

@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use hdrhistogram::Histogram;
 
+use super::health::HealthReport;
 use super::logger::{LogReport, Sample, Status};
 use super::valve::Fault;
 use crate::net::HealthView;
@@ -184,30 +185,43 @@ impl fmt::Display for StopReason {
 /// What `valve-bridge run` reports at the end.
 #[derive(Debug, Clone)]
 pub struct Summary {
-    /// Loop statistics (cycle rows and the stop-action row).
-    pub stats: Stats,
+    /// Each valve's figures, in the order of the config.
+    pub valves: Vec<ValveSummary>,
     /// Why the loop stopped.
     pub reason: StopReason,
     /// Slots covered, including skipped ones (not the stop action).
     pub slots: u64,
     /// Loop rate, Hz.
     pub rate_hz: f64,
+    /// What each server (`modbus-server`, `metrics`) went through.
+    pub servers: Vec<(&'static str, HealthView)>,
+}
+
+/// One valve's part of the [`Summary`].
+#[derive(Debug, Clone)]
+pub struct ValveSummary {
+    /// The valve's name.
+    pub name: String,
+    /// Loop statistics (cycle rows and the stop-action row).
+    pub stats: Stats,
     /// The stop-action row, if one was sent.
     pub safe: Option<Sample>,
     /// Times a Modbus link was reopened after a fault (None: not a Modbus valve).
     pub reconnects: Option<u64>,
     /// Connection attempts of a Modbus link, the first one included.
     pub connection_attempts: Option<u64>,
-    /// What each server (`modbus-server`, `metrics`) went through.
-    pub servers: Vec<(&'static str, HealthView)>,
     /// What the logger wrote.
     pub log: LogReport,
+    /// What the live health check did, with `[health]`.
+    pub health: Option<HealthReport>,
 }
 
-/// A run in which the valve never gave a V_P: it did not do its job, whatever stopped it.
+/// A run in which a valve never gave a V_P: it did not do its job, whatever stopped it.
 #[derive(Debug, Clone, thiserror::Error)]
-#[error("no cycle read a V_P: all {cycles} failed ({counts}); the last {last}")]
+#[error("{valve}no cycle read a V_P: all {cycles} failed ({counts}); the last {last}")]
 pub struct NothingRead {
+    /// `valve NAME: ` with several valves, else empty.
+    pub valve: String,
     /// Cycles that ran a transaction.
     pub cycles: u64,
     /// The failures by kind, e.g. `200 error`.
@@ -217,30 +231,41 @@ pub struct NothingRead {
 }
 
 impl Summary {
-    /// Err when cycles ran but none read a V_P (every transaction failed): the cause is the
-    /// last fault of the most frequent kind.
+    /// Err when cycles ran but a valve read no V_P (every one of its transactions failed): the
+    /// cause is the last fault of the most frequent kind.
     pub fn check(&self) -> Result<(), NothingRead> {
-        let s = &self.stats;
-        let cycles = self.samples();
-        if cycles == 0 || s.count(Status::Ok) + s.count(Status::Watchdog) > 0 {
-            return Ok(());
+        let several = self.valves.len() > 1;
+        for v in &self.valves {
+            let s = &v.stats;
+            let cycles = v.samples();
+            if cycles == 0 || s.count(Status::Ok) + s.count(Status::Watchdog) > 0 {
+                continue;
+            }
+            let counts: Vec<String> = FAILURES
+                .iter()
+                .filter(|st| s.count(**st) > 0)
+                .map(|st| format!("{} {}", s.count(*st), st.as_str()))
+                .collect();
+            let last = s
+                .last_faults()
+                .first()
+                .map_or("fault is unknown".into(), |(_, f)| format!("was {f}"));
+            return Err(NothingRead {
+                valve: if several {
+                    format!("valve {}: ", v.name)
+                } else {
+                    String::new()
+                },
+                cycles,
+                counts: counts.join(", "),
+                last,
+            });
         }
-        let counts: Vec<String> = FAILURES
-            .iter()
-            .filter(|st| s.count(**st) > 0)
-            .map(|st| format!("{} {}", s.count(*st), st.as_str()))
-            .collect();
-        let last = s
-            .last_faults()
-            .first()
-            .map_or("fault is unknown".into(), |(_, f)| format!("was {f}"));
-        Err(NothingRead {
-            cycles,
-            counts: counts.join(", "),
-            last,
-        })
+        Ok(())
     }
+}
 
+impl ValveSummary {
     /// Slots that ran a transaction (ok or failed), not counting skipped slots or the stop action.
     pub fn samples(&self) -> u64 {
         [
@@ -259,22 +284,13 @@ impl Summary {
     pub fn missed(&self) -> u64 {
         self.stats.count(Status::Skipped)
     }
-}
 
-impl fmt::Display for Summary {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    /// The valve's lines of the summary, each starting with `indent`.
+    fn write(&self, f: &mut fmt::Formatter<'_>, indent: &str) -> fmt::Result {
         let s = &self.stats;
         writeln!(
             f,
-            "run: {} slots at {} Hz ({:.2} s), stopped: {}",
-            self.slots,
-            self.rate_hz,
-            self.slots as f64 / self.rate_hz,
-            self.reason
-        )?;
-        writeln!(
-            f,
-            "samples: {} ({} ok, {} timeout, {} error, {} disconnected)",
+            "{indent}samples: {} ({} ok, {} timeout, {} error, {} disconnected)",
             self.samples(),
             s.count(Status::Ok),
             s.count(Status::Timeout),
@@ -285,37 +301,41 @@ impl fmt::Display for Summary {
         if held > 0 {
             writeln!(
                 f,
-                "watchdog: {held} cycles sent the safe O_P (no set-point from the controller)"
+                "{indent}watchdog: {held} cycles sent the safe O_P (no set-point from the controller)"
             )?;
         }
         for (_, fault) in s.last_faults() {
-            writeln!(f, "last {fault}")?;
+            writeln!(f, "{indent}last {fault}")?;
         }
-        writeln!(f, "missed cycles: {}", self.missed())?;
+        writeln!(f, "{indent}missed cycles: {}", self.missed())?;
         if let Some(n) = self.reconnects {
             let attempts = self.connection_attempts.unwrap_or(0);
-            writeln!(f, "reconnects: {n} ({attempts} connection attempts)")?;
+            writeln!(
+                f,
+                "{indent}reconnects: {n} ({attempts} connection attempts)"
+            )?;
         }
-        for (name, health) in &self.servers {
-            writeln!(f, "{name}: {health}")?;
-        }
-        writeln!(
-            f,
-            "timing error |actual - scheduled|: p50 {:.2} us, p99 {:.2} us, max {:.2} us",
-            s.lateness_us(0.5),
-            s.lateness_us(0.99),
-            s.max_lateness_us()
-        )?;
         match &self.safe {
             Some(row) => writeln!(
                 f,
-                "stop action: {} O_P {} %, V_P {}",
+                "{indent}stop action: {} O_P {} %, V_P {}",
                 row.status.as_str(),
                 row.op_pct.map_or("-".into(), |v| format!("{v:.2}")),
                 row.vp_pct
                     .map_or("not read".into(), |v| format!("{v:.2} %"))
             )?,
-            None => writeln!(f, "stop action: none (no O_P was ever sent)")?,
+            None => writeln!(f, "{indent}stop action: none (no O_P was ever sent)")?,
+        }
+        if let Some(h) = &self.health {
+            writeln!(
+                f,
+                "{indent}health: {} windows, {} alarms{}, in {}",
+                h.windows,
+                h.alarms,
+                h.first_alarm_t_s
+                    .map_or(String::new(), |t| format!(" (first at {t:.0} s)")),
+                h.file.display()
+            )?;
         }
         let files: Vec<String> = self
             .log
@@ -323,6 +343,48 @@ impl fmt::Display for Summary {
             .iter()
             .map(|p| p.display().to_string())
             .collect();
-        write!(f, "log: {} rows in {}", self.log.rows, files.join(", "))
+        write!(
+            f,
+            "{indent}log: {} rows in {}",
+            self.log.rows,
+            files.join(", ")
+        )
+    }
+}
+
+impl fmt::Display for Summary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "run: {} slots at {} Hz ({:.2} s), stopped: {}",
+            self.slots,
+            self.rate_hz,
+            self.slots as f64 / self.rate_hz,
+            self.reason
+        )?;
+        for (name, health) in &self.servers {
+            writeln!(f, "{name}: {health}")?;
+        }
+        // Every valve of a cycle starts in the same slot: the timing is the loop's.
+        if let Some(s) = self.valves.first().map(|v| &v.stats) {
+            writeln!(
+                f,
+                "timing error |actual - scheduled|: p50 {:.2} us, p99 {:.2} us, max {:.2} us",
+                s.lateness_us(0.5),
+                s.lateness_us(0.99),
+                s.max_lateness_us()
+            )?;
+        }
+        let several = self.valves.len() > 1;
+        for (i, v) in self.valves.iter().enumerate() {
+            if i > 0 {
+                writeln!(f)?;
+            }
+            if several {
+                writeln!(f, "valve {}:", v.name)?;
+            }
+            v.write(f, if several { "  " } else { "" })?;
+        }
+        Ok(())
     }
 }

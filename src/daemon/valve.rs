@@ -23,6 +23,9 @@
 //! behind the clock, and the log (which shows that held O_P in skipped rows) replays through
 //! [`crate::model::Valve::simulate`] to the log's precision. It starts at rest at its first O_P
 //! (`reset(op0, op0)`). Optional Gaussian measurement noise is added to the reported V_P only.
+//! A dead-time drift (`dead_time_drift_s_per_h`) delays O_P before the model by a time that
+//! grows with loop time up to `dead_time_drift_max_s`: a valve wearing over hours, for the
+//! live health check to notice.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -30,7 +33,7 @@ use rand_distr::{Distribution, Normal};
 
 use super::config::{ValveConfig, ValveKind};
 use crate::modbus::client::{Link, ModbusValve, OpenError, MAX_BACKOFF};
-use crate::model::{ModelError, Valve};
+use crate::model::{DelayLine, ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
 pub use crate::modbus::client::Fault;
@@ -106,10 +109,16 @@ impl Backend {
                 } else {
                     None
                 };
+                let drift = (e.dead_time_drift_s_per_h > 0.0).then(|| Drift {
+                    line: DelayLine::with_capacity(e.dead_time_drift_max_s, period_s),
+                    per_slot_s: e.dead_time_drift_s_per_h / 3600.0 * period_s,
+                    period_s,
+                });
                 Ok(Backend::Emulated(Box::new(Emulated {
                     valve: Valve::new(&spec, period_s)?,
                     last: None,
                     noise,
+                    drift,
                 })))
             }
         }
@@ -165,25 +174,55 @@ pub struct Emulated {
     /// Last slot stepped and the O_P it got.
     last: Option<(u64, f64)>,
     noise: Option<(Normal<f64>, ChaCha8Rng)>,
+    drift: Option<Drift>,
+}
+
+/// The growing extra dead time of a wearing valve.
+#[derive(Debug)]
+struct Drift {
+    line: DelayLine,
+    /// Growth per slot, s.
+    per_slot_s: f64,
+    period_s: f64,
 }
 
 impl Emulated {
     /// Steps the model through slot `k` (holding the previous O_P over skipped slots).
     fn step_to(&mut self, op_pct: f64, k: u64) -> f64 {
         match self.last {
-            None => self.valve.reset(op_pct, op_pct),
+            None => {
+                self.valve.reset(op_pct, op_pct);
+                if let Some(d) = &mut self.drift {
+                    d.line.reset(op_pct);
+                }
+            }
             Some((last_k, held)) => {
-                for _ in last_k + 1..k {
-                    self.valve.step(held);
+                for j in last_k + 1..k {
+                    self.step_model(held, j);
                 }
             }
         }
         self.last = Some((k, op_pct));
-        let vp = self.valve.step(op_pct);
+        let vp = self.step_model(op_pct, k);
         match &mut self.noise {
             Some((normal, rng)) => vp + normal.sample(rng),
             None => vp,
         }
+    }
+
+    /// One step of the model in slot `k`, through the drift's delay when there is one.
+    fn step_model(&mut self, op_pct: f64, k: u64) -> f64 {
+        let op = match &mut self.drift {
+            Some(d) => {
+                // Whole samples: the model sees only O_Ps that were sent, never a blend (a
+                // blend that changes every slot would look like a new step to pin-cart II).
+                d.line
+                    .set_samples((d.per_slot_s * k as f64 / d.period_s) as usize);
+                d.line.push(op_pct)
+            }
+            None => op_pct,
+        };
+        self.valve.step(op)
     }
 }
 
@@ -199,7 +238,8 @@ mod tests {
         let rt = tokio::runtime::Builder::new_current_thread()
             .build()
             .unwrap();
-        rt.block_on(Backend::open(&cfg.valve, 0.01, true)).unwrap()
+        rt.block_on(Backend::open(&cfg.valves[0], 0.01, true))
+            .unwrap()
     }
 
     fn run(b: &mut Backend, ops: &[(u64, f64)]) -> Vec<f64> {
@@ -224,6 +264,26 @@ mod tests {
             .unwrap()
             .simulate(&op, op[0]);
         assert_eq!(got, vec![want[0], want[1], want[2], want[5], want[6]]);
+    }
+
+    #[test]
+    fn drift_adds_a_dead_time_growing_with_loop_time() {
+        // Modelless: V_P is O_P delayed by the drift alone, 360 s/h = 1 ms more per 10 ms slot.
+        let toml = "[valve.emulated]\nmodel = \"modelless\"\ndead_time_drift_s_per_h = 360.0\ndead_time_drift_max_s = 0.5\n";
+        let mut b = backend(toml);
+        // A step at slot 300 shows when k - floor(k / 10) reaches 300 (the delay grows
+        // meanwhile, by whole slots).
+        let mut ops: Vec<(u64, f64)> = (0..300).map(|k| (k, 10.0)).collect();
+        ops.extend((300..400).map(|k| (k, 20.0)));
+        let vp = run(&mut b, &ops);
+        let first = vp.iter().position(|&v| v > 10.0).unwrap();
+        assert_eq!(first, 333);
+        // The growth stops at the most the drift adds (0.5 s, reached at 5 s).
+        let mut ops: Vec<(u64, f64)> = (400..2000).map(|k| (k, 20.0)).collect();
+        ops.extend((2000..2100).map(|k| (k, 30.0)));
+        let vp = run(&mut b, &ops);
+        let first = vp.iter().position(|&v| v > 20.0).unwrap();
+        assert_eq!(first, 1600 + 50);
     }
 
     #[test]

@@ -73,6 +73,23 @@ pub fn dead_time_xcorr(op: &[f64], vp: &[f64], dt: f64, max_lag_s: f64) -> f64 {
     ((best as f64 + frac) * dt).max(0.0)
 }
 
+/// The 99.5th percentile of the speed of V_P over 0.1 s, %/s: of every move (`direction`
+/// None), or only of the opening (`Some(1.0)`) or closing (`Some(-1.0)`) moves (0 when there
+/// are none).
+pub fn travel_speed(vp: &[f64], dt: f64, direction: Option<f64>) -> f64 {
+    let h = ((0.1 / dt).round() as usize).max(1);
+    let mut speeds: Vec<f64> = (h..vp.len())
+        .step_by(h)
+        .map(|k| (vp[k] - vp[k - h]) / (h as f64 * dt))
+        .filter(|v| v.is_finite())
+        .filter_map(|v| match direction {
+            None => Some(v.abs()),
+            Some(d) => (v * d > 0.0).then_some(v.abs()),
+        })
+        .collect();
+    quantile(&mut speeds, 0.995)
+}
+
 /// Reads the physical estimates off a recording and its step analysis.
 pub fn estimate(op: &[f64], vp: &[f64], dt: f64, steps: &StepAnalysis) -> Physical {
     let td = dead_time_xcorr(op, vp, dt, 5.0_f64.max(5.0 * dt));
@@ -88,16 +105,10 @@ pub fn estimate(op: &[f64], vp: &[f64], dt: f64, steps: &StepAnalysis) -> Physic
     } else {
         quantile(&mut t63, 0.5)
     };
-    let h = ((0.1 / dt).round() as usize).max(1);
-    let mut speeds: Vec<f64> = (h..vp.len())
-        .step_by(h)
-        .map(|k| (vp[k] - vp[k - h]).abs() / (h as f64 * dt))
-        .filter(|s| s.is_finite())
-        .collect();
     Physical {
         dead_time_s: td,
         time_constant_s: tau,
-        max_speed_pct_per_s: quantile(&mut speeds, 0.995),
+        max_speed_pct_per_s: travel_speed(vp, dt, None),
         same_delay_s: (steps.same.count > 0).then_some(steps.same.mean_s),
         crossing: steps.pincart2,
     }

@@ -35,6 +35,22 @@ impl DelayLine {
         }
     }
 
+    /// A line that can delay by up to `max_delay_s` at `sample_period_s`, starting with no
+    /// delay; [`DelayLine::set_samples`] changes the delay without allocating.
+    pub fn with_capacity(max_delay_s: f64, sample_period_s: f64) -> Self {
+        let mut line = DelayLine::new(max_delay_s, sample_period_s);
+        line.whole = 0;
+        line.frac = 0.0;
+        line
+    }
+
+    /// Sets the delay to `samples` whole samples, at most the line's capacity. The stored
+    /// history is kept, so a growing delay repeats the last input instead of jumping.
+    pub fn set_samples(&mut self, samples: usize) {
+        self.whole = samples.min(self.buf.len() - 2);
+        self.frac = 0.0;
+    }
+
     /// Fills the history with `value`, as if the input had been constant forever.
     pub fn reset(&mut self, value: f64) {
         self.buf.fill(value);
@@ -71,6 +87,20 @@ mod tests {
         d.reset(0.0);
         let out: Vec<f64> = (1..=6).map(|k| d.push(k as f64)).collect();
         assert_eq!(out, vec![0.0, 0.0, 0.0, 1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn a_set_delay_stays_within_the_capacity() {
+        let mut d = DelayLine::with_capacity(0.03, 0.01);
+        d.reset(0.0);
+        assert_eq!(d.push(1.0), 1.0);
+        d.set_samples(2);
+        assert_eq!(d.push(2.0), 0.0);
+        assert_eq!(d.push(3.0), 1.0);
+        d.set_samples(1);
+        assert_eq!(d.push(4.0), 3.0);
+        d.set_samples(100);
+        assert_eq!(d.push(5.0), 2.0);
     }
 
     #[test]

@@ -511,6 +511,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
         plot::lines(
             title,
             "position (%)",
+            "time (s)",
             t,
             &[
                 Series {
@@ -554,6 +555,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
     h.push_str(&plot::lines(
         "residual (measured - simulated)",
         "residual (%)",
+        "time (s)",
         t,
         &[
             Series {

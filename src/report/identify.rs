@@ -227,6 +227,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
     h.push_str(&plot::lines(
         "whole recording (free run from the first sample)",
         "position (%)",
+        "time (s)",
         t,
         &series(true),
         0..n,
@@ -252,6 +253,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
             h.push_str(&plot::lines(
                 &format!("{:.1}–{:.1} s", t[a], t[b - 1]),
                 "position (%)",
+                "time (s)",
                 t,
                 &series(true),
                 a..b,
@@ -281,6 +283,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
     h.push_str(&plot::lines(
         "measured − simulated V_P",
         "residual (%)",
+        "time (s)",
         t,
         &res_series,
         0..n,

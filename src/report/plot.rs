@@ -21,6 +21,8 @@ pub const MEASURED: RGBColor = RGBColor(40, 40, 40);
 pub const BEFORE: RGBColor = RGBColor(214, 39, 40);
 pub const AFTER: RGBColor = RGBColor(31, 119, 180);
 pub const EXTRA: RGBColor = RGBColor(44, 160, 44);
+pub const GREY: RGBColor = RGBColor(150, 150, 150);
+pub const PURPLE: RGBColor = RGBColor(148, 103, 189);
 
 /// Draws the series labels in the one legend style every plot uses.
 fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) {
@@ -58,10 +60,11 @@ fn thin(y: &[f64], range: std::ops::Range<usize>) -> Vec<usize> {
     out
 }
 
-/// A time-series chart of `series` against `t` over the samples `range`.
+/// A time-series chart of `series` against `t` (labelled `x_label`) over the samples `range`.
 pub fn lines(
     title: &str,
     y_label: &str,
+    x_label: &str,
     t: &[f64],
     series: &[Series],
     range: std::ops::Range<usize>,
@@ -98,7 +101,7 @@ pub fn lines(
         };
         let _ = chart
             .configure_mesh()
-            .x_desc("time (s)")
+            .x_desc(x_label)
             .y_desc(y_label)
             .light_line_style(WHITE.mix(0.0))
             .draw();
@@ -312,6 +315,7 @@ mod tests {
         let svg = lines(
             "x",
             "%",
+            "time (s)",
             &t,
             &[Series {
                 name: "sin",

@@ -1,7 +1,9 @@
 //! The daemon's TOML configuration: types, defaults, range checks and the embedded default.
 //!
-//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]` and `[metrics]`,
-//! all optional (no `[metrics]`: no Prometheus endpoint).
+//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]`, `[metrics]`
+//! and `[health]`, all optional (no `[metrics]`: no Prometheus endpoint; no `[health]`: no live
+//! health check). Several valves are several
+//! `[[valve]]` tables, each with a `name` and, optionally, a `[valve.source]` of its own.
 //! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
 //! each kind live in their own sub-table (`[valve.emulated]`, `[source.sine]`, ...), so a file
 //! can keep settings for several kinds and switch with one line, and every key keeps its exact
@@ -17,6 +19,7 @@
 //!
 //! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
 
+mod health;
 mod source;
 mod valve;
 
@@ -27,6 +30,7 @@ use serde::Deserialize;
 
 use crate::toml_file::{self, TomlError};
 
+pub use health::HealthConfig;
 pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
     SineConfig, SourceConfig, SourceKind, StepsConfig,
@@ -49,10 +53,15 @@ pub struct Config {
     /// Loop rate and clock.
     #[serde(rename = "loop", default)]
     pub loop_: LoopConfig,
-    /// The valve backend.
-    #[serde(default)]
-    pub valve: ValveConfig,
-    /// The source of O_P.
+    /// The valves, in the order of the file: one `[valve]` table or several `[[valve]]` tables.
+    /// The loop drives them in this order within each cycle.
+    #[serde(
+        rename = "valve",
+        default = "valve::one_default",
+        deserialize_with = "valve::one_or_many"
+    )]
+    pub valves: Vec<ValveConfig>,
+    /// The source of O_P of every valve that has no `source` table of its own.
     #[serde(default)]
     pub source: SourceConfig,
     /// What to do on stop.
@@ -63,6 +72,8 @@ pub struct Config {
     pub log: LogConfig,
     /// The Prometheus endpoint, if any.
     pub metrics: Option<MetricsConfig>,
+    /// The live health check of every valve, if any.
+    pub health: Option<HealthConfig>,
 }
 
 /// `[loop]`: rate and clock.
@@ -194,16 +205,61 @@ impl Default for LogConfig {
         }
     }
 }
-/// Where the checks of one config point their messages: its text and its file.
+/// Where the checks of one config point their messages: its text (or the part of it that
+/// holds one `[[valve]]` table and its sub-tables, `line_offset` lines into the file), its
+/// file, and the prefix of the tables looked up (`valve.` for a valve's own `[valve.source]`).
 pub(super) struct Check<'a> {
     text: &'a str,
     path: &'a Path,
+    line_offset: usize,
+    prefix: &'static str,
 }
 
-impl Check<'_> {
+impl<'a> Check<'a> {
+    /// The checks of a whole file.
+    fn whole(text: &'a str, path: &'a Path) -> Self {
+        Check {
+            text,
+            path,
+            line_offset: 0,
+            prefix: "",
+        }
+    }
+
+    /// The same part of the file, with every table looked up under `prefix`.
+    fn under(&self, prefix: &'static str) -> Check<'a> {
+        Check { prefix, ..*self }
+    }
+
+    /// The line (1-based, in the file) that sets `table.key` (the table's header when `key` is
+    /// empty), or 1.
+    fn line(&self, table: &str, key: &str) -> usize {
+        let table = format!("{}{table}", self.prefix);
+        toml_file::line_of(self.text, Some(&table), key).unwrap_or(1) + self.line_offset
+    }
+
+    /// `e`, found in this part of the file, at its line in the whole file.
+    fn shift(&self, mut e: TomlError) -> TomlError {
+        if let TomlError::Invalid { line, .. } = &mut e {
+            *line += self.line_offset;
+        }
+        e
+    }
+
     /// An error about `table.key`, at the line that sets it.
     fn bad(&self, table: &str, key: &str, message: String) -> TomlError {
-        toml_file::invalid(self.text, self.path, Some(table), key, message)
+        let table = format!("{}{table}", self.prefix);
+        let dotted = if key.is_empty() {
+            table.clone()
+        } else {
+            format!("{table}.{key}")
+        };
+        TomlError::Invalid {
+            path: self.path.to_path_buf(),
+            line: toml_file::line_of(self.text, Some(&table), key).unwrap_or(1) + self.line_offset,
+            key: dotted,
+            message,
+        }
     }
 
     /// `max_connections` of `table`: 1 to [`MAX_CONNECTIONS`].
@@ -269,17 +325,36 @@ impl Config {
     /// The checks of every table in file order, then those across tables; loads the model and
     /// the replayed recording.
     fn resolve(mut self, text: &str, path: &Path) -> Result<Config, TomlError> {
-        let c = Check { text, path };
+        let c = Check::whole(text, path);
         self.loop_.check_in(&c)?;
-        self.valve.check_in(&c, &self.loop_)?;
         self.source.check_in(&c, &self.loop_)?;
+        valve::check_all(&mut self.valves, &c, &self.loop_)?;
+        if self.valves.len() > 1 {
+            if let Some(v) =
+                (self.valves.iter()).find(|v| self.source_of(v).kind == SourceKind::ModbusServer)
+            {
+                let at = if v.source.is_some() {
+                    "valve.source"
+                } else {
+                    "source"
+                };
+                return Err(c.bad(
+                    at,
+                    "kind",
+                    format!("valve `{}`: a process controller (kind = \"modbus-server\") drives one valve per daemon; give the other valves generated sources or run one daemon per valve", v.label()),
+                ));
+            }
+        }
         self.safety.check_in(&c)?;
         self.log.check_in(&c)?;
+        if let Some(h) = &self.health {
+            h.check_in(&c, self.loop_.period_s())?;
+        }
         if let Some(m) = &self.metrics {
             c.max_connections("metrics", m.max_connections)?;
         }
-        if let (Some(m), SourceKind::ModbusServer) = (&self.metrics, self.source.kind) {
-            let hil = self.source.modbus_server.listen.0;
+        if let (Some(m), Some(source)) = (&self.metrics, self.controller_source()) {
+            let hil = source.modbus_server.listen.0;
             if m.listen.0 == hil && hil.port() != 0 {
                 return Err(c.bad(
                     "metrics",
@@ -289,6 +364,20 @@ impl Config {
             }
         }
         Ok(self)
+    }
+}
+
+impl Config {
+    /// The source of O_P of `valve`: its own `source` table, else `[source]`.
+    pub fn source_of<'a>(&'a self, valve: &'a ValveConfig) -> &'a SourceConfig {
+        valve.source.as_ref().unwrap_or(&self.source)
+    }
+
+    /// The source of the process controller, when the (single) valve is driven by one.
+    pub fn controller_source(&self) -> Option<&SourceConfig> {
+        (self.valves.first())
+            .map(|v| self.source_of(v))
+            .filter(|s| s.kind == SourceKind::ModbusServer)
     }
 }
 

@@ -19,12 +19,12 @@ fn shipped_file_is_the_embedded_default_and_states_the_defaults() {
     let shipped = Config::embedded_default().unwrap();
     let mut empty = Config::from_toml("", Path::new("empty.toml")).unwrap();
     // No `model` means pin-cart II; the file says so explicitly.
-    empty.valve.emulated.model = Some(ModelKind::Pincart2);
+    empty.valves[0].emulated.model = Some(ModelKind::Pincart2);
     assert_eq!(format!("{shipped:?}"), format!("{empty:?}"));
     assert_eq!(shipped.loop_.rate_hz, 100.0);
     assert_eq!(shipped.source.kind, SourceKind::RandomSteps);
     assert_eq!(
-        shipped.valve.emulated.model_spec().unwrap().model,
+        shipped.valves[0].emulated.model_spec().unwrap().model,
         ModelKind::Pincart2
     );
     assert_eq!(shipped.log.dir, PathBuf::from("./logs"));
@@ -175,7 +175,7 @@ fn shipped_hil_config_serves_loopback_with_metrics() {
     let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/hil.toml"));
     let c = Config::load(Some(path)).unwrap();
     assert_eq!(c.source.kind, SourceKind::ModbusServer);
-    assert_eq!(c.valve.kind, ValveKind::Emulated);
+    assert_eq!(c.valves[0].kind, ValveKind::Emulated);
     let m = &c.source.modbus_server;
     assert!(m.listen.0.ip().is_loopback());
     // The map written out in the file is the default one.
@@ -196,7 +196,7 @@ fn model_file_loads_any_model() {
     )
     .unwrap();
     assert_eq!(
-        c.valve.emulated.model_spec().unwrap().model,
+        c.valves[0].emulated.model_spec().unwrap().model,
         ModelKind::Stiction
     );
     let e = err(&format!(
@@ -224,4 +224,64 @@ proptest::proptest! {
             proptest::prop_assert!(!e.to_string().contains('\n'), "{e}");
         }
     }
+}
+
+#[test]
+fn several_valves_are_named_tables_with_their_own_sources() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/two-valves.toml"
+    ))
+    .unwrap();
+    let c = Config::from_toml(&text, Path::new("two-valves.toml")).unwrap();
+    let names: Vec<&str> = c.valves.iter().map(|v| v.label()).collect();
+    assert_eq!(names, ["level", "cyclone"]);
+    assert_eq!(c.source_of(&c.valves[0]).random_steps.seed, 1);
+    assert_eq!(c.source_of(&c.valves[1]).random_steps.seed, 2);
+    assert_eq!(c.source_of(&c.valves[1]).op_min_pct, 30.0);
+    // A single [valve] is one unnamed valve driven by [source].
+    let one = Config::from_toml("[valve]\nkind = \"emulated\"\n", Path::new("c.toml")).unwrap();
+    assert_eq!(one.valves.len(), 1);
+    assert_eq!(one.valves[0].label(), "valve");
+    assert!(std::ptr::eq(one.source_of(&one.valves[0]), &one.source));
+}
+
+#[test]
+fn errors_in_a_later_valve_name_its_line() {
+    let two = "[[valve]]\nname = \"a\"\n\n[[valve]]\nname = \"b\"\n[valve.emulated]\nnoise_std_pct = -1.0\n";
+    let e = err(two);
+    assert!(
+        e.starts_with("c.toml:7: valve.emulated.noise_std_pct: -1 is out of range"),
+        "{e}"
+    );
+    let e = err("[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n[valve.source]\nkind = \"ramp\"\n[valve.source.ramp]\nduration_s = 0.0\n");
+    assert!(
+        e.starts_with("c.toml:8: valve.source.ramp.duration_s"),
+        "{e}"
+    );
+    let e = err("[[valve]]\nname = \"a\"\n[[valve]]\nkind = \"emulated\"\n");
+    assert!(
+        e.starts_with("c.toml:3: valve: valve 2 of 2 has no name"),
+        "{e}"
+    );
+    let e = err("[[valve]]\nname = \"a\"\n[[valve]]\nname = \"a\"\n");
+    assert!(
+        e.starts_with("c.toml:4: valve.name: `a` names two valves"),
+        "{e}"
+    );
+    let e = err("[[valve]]\nname = \"a b\"\n");
+    assert!(e.contains("letters, digits"), "{e}");
+    let e = err(
+        "[source]\nkind = \"modbus-server\"\n[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n",
+    );
+    assert!(e.contains("drives one valve per daemon"), "{e}");
+}
+
+#[test]
+fn drift_settings_are_checked() {
+    let e = err("[valve.emulated]\ndead_time_drift_s_per_h = -0.1\n");
+    assert!(
+        e.starts_with("c.toml:2: valve.emulated.dead_time_drift_s_per_h"),
+        "{e}"
+    );
 }

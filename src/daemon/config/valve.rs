@@ -1,5 +1,7 @@
 //! `[valve]`: which backend drives the valve and the settings of each kind (`[valve.emulated]`,
-//! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]`), with their checks.
+//! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]`), with their checks; several
+//! valves are `[[valve]]` tables, each named, each with these sub-tables and optionally a
+//! `[valve.source]` of its own.
 //!
 //! Checking only: opening the backend is [`crate::daemon::valve`]'s job, and the link settings
 //! themselves are [`crate::modbus::link`]'s types.
@@ -8,7 +10,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use super::{Check, LoopConfig};
+use super::{Check, LoopConfig, SourceConfig};
 use crate::modbus::link::{RtuLink, TcpLink};
 use crate::modbus::map::RegisterMap;
 use crate::model::{bundled, ModelError, ModelKind, ModelSpec};
@@ -20,6 +22,13 @@ use crate::toml_file::{self, TomlError};
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ValveConfig {
+    /// The valve's name in logs, file names, metrics (label `valve`) and the summary; required
+    /// with several valves.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// `[valve.source]`: this valve's source of O_P (default: `[source]`).
+    #[serde(default)]
+    pub source: Option<SourceConfig>,
     /// The backend in use.
     #[serde(default)]
     pub kind: ValveKind,
@@ -35,6 +44,10 @@ pub struct ValveConfig {
     /// `[valve.registers]`: the positioner's register map (Modbus kinds).
     #[serde(default)]
     pub registers: RegisterMap,
+    /// A model file whose answer to each window's O_P is the health baseline (default: the
+    /// first window with enough steps).
+    #[serde(default)]
+    pub health_baseline_model: Option<PathBuf>,
 }
 
 /// Valve backends.
@@ -78,6 +91,11 @@ pub struct EmulatedConfig {
     pub noise_std_pct: f64,
     /// Seed of the noise.
     pub noise_seed: u64,
+    /// Dead time added to the model's, growing by this much per hour of loop time, s/h (a
+    /// wearing valve; 0 = none).
+    pub dead_time_drift_s_per_h: f64,
+    /// The most dead time the drift adds, s.
+    pub dead_time_drift_max_s: f64,
 }
 
 impl EmulatedConfig {
@@ -97,14 +115,131 @@ impl Default for EmulatedConfig {
             model_file: None,
             noise_std_pct: 0.0,
             noise_seed: 1,
+            dead_time_drift_s_per_h: 0.0,
+            dead_time_drift_max_s: 2.0,
         }
     }
 }
+/// The name a valve without `name` goes by.
+pub const UNNAMED: &str = "valve";
+
+/// One default valve, for a config without any `[valve]` table.
+pub(super) fn one_default() -> Vec<ValveConfig> {
+    vec![ValveConfig::default()]
+}
+
+/// Reads `valve` as one `[valve]` table or as `[[valve]]` tables, keeping the errors (and
+/// their lines) of either form.
+pub(super) fn one_or_many<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Vec<ValveConfig>, D::Error> {
+    struct OneOrMany;
+    impl<'de> serde::de::Visitor<'de> for OneOrMany {
+        type Value = Vec<ValveConfig>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a [valve] table or [[valve]] tables")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+            let one = ValveConfig::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+            Ok(vec![one])
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+            Vec::deserialize(serde::de::value::SeqAccessDeserializer::new(seq))
+        }
+    }
+    d.deserialize_any(OneOrMany)
+}
+
+/// The part of `text` that holds each `[[valve]]` table and its sub-tables, with the lines
+/// before it; the whole text for a single `[valve]`.
+fn parts(text: &str) -> Vec<(usize, &str)> {
+    let mut starts: Vec<(usize, usize)> = Vec::new();
+    let mut offset = 0;
+    for (i, line) in text.split_inclusive('\n').enumerate() {
+        let l = line.trim();
+        if l.starts_with("[[") && toml_file::header(l).as_deref() == Some("valve") {
+            starts.push((i, offset));
+        }
+        offset += line.len();
+    }
+    if starts.is_empty() {
+        return vec![(0, text)];
+    }
+    let ends = starts.iter().skip(1).map(|s| s.1).chain([text.len()]);
+    starts
+        .iter()
+        .zip(ends)
+        .map(|(&(line, from), to)| (line, &text[from..to]))
+        .collect()
+}
+
+/// The checks of every valve: names (required, distinct and fit for file names with several
+/// valves), then each valve's tables and its own source, at their lines.
+pub(super) fn check_all(
+    valves: &mut [ValveConfig],
+    c: &Check<'_>,
+    timing: &LoopConfig,
+) -> Result<(), TomlError> {
+    let parts = parts(c.text);
+    let several = valves.len() > 1;
+    let mut seen: Vec<String> = Vec::new();
+    for (i, v) in valves.iter_mut().enumerate() {
+        let (line_offset, text) = parts.get(i).copied().unwrap_or((0, c.text));
+        let vc = Check {
+            text,
+            line_offset: c.line_offset + line_offset,
+            ..c.under("")
+        };
+        match &v.name {
+            None if several => {
+                return Err(vc.bad(
+                    "valve",
+                    "",
+                    format!("valve {} of {} has no name: with several [[valve]] tables each needs name = \"...\" (e.g. \"level\")", i + 1, valves.len()),
+                ))
+            }
+            None => {}
+            Some(name) => {
+                let fit = !name.is_empty()
+                    && name.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '-' || ch == '_');
+                if !fit {
+                    return Err(vc.bad("valve", "name", format!("`{name}`: a name is letters, digits, `-` and `_` (it names the log files and the metrics' `valve` label)")));
+                }
+                if seen.contains(name) {
+                    return Err(vc.bad("valve", "name", format!("`{name}` names two valves: give each its own name")));
+                }
+                seen.push(name.clone());
+            }
+        }
+        v.check_in(&vc, timing)?;
+        if let Some(s) = &mut v.source {
+            s.check_in(&vc.under("valve."), timing)?;
+        }
+    }
+    Ok(())
+}
+
 impl ValveConfig {
+    /// The name the valve goes by (`valve` when it has none).
+    pub fn label(&self) -> &str {
+        self.name.as_deref().unwrap_or(UNNAMED)
+    }
+
     /// The checks of `[valve]` and its sub-tables, for a loop of `[loop]` `timing`.
-    pub(super) fn check_in(&self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
+    fn check_in(&self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
         self.emulated.check_in(c)?;
-        self.registers.check_in(c.text, c.path, "valve.registers")?;
+        if let Some(file) = &self.health_baseline_model {
+            if let Err(err) = ModelSpec::load(file) {
+                return Err(c.bad(
+                    "valve",
+                    "health_baseline_model",
+                    format!("cannot use model file `{}`: {err} (a model file looks like config/models/pincart2.toml; `identify --out` writes them)", file.display()),
+                ));
+            }
+        }
+        self.registers
+            .check_in(c.text, c.path, "valve.registers")
+            .map_err(|e| c.shift(e))?;
         let (table, settings) = match self.kind {
             ValveKind::Emulated => return Ok(()),
             ValveKind::ModbusTcp => (
@@ -119,7 +254,7 @@ impl ValveConfig {
         let Some((violation, timeout_ms)) = settings else {
             return Err(TomlError::Invalid {
                 path: c.path.to_path_buf(),
-                line: toml_file::line_of(c.text, Some("valve"), "kind").unwrap_or(1),
+                line: c.line("valve", "kind"),
                 key: table.to_string(),
                 message: format!(
                     "kind = \"{}\" needs this table, e.g. {}",
@@ -163,6 +298,22 @@ impl EmulatedConfig {
             0.0,
             100.0,
             "a noise standard deviation in %",
+        )?;
+        c.range(
+            t,
+            "dead_time_drift_s_per_h",
+            self.dead_time_drift_s_per_h,
+            0.0,
+            3600.0,
+            "a growth of the dead time in s per hour",
+        )?;
+        c.range(
+            t,
+            "dead_time_drift_max_s",
+            self.dead_time_drift_max_s,
+            0.0,
+            60.0,
+            "the most dead time the drift adds, s",
         )?;
         if self.model.is_some() && self.model_file.is_some() {
             return Err(c.bad(

@@ -1,0 +1,530 @@
+//! Live valve health (`[health]`): every `every_s` of loop time, over the last `window_s` of each
+//! valve's rows, the figures a maintenance engineer watches, compared with a baseline, with an
+//! alarm when one drifts past its limit.
+//!
+//! The figures come from the same code as `steps` and `identify`: the step analysis
+//! ([`crate::fit::steps::analyse`]) gives the dead time (the median delay of steps that keep
+//! the direction, until V_P has moved 2 % of the step) and the reversal delay (of steps against
+//! it); the identification's travel-speed
+//! estimate ([`crate::fit::seeds::travel_speed`]) the opening and closing stroke speeds; the
+//! tracking error is the RMS of O_P - V_P. A window with fewer than `min_steps` steps of a kind
+//! gives no delay and says so in its note. The baseline is the first window with enough steps,
+//! or, with `health_baseline_model`, that model's answer to each window's O_P (analysed the
+//! same way).
+//!
+//! It runs on a thread of its own (`vb-health`), fed by the loggers with the rows they write:
+//! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
+//! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
+//! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
+//! `valve_bridge_health_alarm` gauge and the summary.
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, Sender};
+use std::thread::JoinHandle;
+
+use super::config::HealthConfig;
+use super::exporter::HealthMetrics;
+use super::logger::{fixed, Sample};
+use super::DaemonError;
+use crate::fit::seeds::travel_speed;
+use crate::fit::steps::{analyse, StepOptions};
+use crate::metrics::stats::median;
+use crate::model::Valve;
+use crate::recording::RecordingView;
+use crate::report::plot;
+
+/// What counts as a step for the health delays: a jump of 0.5 % held 1 s, as for `steps`; its
+/// delay ends when V_P has moved 2 % of it (and four noise sigmas), so the slewing of a large
+/// step adds next to nothing and the delay is the dead time (with the reversal's crossing).
+const DELAY_OPTIONS: StepOptions = StepOptions {
+    min_size_pct: 0.5,
+    fraction: 0.02,
+    min_hold_s: 1.0,
+};
+
+/// What one window shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Figures {
+    /// Steps that keep the direction, and reversals, in the window.
+    pub same_steps: usize,
+    pub reversals: usize,
+    /// Median delay of same-direction steps, s (None: too few).
+    pub dead_time_s: Option<f64>,
+    /// Median delay of reversals, s (None: too few).
+    pub reversal_delay_s: Option<f64>,
+    /// Stroke speeds opening and closing (99.5th percentile over 0.1 s), %/s.
+    pub opening_speed_pct_per_s: f64,
+    pub closing_speed_pct_per_s: f64,
+    /// RMS of O_P - V_P, %.
+    pub tracking_rms_pct: f64,
+}
+
+impl Figures {
+    /// The figures of `op` and `vp` sampled every `dt` s; a delay needs `min_steps` steps.
+    pub fn of(op: &[f64], vp: &[f64], dt: f64, min_steps: usize) -> Figures {
+        let rec = RecordingView {
+            t: &[],
+            op,
+            vp,
+            restarts: &[],
+            dt,
+        };
+        let a = analyse(&rec, &DELAY_OPTIONS);
+        // The median: a step held too briefly or lost in a slip does not move it.
+        let delay = |reversal: bool| {
+            let d: Vec<f64> = (a.steps.iter())
+                .filter(|s| s.reversal == Some(reversal))
+                .filter_map(|s| s.delay_s)
+                .collect();
+            (d.len() >= min_steps).then(|| median(&d)).flatten()
+        };
+        let n = op.len().min(vp.len()).max(1);
+        Figures {
+            same_steps: a.same.count,
+            reversals: a.reversal.count,
+            dead_time_s: delay(false),
+            reversal_delay_s: delay(true),
+            opening_speed_pct_per_s: travel_speed(vp, dt, Some(1.0)),
+            closing_speed_pct_per_s: travel_speed(vp, dt, Some(-1.0)),
+            tracking_rms_pct: (crate::metrics::sse(op, vp) / n as f64).sqrt(),
+        }
+    }
+
+    /// Both delays could be measured.
+    pub fn complete(&self) -> bool {
+        self.dead_time_s.is_some() && self.reversal_delay_s.is_some()
+    }
+
+    /// What drifted past `limits` against `base`, one phrase each (empty: healthy).
+    pub fn drifts(&self, base: &Figures, limits: &HealthConfig) -> Vec<String> {
+        let mut out = Vec::new();
+        let delays = [
+            (
+                "dead time",
+                self.dead_time_s,
+                base.dead_time_s,
+                limits.dead_time_rise_s,
+            ),
+            (
+                "reversal delay",
+                self.reversal_delay_s,
+                base.reversal_delay_s,
+                limits.reversal_delay_rise_s,
+            ),
+        ];
+        for (what, now, then, rise) in delays {
+            if let (Some(now), Some(then)) = (now, then) {
+                if now - then > rise {
+                    out.push(format!(
+                        "{what} {now:.3} s against {then:.3} s (limit +{rise} s)"
+                    ));
+                }
+            }
+        }
+        let speeds = [
+            (
+                "opening",
+                self.opening_speed_pct_per_s,
+                base.opening_speed_pct_per_s,
+            ),
+            (
+                "closing",
+                self.closing_speed_pct_per_s,
+                base.closing_speed_pct_per_s,
+            ),
+        ];
+        for (what, now, then) in speeds {
+            if then > 0.0 && now < then * (1.0 - limits.speed_drop) {
+                out.push(format!(
+                    "{what} speed {now:.2} %/s against {then:.2} %/s (limit -{:.0} %)",
+                    limits.speed_drop * 100.0
+                ));
+            }
+        }
+        let (now, then) = (self.tracking_rms_pct, base.tracking_rms_pct);
+        if now > then * (1.0 + limits.tracking_rise) {
+            out.push(format!(
+                "tracking error {now:.2} % against {then:.2} % (limit +{:.0} %)",
+                limits.tracking_rise * 100.0
+            ));
+        }
+        out
+    }
+}
+
+/// What the health check of one valve did, for the summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HealthReport {
+    /// Windows estimated.
+    pub windows: u64,
+    /// Times the alarm was raised.
+    pub alarms: u64,
+    /// Loop time of the first alarm, s.
+    pub first_alarm_t_s: Option<f64>,
+    /// The health CSV.
+    pub file: PathBuf,
+}
+
+/// Where a valve's baseline comes from.
+enum Baseline {
+    /// The first window with both delays.
+    First(Option<Figures>),
+    /// A model's answer to each window's O_P.
+    Model(Box<Valve>),
+}
+
+/// One valve's sliding window and alarm state.
+struct Monitor {
+    name: String,
+    op: VecDeque<f64>,
+    /// NaN where the row had no V_P.
+    vp: VecDeque<f64>,
+    next_at_s: f64,
+    baseline: Baseline,
+    alarm: bool,
+    report: HealthReport,
+    csv: csv::Writer<File>,
+    metrics: Option<HealthMetrics>,
+    /// Loop time of each compared window and its figures over the baseline's, for the plot.
+    history: Vec<(f64, [f64; 6])>,
+}
+
+/// The figures of the plot, in the order of [`Monitor::history`].
+const PLOTTED: [&str; 6] = [
+    "dead time",
+    "reversal delay",
+    "opening speed",
+    "closing speed",
+    "tracking error",
+    "alarm",
+];
+
+/// The header of the health CSV.
+pub const HEADER: [&str; 10] = [
+    "t_s",
+    "same_steps",
+    "reversals",
+    "dead_time_s",
+    "reversal_delay_s",
+    "opening_speed_pct_per_s",
+    "closing_speed_pct_per_s",
+    "tracking_rms_pct",
+    "alarm",
+    "note",
+];
+
+/// One valve to watch: its name, its health file's name, its baseline model and its metrics.
+pub struct Watched {
+    pub name: String,
+    pub file_name: String,
+    pub baseline_model: Option<Valve>,
+    pub metrics: Option<HealthMetrics>,
+}
+
+/// The running health thread: where the loggers send rows (with the valve's index), and the
+/// thread.
+pub struct Health {
+    pub tx: Sender<(usize, Sample)>,
+    pub handle: JoinHandle<Result<Vec<HealthReport>, DaemonError>>,
+}
+
+/// Creates each valve's health CSV in `dir` and starts the health thread for a loop of period
+/// `period_s`; it ends when every sender of rows is dropped.
+pub fn start(
+    cfg: &HealthConfig,
+    dir: &Path,
+    period_s: f64,
+    valves: Vec<Watched>,
+) -> Result<Health, DaemonError> {
+    let cap = ((cfg.window_s / period_s).round() as usize).max(1);
+    let mut monitors = Vec::with_capacity(valves.len());
+    for w in valves {
+        let path = dir.join(&w.file_name);
+        let file = File::create(&path).map_err(|source| DaemonError::LogFile {
+            path: path.clone(),
+            source,
+        })?;
+        let mut csv = csv::Writer::from_writer(file);
+        csv.write_record(HEADER)
+            .and_then(|()| csv.flush().map_err(csv::Error::from))
+            .map_err(|e| write_error(&path, e))?;
+        monitors.push(Monitor {
+            name: w.name,
+            op: VecDeque::with_capacity(cap),
+            vp: VecDeque::with_capacity(cap),
+            next_at_s: (cap as f64 - 0.5) * period_s,
+            baseline: match w.baseline_model {
+                Some(v) => Baseline::Model(Box::new(v)),
+                None => Baseline::First(None),
+            },
+            alarm: false,
+            report: HealthReport {
+                windows: 0,
+                alarms: 0,
+                first_alarm_t_s: None,
+                file: path,
+            },
+            csv,
+            metrics: w.metrics,
+            history: Vec::new(),
+        });
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let cfg = cfg.clone();
+    let handle = std::thread::Builder::new()
+        .name("vb-health".into())
+        .spawn(move || watch(rx, monitors, &cfg, period_s, cap))
+        .map_err(|source| DaemonError::Thread {
+            what: "health thread",
+            source,
+        })?;
+    Ok(Health { tx, handle })
+}
+
+fn write_error(path: &Path, e: csv::Error) -> DaemonError {
+    DaemonError::LogWrite {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    }
+}
+
+/// The health thread: keeps each valve's window and estimates on time.
+fn watch(
+    rx: Receiver<(usize, Sample)>,
+    mut monitors: Vec<Monitor>,
+    cfg: &HealthConfig,
+    period_s: f64,
+    cap: usize,
+) -> Result<Vec<HealthReport>, DaemonError> {
+    for (i, row) in rx {
+        let Some(m) = monitors.get_mut(i) else {
+            continue;
+        };
+        if m.op.len() == cap {
+            m.op.pop_front();
+            m.vp.pop_front();
+        }
+        m.op.push_back(row.op_pct.unwrap_or(f64::NAN));
+        m.vp.push_back(row.vp_pct.unwrap_or(f64::NAN));
+        if row.t_s >= m.next_at_s && m.op.len() == cap {
+            m.next_at_s += cfg.every_s;
+            m.estimate(row.t_s, cfg, period_s)?;
+        }
+    }
+    for m in &monitors {
+        m.plot()?;
+    }
+    Ok(monitors.into_iter().map(|m| m.report).collect())
+}
+
+/// `x` with every NaN replaced by the last number before it (the first number for leading
+/// ones); the count of NaNs replaced.
+fn filled(x: &VecDeque<f64>) -> (Vec<f64>, usize) {
+    let first = x.iter().copied().find(|v| !v.is_nan()).unwrap_or(0.0);
+    let mut last = first;
+    let mut missing = 0;
+    let out = (x.iter())
+        .map(|&v| {
+            if v.is_nan() {
+                missing += 1;
+            } else {
+                last = v;
+            }
+            last
+        })
+        .collect();
+    (out, missing)
+}
+
+impl Monitor {
+    /// Estimates the window ending at loop time `t_s`, compares, alarms, writes and publishes.
+    fn estimate(&mut self, t_s: f64, cfg: &HealthConfig, period_s: f64) -> Result<(), DaemonError> {
+        let (op, _) = filled(&self.op);
+        let (vp, missing) = filled(&self.vp);
+        self.report.windows += 1;
+        if missing * 10 > vp.len() {
+            let note = format!(
+                "{:.0} % of the rows have no V_P: no estimate",
+                100.0 * missing as f64 / vp.len() as f64
+            );
+            return self.write(t_s, None, &note);
+        }
+        let fig = Figures::of(&op, &vp, period_s, cfg.min_steps);
+        let base = match &mut self.baseline {
+            Baseline::Model(v) => {
+                let sim = v.simulate(&op, vp.first().copied().unwrap_or(0.0));
+                Some(Figures::of(&op, &sim, period_s, cfg.min_steps))
+            }
+            Baseline::First(b) => {
+                if b.is_none() && fig.complete() {
+                    *b = Some(fig);
+                }
+                *b
+            }
+        };
+        let mut notes = Vec::new();
+        if !fig.complete() {
+            notes.push(format!(
+                "too few steps for the delays: {} same-direction, {} reversals (need {} each)",
+                fig.same_steps, fig.reversals, cfg.min_steps
+            ));
+        }
+        let drifts = base.map(|b| fig.drifts(&b, cfg)).unwrap_or_default();
+        // A window that cannot measure the delays keeps the alarm unless it sees a drift itself.
+        let alarm = !drifts.is_empty() || (self.alarm && !fig.complete());
+        if alarm && !self.alarm {
+            self.report.alarms += 1;
+            self.report.first_alarm_t_s.get_or_insert(t_s);
+            tracing::warn!(valve = %self.name, t_s, "health alarm: {}", drifts.join("; "));
+        } else if !alarm && self.alarm {
+            tracing::info!(valve = %self.name, t_s, "health back within its limits");
+        }
+        self.alarm = alarm;
+        if let Some(b) = base {
+            let ratio = |now: Option<f64>, then: Option<f64>| match (now, then) {
+                (Some(n), Some(t)) if t > 0.0 => n / t,
+                _ => f64::NAN,
+            };
+            self.history.push((
+                t_s / 3600.0,
+                [
+                    ratio(fig.dead_time_s, b.dead_time_s),
+                    ratio(fig.reversal_delay_s, b.reversal_delay_s),
+                    ratio(
+                        Some(fig.opening_speed_pct_per_s),
+                        Some(b.opening_speed_pct_per_s),
+                    ),
+                    ratio(
+                        Some(fig.closing_speed_pct_per_s),
+                        Some(b.closing_speed_pct_per_s),
+                    ),
+                    ratio(Some(fig.tracking_rms_pct), Some(b.tracking_rms_pct)),
+                    f64::from(u8::from(alarm)),
+                ],
+            ));
+        }
+        notes.extend(drifts);
+        if base.is_none() {
+            notes.push("no baseline yet".into());
+        }
+        if let Some(m) = &self.metrics {
+            m.publish(&fig, alarm);
+        }
+        self.write(t_s, Some(&fig), &notes.join("; "))
+    }
+
+    /// `health*.svg` beside the CSV: each figure over its baseline's, and the alarm, against
+    /// loop time (nothing when no window was compared).
+    fn plot(&self) -> Result<(), DaemonError> {
+        if self.history.is_empty() {
+            return Ok(());
+        }
+        let t: Vec<f64> = self.history.iter().map(|h| h.0).collect();
+        let ys: Vec<Vec<f64>> = (0..PLOTTED.len())
+            .map(|i| self.history.iter().map(|h| h.1[i]).collect())
+            .collect();
+        let colors = [
+            plot::AFTER,
+            plot::EXTRA,
+            plot::MEASURED,
+            plot::GREY,
+            plot::PURPLE,
+            plot::BEFORE,
+        ];
+        let series: Vec<plot::Series> = (PLOTTED.iter().zip(&ys).zip(colors))
+            .map(|((name, y), color)| plot::Series { name, y, color })
+            .collect();
+        let svg = plot::lines(
+            &format!(
+                "valve {}: health figures over the baseline's (1 = as the baseline; alarm 0/1)",
+                self.name
+            ),
+            "figure / baseline",
+            "loop time (h)",
+            &t,
+            &series,
+            0..t.len(),
+        );
+        let path = self.report.file.with_extension("svg");
+        std::fs::write(&path, svg).map_err(|source| DaemonError::LogWrite { path, source })
+    }
+
+    /// One row of the health CSV, flushed.
+    fn write(&mut self, t_s: f64, fig: Option<&Figures>, note: &str) -> Result<(), DaemonError> {
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| fixed(v, 4));
+        let row = [
+            fixed(t_s, 3),
+            fig.map_or(String::new(), |f| f.same_steps.to_string()),
+            fig.map_or(String::new(), |f| f.reversals.to_string()),
+            opt(fig.and_then(|f| f.dead_time_s)),
+            opt(fig.and_then(|f| f.reversal_delay_s)),
+            opt(fig.map(|f| f.opening_speed_pct_per_s)),
+            opt(fig.map(|f| f.closing_speed_pct_per_s)),
+            opt(fig.map(|f| f.tracking_rms_pct)),
+            u8::from(self.alarm).to_string(),
+            note.to_string(),
+        ];
+        let path = &self.report.file;
+        self.csv
+            .write_record(&row)
+            .and_then(|()| self.csv.flush().map_err(csv::Error::from))
+            .map_err(|e| write_error(path, e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, ModelKind};
+    use crate::signal::{RandomSteps, RandomStepsParams};
+
+    /// 10 min of the paper's random steps through pin-cart II with `extra_dead_time_s`.
+    fn window(extra_dead_time_s: f64) -> (Vec<f64>, Vec<f64>) {
+        let mut spec = bundled(ModelKind::Pincart2);
+        spec.dead_time_s += extra_dead_time_s;
+        let mut sig = RandomSteps::new(&RandomStepsParams::default());
+        let op: Vec<f64> = (0..60_000).map(|k| sig.op_at(k as f64 * 0.01)).collect();
+        let vp = Valve::new(&spec, 0.01).unwrap().simulate(&op, op[0]);
+        (op, vp)
+    }
+
+    #[test]
+    fn a_longer_dead_time_drifts_past_the_limit_and_the_same_valve_does_not() {
+        let cfg = HealthConfig::default();
+        let (op, vp) = window(0.0);
+        let base = Figures::of(&op, &vp, 0.01, cfg.min_steps);
+        assert!(base.complete(), "{base:?}");
+        // The paper's valve: about 0.45 s for a step that keeps the direction, 1 s reversing.
+        let dead = base.dead_time_s.unwrap();
+        assert!((0.3..0.6).contains(&dead), "{base:?}");
+        assert!(base.reversal_delay_s.unwrap() > dead + 0.2, "{base:?}");
+        assert!(base.drifts(&base, &cfg).is_empty());
+        let (op, vp) = window(0.3);
+        let worn = Figures::of(&op, &vp, 0.01, cfg.min_steps);
+        let drifts = worn.drifts(&base, &cfg);
+        assert!(
+            drifts.iter().any(|d| d.starts_with("dead time")),
+            "{drifts:?}"
+        );
+        assert!(
+            drifts.iter().any(|d| d.starts_with("reversal delay")),
+            "{drifts:?}"
+        );
+    }
+
+    #[test]
+    fn a_window_without_steps_gives_no_delays() {
+        let op = vec![50.0; 6000];
+        let f = Figures::of(&op, &op, 0.01, 5);
+        assert_eq!((f.dead_time_s, f.reversal_delay_s), (None, None));
+        assert_eq!(f.tracking_rms_pct, 0.0);
+    }
+
+    #[test]
+    fn missing_positions_are_held_and_counted() {
+        let x: VecDeque<f64> = [f64::NAN, 1.0, f64::NAN, 3.0].into();
+        assert_eq!(filled(&x), (vec![1.0, 1.0, 1.0, 3.0], 2));
+    }
+}

@@ -1,0 +1,99 @@
+//! The live health check through the real binary, on the virtual clock:
+//! - `config/worn-valve.toml`, whose emulated valve's dead time grows by 0.5 s per hour, raises
+//!   the alarm within one window (10 min) and a minute of the drift passing the 0.2 s limit
+//!   over the baseline (the first window), with a warning naming the dead time and the alarm in
+//!   `health-worn.csv`;
+//! - `config/two-valves.toml`, two healthy valves, runs 3 simulated hours (180 windows each)
+//!   without an alarm; README shows the 24-hour run.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
+
+fn run(config: &str, secs: &str, dir: &Path) -> Output {
+    Command::new(BIN)
+        .args([
+            "run",
+            "--config",
+            &format!("{}/config/{config}", env!("CARGO_MANIFEST_DIR")),
+            "--as-fast-as-possible",
+            "--duration",
+            secs,
+            "--log-dir",
+            dir.to_str().unwrap(),
+        ])
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap()
+}
+
+/// (t_s, alarm, note) of every row of a health CSV.
+fn health_rows(path: &Path) -> Vec<(f64, bool, String)> {
+    let mut r = csv::Reader::from_path(path).unwrap();
+    assert_eq!(
+        r.headers().unwrap().iter().collect::<Vec<_>>(),
+        [
+            "t_s",
+            "same_steps",
+            "reversals",
+            "dead_time_s",
+            "reversal_delay_s",
+            "opening_speed_pct_per_s",
+            "closing_speed_pct_per_s",
+            "tracking_rms_pct",
+            "alarm",
+            "note"
+        ]
+    );
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (rec[0].parse().unwrap(), &rec[8] == "1", rec[9].to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn a_growing_dead_time_raises_the_alarm_within_the_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("worn-valve.toml", "3600", dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    let rows = health_rows(&dir.path().join("health-worn.csv"));
+    // The first estimate when the window is full, then one a minute.
+    assert_eq!(rows.len(), 51, "{rows:?}");
+    assert!((rows[0].0 - 599.99).abs() < 0.02, "{rows:?}");
+    let first = rows.iter().find(|r| r.1).expect("an alarm");
+    // The baseline window (0-600 s) saw 0.04 s of drift on average, so the dead time is 0.2 s
+    // past it at 1740 s; the alarm comes within one window and one cadence after that.
+    assert!(
+        first.0 > 1740.0 && first.0 <= 1740.0 + 600.0 + 60.0,
+        "{first:?}"
+    );
+    assert!(first.2.contains("dead time"), "{first:?}");
+    assert!(rows.last().unwrap().1, "{rows:?}");
+    assert!(stderr.contains("health alarm: dead time"), "{stderr}");
+    assert!(
+        stdout.contains("health: 51 windows, 1 alarms (first at"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn healthy_valves_raise_no_alarm_over_hours() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("two-valves.toml", "10800", dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    for name in ["level", "cyclone"] {
+        let rows = health_rows(&dir.path().join(format!("health-{name}.csv")));
+        assert_eq!(rows.len(), 171, "{name}");
+        assert!(rows.iter().all(|r| !r.1), "{name}: {rows:?}");
+        // Every window measures both delays against the first one.
+        assert!(rows.iter().all(|r| r.2.is_empty()), "{name}: {rows:?}");
+    }
+    assert!(!stderr.contains("health alarm"), "{stderr}");
+}

@@ -1,0 +1,146 @@
+//! Several valves in one daemon, through the real binary:
+//! - `config/two-valves.toml` drives two emulated valves from their own sources in the same
+//!   cycles, each with its own log files and summary;
+//! - a valve whose device is not there logs its own rows as `disconnected` while every cycle
+//!   of the other valve reads its V_P; the run exits 1 naming that valve.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
+const TWO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/two-valves.toml");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap()
+}
+
+/// The log files of `dir` whose names start with `prefix`.
+fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            name.starts_with(prefix) && name.ends_with(".csv")
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+/// (op, vp, status) of every row of `path`.
+fn rows(path: &Path) -> Vec<(f64, Option<f64>, String)> {
+    let mut r = csv::Reader::from_path(path).unwrap();
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (
+                rec[1].parse().unwrap(),
+                rec[2].parse().ok(),
+                rec[3].to_string(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn two_emulated_valves_run_in_the_same_cycles_with_their_own_logs() {
+    let dir = tempfile::tempdir().unwrap();
+    let log_dir = dir.path().to_str().unwrap();
+    let out = run(&[
+        "run",
+        "--config",
+        TWO,
+        "--as-fast-as-possible",
+        "--duration",
+        "120",
+        "--log-dir",
+        log_dir,
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for name in ["level", "cyclone"] {
+        assert!(
+            stdout.contains(&format!("valve {name}:\n  samples: 12000 (12000 ok")),
+            "{stdout}"
+        );
+    }
+    let level = logs(dir.path(), "vb-level-");
+    let cyclone = logs(dir.path(), "vb-cyclone-");
+    assert_eq!((level.len(), cyclone.len()), (1, 1), "{stdout}");
+    let (a, b) = (rows(&level[0]), rows(&cyclone[0]));
+    // 12000 cycles and the stop action, each.
+    assert_eq!((a.len(), b.len()), (12001, 12001));
+    // Each valve follows its own source: the level valve's random steps span 20-97 %, the
+    // cyclone valve's stay within its 30-70 % clamp.
+    let span = |r: &[(f64, Option<f64>, String)]| {
+        r.iter().fold((f64::MAX, f64::MIN), |(lo, hi), x| {
+            (lo.min(x.0), hi.max(x.0))
+        })
+    };
+    let (lo, hi) = span(&b);
+    assert!(lo >= 30.0 && hi <= 70.0, "cyclone O_P {lo}..{hi}");
+    let (lo, hi) = span(&a);
+    assert!(lo < 30.0 && hi > 70.0, "level O_P {lo}..{hi}");
+    assert!(a
+        .iter()
+        .chain(&b)
+        .all(|r| r.2 == "ok" || r.2 == "safe-hold"));
+}
+
+#[test]
+fn a_valve_without_its_device_never_stalls_the_other() {
+    let dir = tempfile::tempdir().unwrap();
+    // Nothing listens on a port just bound and released.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let config = dir.path().join("c.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[[valve]]\nname = \"emulated\"\n\n[[valve]]\nname = \"absent\"\nkind = \"modbus-tcp\"\n\
+             [valve.modbus-tcp]\naddress = \"127.0.0.1:{port}\"\n"
+        ),
+    )
+    .unwrap();
+    let out = run(&[
+        "run",
+        "--config",
+        config.to_str().unwrap(),
+        "--duration",
+        "2",
+        "--log-dir",
+        dir.path().to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    // A loaded machine may skip a slot for both valves; every cycle that ran is counted.
+    assert!(
+        stderr.contains("valve absent: no cycle read a V_P: all ")
+            && stderr.contains(" disconnected); the last was disconnected"),
+        "{stderr}"
+    );
+    assert!(
+        stdout.contains("valve emulated:\n  samples: ")
+            && stdout.contains(" ok, 0 timeout, 0 error, 0 disconnected)\n"),
+        "{stdout}"
+    );
+    let ok = rows(&logs(dir.path(), "vb-emulated-")[0]);
+    assert!(ok.iter().all(|r| r.2 != "skipped" && r.1.is_some()));
+    let absent = rows(&logs(dir.path(), "vb-absent-")[0]);
+    assert!(absent[..200]
+        .iter()
+        .all(|r| r.2 == "disconnected" && r.1.is_none()));
+}
