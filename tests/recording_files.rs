@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use valve_bridge::recording::{read, ReadOptions, Recording};
+use valve_bridge::recording::{read, read_all, ReadOptions, Recording};
 
 fn data(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -136,4 +136,50 @@ fn second_plant_file_loads_the_same_way() {
     assert_eq!(r.op[0], 45.9901733398438);
     assert_eq!(r.op[999], 44.9806976318359);
     assert_eq!(r.source, data(LIC106).display().to_string());
+}
+
+/// Writes a recording at 10 Hz from `t0` for `n` rows, with O_P stepping every 2 s.
+fn rotated(dir: &Path, name: &str, t0: f64, n: usize) -> PathBuf {
+    let mut text = String::from("t_s,op_pct,vp_pct\n");
+    for k in 0..n {
+        let op = 40.0 + 10.0 * ((k / 20) % 2) as f64;
+        text.push_str(&format!("{:.1},{op},{op}\n", t0 + k as f64 * 0.1));
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn rotated_logs_join_in_time_order_with_their_gap_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    // Given newest first: joined oldest first; the 10 s between them stays a gap (a restart).
+    let a = rotated(dir.path(), "vb-1.csv", 0.0, 100);
+    let b = rotated(dir.path(), "vb-2.csv", 20.0, 100);
+    let opts = ReadOptions::default();
+    let rec = read_all(&[b.clone(), a.clone()], &opts).unwrap();
+    assert_eq!(rec.t.len(), 200);
+    assert_eq!((rec.t[99], rec.t[100]), (9.9, 20.0));
+    assert_eq!(rec.restarts, vec![100]);
+    assert!((rec.sample_period - 0.1).abs() < 1e-9);
+    assert!(
+        rec.source.ends_with("vb-1.csv (+1 files)"),
+        "{}",
+        rec.source
+    );
+    // A directory stands for its .csv files.
+    assert_eq!(
+        read_all(&[dir.path().to_path_buf()], &opts).unwrap().t,
+        rec.t
+    );
+    // Files that overlap in time are refused, naming both.
+    let c = rotated(dir.path(), "vb-3.csv", 5.0, 10);
+    let e = read_all(&[a, c], &opts).unwrap_err().to_string();
+    assert!(e.contains("vb-1.csv") && e.contains("vb-3.csv"), "{e}");
+    assert!(e.contains("must not overlap"), "{e}");
+    let empty = tempfile::tempdir().unwrap();
+    let e = read_all(&[empty.path().to_path_buf()], &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no .csv file"), "{e}");
 }
