@@ -12,6 +12,7 @@
 //! - [`net`]: TCP servers that stay up (accept errors retried, connections capped).
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
+//! - [`fleet`]: many recordings diagnosed in parallel, summed up and ranked for maintenance.
 //! - [`report`]: self-contained HTML reports with SVG charts.
 //! - [`signal`]: time-only O_P generators (random steps, steps, ramp, sine, PRBS, replay, constant).
 //! - [`synth`]: synthetic recordings (random steps, small steps, ramps, a mix, or a closed level
@@ -21,6 +22,7 @@
 pub mod daemon;
 pub mod diagnose;
 pub mod fit;
+pub mod fleet;
 pub mod human;
 pub mod metrics;
 pub mod modbus;

@@ -28,6 +28,8 @@ enum Command {
     Diagnose(cli::diagnose::Args),
     /// Fit every model of the paper to a recording: Table 1 (with held-out scores), Table 2, model files.
     Identify(cli::identify::Args),
+    /// Diagnose every recording of a directory in parallel and rank the valves for maintenance.
+    Fleet(cli::fleet::Args),
     /// Step-delay analysis: same-direction and reversal delays, pin-cart II's delay polynomial.
     Steps(cli::steps::Args),
     /// Demonstrations: `demo concealed` hides an effect in a recording and diagnoses it.
@@ -44,6 +46,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(a) => cli::demo::run(a),
         Command::Identify(a) => cli::identify::run(a),
         Command::Steps(a) => cli::steps::run(a),
+        Command::Fleet(a) => cli::fleet::run(a),
     };
     cli::report(result)
 }

@@ -15,8 +15,9 @@
 //!   block's end they get SIGTERM, last started first, and a daemon must exit 0 with its
 //!   summary. A block with a `while` loop feeding the daemon's Modbus server must end without
 //!   a watchdog trip (the loop is there to hold the set-point);
-//! - `cargo test`/`bench`/`build`/`install`, `pip`, `apt-get`, `sudo`, `systemctl` and
-//!   `journalctl` are not run (listed, with the reason);
+//! - `cargo test`/`bench`/`build`/`install`, `pip`, `maturin`, `pytest`, `apt-get`, `sudo`,
+//!   `systemctl` and `journalctl` are not run (listed, with the reason); ```python blocks are
+//!   text here and run by `python/tests/test_readme.py`;
 //! - a block whose first command is none of the above is text (the model diagram, say); an
 //!   unknown program later in a command block fails the test, so a new kind of command gets a
 //!   rule here rather than being skipped unnoticed.
@@ -171,6 +172,8 @@ fn how(cmd: &Cmd) -> How {
         ["cargo", "bench", ..] => How::NotRun("a benchmark (minutes; run by hand)"),
         ["cargo", "build" | "install" | "fmt" | "clippy", ..] => How::NotRun("a build step"),
         ["pip" | "pip3" | "apt-get" | "apt", ..] => How::NotRun("installs packages"),
+        ["maturin", ..] => How::NotRun("builds the Python package (minutes; .ci/run builds it)"),
+        ["pytest", ..] => How::NotRun("the Python tests (.ci/run runs them)"),
         ["sudo", ..] => How::NotRun("needs root and systemd"),
         ["systemctl" | "journalctl", ..] => How::NotRun("needs systemd"),
         _ => How::Unknown,
@@ -535,4 +538,8 @@ fn blocks_and_rules() {
     );
     assert_eq!(run("cargo run --release -- run"), How::Background);
     assert_eq!(split_comment("a 'b # c' # d").1, Some(" d"));
+    assert!(matches!(
+        run("maturin build --release -m python/Cargo.toml"),
+        How::NotRun(_)
+    ));
 }

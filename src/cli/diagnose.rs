@@ -77,24 +77,8 @@ fn write_out(
     rec: &recording::Recording,
     d: &Diagnosis,
 ) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let model = dir.join("model.toml");
-    std::fs::write(&model, d.final_model.spec.to_toml())
-        .with_context(|| format!("cannot write {}", model.display()))?;
-    let json = dir.join("diagnosis.json");
-    std::fs::write(
-        &json,
-        serde_json::to_string_pretty(&report::diagnose::json(d))?,
-    )
-    .with_context(|| format!("cannot write {}", json.display()))?;
-    let html = dir.join("report.html");
-    let page = report::diagnose::html(&rec.source, &rec.view(), d);
-    std::fs::write(&html, page).with_context(|| format!("cannot write {}", html.display()))?;
-    eprintln!(
-        "wrote {}, {} and {}",
-        html.display(),
-        model.display(),
-        json.display()
-    );
+    let paths = report::write_files(dir, &report::diagnose::files(&rec.source, &rec.view(), d))?;
+    let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    eprintln!("wrote {}", names.join(", "));
     Ok(())
 }

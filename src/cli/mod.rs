@@ -2,6 +2,7 @@
 
 pub mod demo;
 pub mod diagnose;
+pub mod fleet;
 pub mod identify;
 pub mod input;
 pub mod probe;

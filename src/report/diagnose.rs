@@ -366,6 +366,17 @@ pub fn json(d: &Diagnosis) -> Value {
     v
 }
 
+/// The files `diagnose --out` writes: `report.html` (titled `title`), `model.toml` (the final
+/// model) and `diagnosis.json` (the `--json` document).
+pub fn files(title: &str, rec: &RecordingView, d: &Diagnosis) -> [(&'static str, String); 3] {
+    let doc = serde_json::to_string_pretty(&json(d)).unwrap_or_else(|_| "null".into());
+    [
+        ("report.html", html(title, rec, d)),
+        ("model.toml", d.final_model.spec.to_toml()),
+        ("diagnosis.json", doc),
+    ]
+}
+
 /// The text `valve-bridge diagnose` prints.
 pub fn text(d: &Diagnosis) -> String {
     let mut o = String::new();

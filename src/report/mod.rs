@@ -5,16 +5,48 @@
 //!   document and its page (the recording against the model before and after, the residual,
 //!   the worst windows zoomed in, the step-delay evidence and the Table 1 rows).
 //! - [`identify`]: an identification's page (Tables 1 and 2, the paper's Figs. 5-10).
+//! - [`fleet`]: a fleet's page (its valves ranked for maintenance, each linked to its own page).
 //! - [`plot`]: the SVG charts.
 //!
-//! Both pages share one skeleton ([`page`]). This module only formats results; it computes
-//! nothing about the valve.
+//! The pages share one skeleton ([`page`]); [`write_files`] saves a report's files. This module
+//! only formats results; it computes nothing about the valve.
 
 pub mod diagnose;
+pub mod fleet;
 pub mod identify;
 pub mod plot;
 
 use std::fmt::Write;
+use std::path::{Path, PathBuf};
+
+/// A report file that cannot be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot write: {source}; check that the output directory is writable", path.display())]
+pub struct WriteError {
+    /// The file or directory that failed.
+    pub path: PathBuf,
+    /// The cause.
+    pub source: std::io::Error,
+}
+
+/// Creates `dir` (and its parents) and writes each `(name, text)` into it; returns the paths.
+pub fn write_files(dir: &Path, files: &[(&str, String)]) -> Result<Vec<PathBuf>, WriteError> {
+    std::fs::create_dir_all(dir).map_err(|source| WriteError {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    files
+        .iter()
+        .map(|(name, text)| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).map_err(|source| WriteError {
+                path: path.clone(),
+                source,
+            })?;
+            Ok(path)
+        })
+        .collect()
+}
 
 use crate::metrics::Scores;
 

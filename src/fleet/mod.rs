@@ -1,0 +1,92 @@
+//! Fleet analysis: many recordings (one valve each, or many valves in one wide historian export)
+//! diagnosed in parallel, each valve summed up in the figures maintenance acts on, and the fleet
+//! ranked by how much attention each valve needs.
+//!
+//! - [`jobs`]: which valves a directory holds (every CSV file, or every tag of a
+//!   [`ValveMap`] in every file) as [`Job`]s.
+//! - [`diagnose_valve`]: one job read, diagnosed by [`crate::diagnose::diagnose`] (nothing of
+//!   the analysis is redone here), its report files written, and summarised as a
+//!   [`ValveSummary`]; a valve that cannot be read or diagnosed becomes a summary with its
+//!   one-line error, so one bad file never stops a fleet.
+//! - [`run`]: every job in parallel (rayon), then [`Fleet::ranked`].
+//! - [`write`]: `summary.csv`, `summary.json` and `index.html` (the page links each valve's own
+//!   report).
+//!
+//! The Python package calls the same functions, so a fleet diagnosed on a cluster through it
+//! gives the same rows and the same ranking as `valve-bridge fleet`.
+
+mod jobs;
+mod summary;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rayon::prelude::*;
+
+pub use jobs::{jobs, Columns, FleetError, Job, ValveMap};
+pub use summary::{Fleet, Limits, ValveSummary};
+
+use crate::recording::{self, ReadOptions};
+use crate::report::{self, WriteError};
+
+/// Where a valve's own report lives, relative to the fleet's output directory.
+pub fn valve_dir(valve: &str) -> String {
+    format!("valves/{valve}")
+}
+
+/// Reads, diagnoses and summarises one valve; with `out`, writes its report, final model and
+/// diagnosis JSON under `out/valves/<valve>/`. Never fails: a problem is the summary's `error`.
+pub fn diagnose_valve(job: &Job, read: &ReadOptions, out: Option<&Path>) -> ValveSummary {
+    let opts = job.read_options(read);
+    let rec = match recording::read(&job.path, &opts) {
+        Ok(r) => r,
+        Err(e) => return ValveSummary::failed(job, e.to_string()),
+    };
+    let d = match crate::diagnose::diagnose(&rec.view(), None, &|_, _| {}) {
+        Ok(d) => d,
+        Err(e) => return ValveSummary::failed(job, format!("diagnosing {}: {e}", job.source())),
+    };
+    let mut s = ValveSummary::of(job, &rec, &d);
+    if let Some(out) = out {
+        let dir = valve_dir(&s.valve);
+        let files = report::diagnose::files(&job.source(), &rec.view(), &d);
+        match report::write_files(&out.join(&dir), &files) {
+            Ok(_) => s.report = Some(format!("{dir}/report.html")),
+            Err(e) => s.error = Some(e.to_string()),
+        }
+    }
+    s
+}
+
+/// Diagnoses every job in parallel and ranks the fleet. `progress(done, total)` is called as
+/// valves finish (from worker threads).
+pub fn run(
+    jobs: &[Job],
+    read: &ReadOptions,
+    out: Option<&Path>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Fleet {
+    let done = AtomicUsize::new(0);
+    let rows = jobs
+        .par_iter()
+        .map(|job| {
+            let s = diagnose_valve(job, read, out);
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
+            s
+        })
+        .collect();
+    Fleet::ranked(rows)
+}
+
+/// Writes `summary.csv`, `summary.json` and `index.html` of `fleet` into `out`.
+pub fn write(out: &Path, fleet: &Fleet) -> Result<Vec<PathBuf>, WriteError> {
+    let json = serde_json::to_string_pretty(fleet).unwrap_or_else(|_| "null".into());
+    report::write_files(
+        out,
+        &[
+            ("summary.csv", fleet.csv()),
+            ("summary.json", json),
+            ("index.html", report::fleet::html(fleet)),
+        ],
+    )
+}

@@ -1,0 +1,152 @@
+//! `valve-bridge fleet` as a real binary: a directory of recordings (one valve each, one file
+//! that is not a recording) and a wide export with a column-mapping file are diagnosed, ranked,
+//! and written as a page, CSV and JSON summaries and one report per valve; the per-valve
+//! diagnosis is the one `valve-bridge diagnose --json` gives.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn case(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/cases")
+        .join(name)
+}
+
+fn run(args: &[&str]) -> Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_valve-bridge"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_directory_of_recordings_is_ranked_with_a_report_per_valve() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    for f in ["pub_clean_rs.csv", "pub_asym_rs.csv"] {
+        std::fs::copy(case(f), dir.path().join(f)).unwrap();
+    }
+    std::fs::write(dir.path().join("notes.csv"), "when,who\n1,me\n").unwrap();
+    let o = run(&[
+        "fleet",
+        dir.path().to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.starts_with("fleet: 2 valves diagnosed, 1 failed"),
+        "{stdout}"
+    );
+
+    let s = json(&out.path().join("summary.json"));
+    let valves = s["valves"].as_array().unwrap();
+    let names: Vec<&str> = valves
+        .iter()
+        .map(|v| v["valve"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["pub_asym_rs", "pub_clean_rs", "notes"], "{s}");
+    let asym = &valves[0];
+    assert_eq!(asym["findings"], serde_json::json!(["asymmetry"]));
+    let (open, close) = (
+        asym["stroke_speed_open_pct_per_s"].as_f64().unwrap(),
+        asym["stroke_speed_close_pct_per_s"].as_f64().unwrap(),
+    );
+    assert!(open > 1.5 * close && close < 40.0, "{open} {close}");
+    assert!(asym["attention"].as_f64().unwrap() > 1.0);
+    assert_eq!(valves[1]["findings"], serde_json::json!([]));
+    assert_eq!(valves[1]["attention"].as_f64(), Some(0.0));
+    for v in &valves[..2] {
+        for k in ["dead_time_s", "reversal_delay_s", "friction_band_pct"] {
+            assert!(v[k].as_f64().is_some_and(|x| x >= 0.0), "{k}: {v}");
+        }
+    }
+    let err = valves[2]["error"].as_str().unwrap();
+    assert!(err.contains("notes.csv:1: no column"), "{err}");
+
+    // The per-valve files are `diagnose --out`'s, linked from the page and the CSV.
+    let report = asym["report"].as_str().unwrap();
+    assert_eq!(report, "valves/pub_asym_rs/report.html");
+    assert!(out.path().join(report).is_file());
+    let page = std::fs::read_to_string(out.path().join("index.html")).unwrap();
+    assert!(page.contains(&format!("<a href=\"{report}\">pub_asym_rs</a>")));
+    assert!(page.contains("Not diagnosed"));
+    let csv = std::fs::read_to_string(out.path().join("summary.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert!(rows[0].starts_with("rank,valve,attention,findings,dead_time_s"));
+    assert!(rows[1].starts_with("1,pub_asym_rs,"), "{}", rows[1]);
+    assert!(rows[1].contains(",valves/pub_asym_rs/report.html,"));
+    assert_eq!(rows.len(), 4);
+
+    let fleet_diag = json(&out.path().join("valves/pub_asym_rs/diagnosis.json"));
+    let alone = run(&[
+        "diagnose",
+        dir.path().join("pub_asym_rs.csv").to_str().unwrap(),
+        "--json",
+    ]);
+    let alone: Value = serde_json::from_slice(&alone.stdout).unwrap();
+    assert_eq!(
+        fleet_diag, alone,
+        "fleet and diagnose give the same diagnosis"
+    );
+}
+
+#[test]
+fn a_wide_export_is_split_by_the_mapping_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    // Two valves side by side, 40 s each, in one historian export.
+    let read = |f: &str| std::fs::read_to_string(case(f)).unwrap();
+    let (a, b) = (read("pub_clean_rs.csv"), read("pub_asym_rs.csv"));
+    let mut wide = String::from("time,FV1_OP,FV1_PV,FV2_OP,FV2_PV\n");
+    for (la, lb) in a.lines().zip(b.lines()).skip(1).take(4000) {
+        let (ca, cb): (Vec<&str>, Vec<&str>) = (la.split(',').collect(), lb.split(',').collect());
+        wide.push_str(&format!(
+            "{},{},{},{},{}\n",
+            ca[0], ca[1], ca[2], cb[1], cb[2]
+        ));
+    }
+    std::fs::write(dir.path().join("export.csv"), wide).unwrap();
+    let map = out.path().join("valves.toml");
+    std::fs::write(
+        &map,
+        "time = \"time\"\n[valves]\nFV1 = { op = \"FV1_OP\", vp = \"FV1_PV\" }\nFV2 = { op = \"FV2_OP\", vp = \"FV2_PV\" }\nFV3 = { op = \"FV3_OP\", vp = \"FV3_PV\" }\n",
+    )
+    .unwrap();
+    let fleet_out = out.path().join("fleet");
+    run(&[
+        "fleet",
+        dir.path().to_str().unwrap(),
+        "--out",
+        fleet_out.to_str().unwrap(),
+        "--valves",
+        map.to_str().unwrap(),
+    ]);
+    let s = json(&fleet_out.join("summary.json"));
+    let valves = s["valves"].as_array().unwrap();
+    let find = |n: &str| valves.iter().find(|v| v["valve"] == n).unwrap();
+    assert_eq!(find("FV1")["samples"].as_u64(), Some(4000));
+    assert!(find("FV2")["source"]
+        .as_str()
+        .unwrap()
+        .ends_with("export.csv [FV2]"));
+    assert!(fleet_out.join("valves/FV2/report.html").is_file());
+    let e = find("FV3")["error"].as_str().unwrap();
+    assert!(e.contains("no column `FV3_OP`, `FV3_PV`"), "{e}");
+    assert_eq!(
+        (s["diagnosed"].as_u64(), s["failed"].as_u64()),
+        (Some(2), Some(1))
+    );
+}
