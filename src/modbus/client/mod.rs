@@ -470,10 +470,14 @@ impl ModbusValve {
             Err(_) => {
                 let mut fault = self.classify_silence(t);
                 // Late replies show the device is there, only slow: no reason to reopen.
+                // Once seen, every timeout says so (the summary quotes the last one, which
+                // may fall between two late replies).
                 let late = self.wire.stale_replies();
                 if late > self.late_seen {
                     self.late_seen = late;
                     self.last_answer = Instant::now();
+                }
+                if late > 0 {
                     if let Fault::Timeout(m) = &mut fault {
                         m.push_str(&format!(
                             " (the device does answer, later: {late} replies came after their \
