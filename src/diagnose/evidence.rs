@@ -152,7 +152,7 @@ pub enum Detail {
         crossing_open_s: Option<f64>,
     },
     SlewRate {
-        /// 99.5th percentile of V_P's opening and closing speed, %/s.
+        /// 99.9th percentile of V_P's opening and closing speed, %/s.
         open_speed: f64,
         close_speed: f64,
         slew_pct_per_s: f64,

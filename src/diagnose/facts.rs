@@ -39,9 +39,14 @@ pub struct Hold {
 pub struct Facts {
     pub steps: Vec<StepResponse>,
     pub holds: Vec<Hold>,
-    /// Fastest opening and closing speed of V_P, noise taken out (99.9th percentiles), %/s.
+    /// Fastest opening and closing speed of V_P, noise taken out (99.9th percentiles over
+    /// windows of 0.1 to 3 s), %/s.
     pub open_speed: f64,
     pub close_speed: f64,
+    /// Fastest speed V_P holds for 0.3 s or more, either way, noise taken out, %/s: a speed
+    /// limit holds its speed that long, while a proportional positioner, which answers a small
+    /// error with a short burst, has slowed by then to under half its peak.
+    pub held_speed: f64,
     /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
     pub lattice_pct: f64,
     /// Noise of the V_P reading (standard deviation), %.
@@ -62,7 +67,8 @@ pub struct Facts {
 /// `lattice_pct` (0 = none, see [`lattice`]).
 pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
-    let (open_speed, close_speed) = speeds(vp, dt, sigma);
+    let (open_speed, close_speed) = speeds(vp, dt, sigma, &[0.1, 0.3, 1.0, 3.0]);
+    let (open_held, close_held) = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     Facts {
         reversals: count_reversals(op),
@@ -70,6 +76,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         holds: holds(op, vp, dt),
         open_speed,
         close_speed,
+        held_speed: open_held.max(close_held),
         lattice_pct,
         noise_pct: sigma,
         slip_scale,
@@ -225,14 +232,14 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
     holds
 }
 
-/// The fastest opening and closing speeds of V_P, %/s, noise taken out: over windows of 0.1,
-/// 0.3, 1 and 3 s, the 99.9th percentile of the speeds in each direction less what noise alone
-/// reaches there (2.8 sigmas of the difference of two readings, over the window); the largest
-/// over the windows. Short windows see fast strokes, long ones the slow moves that noise hides
-/// in short ones.
-fn speeds(vp: &[f64], dt: f64, sigma: f64) -> (f64, f64) {
+/// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
+/// taken out: over each window, the 99.9th percentile of the speeds in each direction less what
+/// noise alone reaches there (2.8 sigmas of the difference of two readings, over the window);
+/// the largest over the windows. Short windows see fast strokes, long ones the slow moves that
+/// noise hides in short ones.
+fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
     let mut best = (0.0f64, 0.0f64);
-    for window_s in [0.1, 0.3, 1.0, 3.0] {
+    for &window_s in windows_s {
         let h = ((window_s / dt).round() as usize).max(1);
         let w = h as f64 * dt;
         let noise = 2.8 * sigma * std::f64::consts::SQRT_2 / w;

@@ -193,11 +193,12 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
         Effect::StateDependentDelay => {
             g(Knob::Slowdown) >= MIN_SLOWDOWN || g(Knob::CrossingSlope).abs() * 100.0 >= 0.1
         }
-        // A slew limit even where the valve is fastest (closed), that V_P reaches.
+        // A slew limit even where the valve is fastest (closed), that V_P reaches and holds:
+        // the short bursts of a proportional positioner answering small errors do not show one.
         Effect::SlewRate => {
-            let top = facts.open_speed.max(facts.close_speed);
             let slew = g(Knob::Slew);
-            slew < NOMINAL_MIN_SLEW_PCT_PER_S && top >= 0.7 * slew / composed::half_open(spec)
+            slew < NOMINAL_MIN_SLEW_PCT_PER_S
+                && facts.held_speed >= 0.7 * slew / composed::half_open(spec)
         }
         Effect::Asymmetry => {
             let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
@@ -284,6 +285,7 @@ mod tests {
             holds: vec![],
             open_speed: open,
             close_speed: close,
+            held_speed: open.max(close),
             lattice_pct: 0.0,
             noise_pct: 0.1,
             reversals: 0,
@@ -303,12 +305,22 @@ mod tests {
         assert!(!material(Effect::DeadTime, &with(Knob::DeadTime, 0.21), &f));
         assert!(material(Effect::Deadband, &with(Knob::Deadband, 0.3), &f));
         assert!(!material(Effect::Deadband, &with(Knob::Deadband, 0.1), &f));
-        // A slew limit of 20 %/s is material only when V_P reaches it.
+        // A slew limit of 20 %/s is material only when V_P reaches it, and holds it for 0.3 s:
+        // bursts at 20 %/s that slow within 0.3 s are a proportional positioner's.
         assert!(material(Effect::SlewRate, &with(Knob::Slew, 20.0), &f));
         assert!(!material(
             Effect::SlewRate,
             &with(Knob::Slew, 20.0),
             &facts(5.0, 5.0)
+        ));
+        let bursts = Facts {
+            held_speed: 8.0,
+            ..facts(20.0, 20.0)
+        };
+        assert!(!material(
+            Effect::SlewRate,
+            &with(Knob::Slew, 20.0),
+            &bursts
         ));
         // Asymmetry must show in the measured speeds, the same way round.
         let mut asym = with(Knob::Slew, 50.0);

@@ -214,7 +214,7 @@ pub fn evidence(f: &Finding) -> String {
             close_speed,
             slew_pct_per_s,
         } => format!(
-            "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.5th percentile): a slew-rate limit of {slew_pct_per_s:.1} %/s"
+            "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): a slew-rate limit of {slew_pct_per_s:.1} %/s"
         ),
         Detail::Asymmetry {
             open_speed,
@@ -222,7 +222,7 @@ pub fn evidence(f: &Finding) -> String {
             fitted_open_pct_per_s,
             fitted_close_pct_per_s,
         } => format!(
-            "V_P opens at up to {open_speed:.1} %/s but closes at up to {close_speed:.1} %/s (99.5th percentile); the fit gives \
+            "V_P opens at up to {open_speed:.1} %/s but closes at up to {close_speed:.1} %/s (99.9th percentile); the fit gives \
              {fitted_open_pct_per_s:.1} %/s opening and {fitted_close_pct_per_s:.1} %/s closing"
         ),
         Detail::MinSpeed {
