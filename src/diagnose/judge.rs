@@ -149,14 +149,17 @@ pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64) -> f64 {
 }
 
 /// Whether a fitted knob sits at the edge of its box, where the effect stands in for something
-/// else rather than measuring itself: at its lower bound (within 2 % of it), or within the top
+/// else rather than measuring itself: at its lower bound (within 2 % of it, or of the box when
+/// that is narrower), or within the top
 /// 2 % of the box on its own scale. The gain and dead time are left out (they are refitted with
 /// every effect and may rest on a bound), and so are the jump fraction (a jump as large as the
 /// stickband is Choudhury's classic case) and the wind-up at a stop (none is a plain stop).
 fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
     free.iter().any(|f| {
         let v = composed::get(spec, f.knob);
-        let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs();
+        // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
+        // of 74-78 % is not pinned at 75 %.
+        let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs().min(f.def.hi - f.def.lo);
         let at_high = f.def.to_unit(v) > 0.98;
         !matches!(
             f.knob,
@@ -276,6 +279,25 @@ mod tests {
         // The same halving on a residual correlated over 1000 samples counts 10 samples.
         let d = bic_change(&errors(100.0), &errors(50.0), 1, 10000, 1000.0);
         assert!((d - (10.0 * 0.5f64.ln() + 10f64.ln())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_knob_is_pinned_at_the_edges_of_its_box_only() {
+        let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        let at = |knob, v| {
+            let mut s = base.clone();
+            composed::set(&mut s, knob, v);
+            s
+        };
+        // A travel stop in a box of 74-78 %: pinned at 74.05 %, not at 75 %.
+        let stop = [Free::new(Knob::TravelMax, 74.0, 78.0, 76.0)];
+        assert!(pinned(&stop, &at(Knob::TravelMax, 74.05)));
+        assert!(!pinned(&stop, &at(Knob::TravelMax, 75.0)));
+        assert!(pinned(&stop, &at(Knob::TravelMax, 77.99)));
+        // A deadband near its small lower bound: within 2 % of it.
+        let band = [Free::new(Knob::Deadband, 0.05, 5.0, 0.5)];
+        assert!(pinned(&band, &at(Knob::Deadband, 0.0505)));
+        assert!(!pinned(&band, &at(Knob::Deadband, 0.06)));
     }
 
     #[test]
