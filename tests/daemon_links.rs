@@ -76,10 +76,11 @@ fn spawn(cfg: &Path, logs: &Path, duration_s: f64) -> Child {
 fn a_device_down_at_start_is_picked_up_when_it_appears() {
     let _turn = real_time_turn();
     let dir = tempfile::tempdir().unwrap();
-    let (addr, cfg) = common::sim::nobody_listening(dir.path(), CONSTANT);
+    let (addr, cfg, port) = common::sim::nobody_listening(dir.path(), CONSTANT);
     let logs = dir.path().join("logs");
     let daemon = spawn(&cfg, &logs, 4.0);
     std::thread::sleep(Duration::from_millis(1500));
+    drop(port);
     let device = SimDevice::start(&["--tcp", &addr]);
     let (code, summary, stderr) = finish(daemon);
     drop(device);

@@ -510,7 +510,7 @@ fn runs_where_no_cycle_reads_a_v_p_fail_naming_the_cause() {
         "the summary is printed first"
     );
     // Nobody listening: every cycle disconnected, the refused connection named.
-    let (addr, cfg) = common::sim::nobody_listening(dir.path(), CONSTANT);
+    let (addr, cfg, _port) = common::sim::nobody_listening(dir.path(), CONSTANT);
     let out = run_cmd(&cfg, &dir.path().join("logs2"), 0.5)
         .output()
         .unwrap();
@@ -560,7 +560,7 @@ fn startup_error(cfg: &Path, options: &[&str]) -> String {
 #[test]
 fn no_device_on_the_tcp_port_with_require_device_is_one_line_naming_the_address() {
     let dir = tempfile::tempdir().unwrap();
-    let (addr, cfg) = common::sim::nobody_listening(dir.path(), CONSTANT);
+    let (addr, cfg, _port) = common::sim::nobody_listening(dir.path(), CONSTANT);
     let e = startup_error(&cfg, &["--require-device"]);
     assert!(
         e.starts_with(&format!(

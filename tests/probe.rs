@@ -129,7 +129,7 @@ fn an_address_the_device_lacks_is_exception_02_with_what_to_check() {
 #[test]
 fn no_device_or_no_modbus_valve_is_one_line() {
     let dir = tempfile::tempdir().unwrap();
-    let (addr, cfg) = common::sim::nobody_listening(dir.path(), "");
+    let (addr, cfg, _port) = common::sim::nobody_listening(dir.path(), "");
     let (out, err) = text(&probe(&cfg, &[]));
     assert!(out.is_empty(), "{out}");
     assert_eq!(err.lines().count(), 1, "{err}");

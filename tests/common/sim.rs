@@ -124,16 +124,23 @@ impl Drop for SimDevice {
     }
 }
 
-/// `127.0.0.1:PORT` with a port nobody listens on (bound, then released), and a daemon config
-/// for the shipped TCP config pointed at it (in `dir`, with `source` appended).
-pub fn nobody_listening(dir: &Path, source: &str) -> (String, PathBuf) {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .unwrap();
+/// A port held bound but not listening: connections to it are refused, and no other test's
+/// server can take it while the guard lives (a port bound and released at once can be handed
+/// to a parallel test's server before the daemon connects).
+pub struct NobodyListening {
+    _socket: tokio::net::TcpSocket,
+}
+
+/// `127.0.0.1:PORT` with a port nobody listens on (held by the returned guard; drop it to let
+/// a device start there), and a daemon config for the shipped TCP config pointed at it (in
+/// `dir`, with `source` appended).
+pub fn nobody_listening(dir: &Path, source: &str) -> (String, PathBuf, NobodyListening) {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.bind("127.0.0.1:0".parse().unwrap()).unwrap();
+    let port = socket.local_addr().unwrap().port();
     let addr = format!("127.0.0.1:{port}");
     let cfg = config(dir, TCP_CONFIG.0, &[(TCP_CONFIG.1, &addr)], source);
-    (addr, cfg)
+    (addr, cfg, NobodyListening { _socket: socket })
 }
 
 /// A daemon config `daemon.toml`: the shipped config with each `(from, to)` replaced (each must
