@@ -99,12 +99,10 @@ fn two_emulated_valves_run_in_the_same_cycles_with_their_own_logs() {
 #[test]
 fn a_valve_without_its_device_never_stalls_the_other() {
     let dir = tempfile::tempdir().unwrap();
-    // Nothing listens on a port just bound and released.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    // Nothing listens on a port held bound (not listening) for the whole run.
+    let held = tokio::net::TcpSocket::new_v4().unwrap();
+    held.bind("127.0.0.1:0".parse().unwrap()).unwrap();
+    let port = held.local_addr().unwrap().port();
     let config = dir.path().join("c.toml");
     std::fs::write(
         &config,
@@ -137,10 +135,15 @@ fn a_valve_without_its_device_never_stalls_the_other() {
             && stdout.contains(" ok, 0 timeout, 0 error, 0 disconnected)\n"),
         "{stdout}"
     );
+    // Every cycle that ran read the emulated valve; only the absent one's rows are failures.
     let ok = rows(&logs(dir.path(), "vb-emulated-")[0]);
-    assert!(ok.iter().all(|r| r.2 != "skipped" && r.1.is_some()));
+    assert!(ok
+        .iter()
+        .all(|r| r.2 == "skipped" || (r.1.is_some() && r.2 != "disconnected")));
+    assert!(ok.iter().filter(|r| r.2 == "ok").count() >= 100);
     let absent = rows(&logs(dir.path(), "vb-absent-")[0]);
     assert!(absent[..200]
         .iter()
-        .all(|r| r.2 == "disconnected" && r.1.is_none()));
+        .all(|r| (r.2 == "disconnected" || r.2 == "skipped") && r.1.is_none()));
+    drop(held);
 }
