@@ -12,7 +12,8 @@
 //! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis;
 //! `--case N` runs only the case of that index; `--csv DIR` also writes each case's recording
 //! (`case-N.csv`) and its truth (`case-N.truth.json`, the labels and the physical model file
-//! `case-N.toml`), so `valve-bridge diagnose DIR/case-N.csv` repeats it.
+//! `case-N.toml`), so `valve-bridge diagnose DIR/case-N.csv` repeats it; `--write-only` with
+//! `--csv` writes the cases without diagnosing them.
 
 #[path = "blind/cases.rs"]
 mod cases;
@@ -37,6 +38,7 @@ struct Options {
     case: Option<usize>,
     jsonl: Option<PathBuf>,
     csv: Option<PathBuf>,
+    write_only: bool,
 }
 
 fn env_number(name: &str) -> Result<Option<u64>, String> {
@@ -57,6 +59,7 @@ fn options() -> Result<Options, String> {
         case: None,
         jsonl: None,
         csv: None,
+        write_only: false,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -89,11 +92,12 @@ fn options() -> Result<Options, String> {
             }
             "--jsonl" => o.jsonl = Some(PathBuf::from(value("a file path")?)),
             "--csv" => o.csv = Some(PathBuf::from(value("a directory")?)),
+            "--write-only" => o.write_only = true,
             // `cargo bench` passes `--bench` to every bench binary.
             "--bench" => {}
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR"
+                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only"
                 ))
             }
         }
@@ -123,6 +127,9 @@ fn run() -> Result<(), String> {
     if let Some(index) = o.case {
         plans.retain(|p| p.index == index);
     }
+    if o.write_only && o.csv.is_none() {
+        return Err("--write-only needs --csv DIR".into());
+    }
     if let Some(dir) = &o.csv {
         std::fs::create_dir_all(dir)
             .map_err(|e| format!("--csv {}: cannot create: {e}", dir.display()))?;
@@ -146,6 +153,9 @@ fn run() -> Result<(), String> {
         let rec = &case.rec;
         if let Some(dir) = &o.csv {
             write_case(dir, &case)?;
+            if o.write_only {
+                continue;
+            }
         }
         let started = Instant::now();
         let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})
@@ -178,6 +188,9 @@ fn run() -> Result<(), String> {
                 .map_err(|e| format!("--jsonl: cannot write: {e}"))?;
         }
         outcomes.push(out);
+    }
+    if o.write_only {
+        return Ok(());
     }
     score::print_confusion(&outcomes);
     let (precision, recall) = score::print_precision_recall(&outcomes);

@@ -4,8 +4,9 @@
 //! An effect that is already in the model, or that the data cannot identify (saturation when
 //! V_P never stops short of O_P), has no candidate; nor has quantization, which is named from
 //! the sensor lattice itself.
-//! Every candidate also refits the positioner gain and the dead time, so an effect is judged
-//! against the best the rest of the model can do, not against a model fitted without it.
+//! Every candidate also refits the positioner gain, the dead time and (while it is a healthy
+//! one) the stroke-speed limit, so an effect is judged against the best the rest of the model
+//! can do, not against a model fitted without it.
 //!
 //! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
 
@@ -18,12 +19,18 @@ use crate::model::ModelSpec;
 const SLOWEST_PCT_PER_S: f64 = 0.05;
 /// Longest dead time a diagnosis fits, s.
 pub const MAX_DEAD_TIME_S: f64 = 3.0;
+/// Largest wind-up past a travel stop, % of travel: a drive can wind from a stop low in the
+/// travel all the way to its supply.
+pub const MAX_WINDUP_PCT: f64 = 100.0;
 
 /// One effect to refit, from several starts (the knobs and boxes are the same in all).
 #[derive(Debug, Clone)]
 pub(crate) struct Job {
     pub effect: Effect,
     pub starts: Vec<Vec<Free>>,
+    /// How many knobs, first in each start, are the effect's own (the rest are the model's
+    /// gain, dead time and stroke speed, refitted with it).
+    pub own: usize,
 }
 
 /// The refit jobs of a round: every effect in `effects` with its variants, each from spread
@@ -40,6 +47,7 @@ pub(crate) fn jobs(
     let td = composed::get(current, Knob::DeadTime);
     for &effect in effects {
         for variant in variants(effect, current, facts, td_max) {
+            let own = variant.len();
             for mut free in spread_starts(variant) {
                 free.push(free_gain(current, dt));
                 let hi = if effect == Effect::DeadTime {
@@ -49,6 +57,9 @@ pub(crate) fn jobs(
                 };
                 if !free.iter().any(|f| f.knob == Knob::DeadTime) {
                     free.push(Free::new(Knob::DeadTime, 0.0, hi, td));
+                }
+                if let Some(slew) = healthy_slew(current, &free) {
+                    free.push(slew);
                 }
                 // Variants that differ only in their own start share the spread starts.
                 let same_box = |starts: &[Vec<Free>]| {
@@ -64,12 +75,34 @@ pub(crate) fn jobs(
                     None => jobs.push(Job {
                         effect,
                         starts: vec![free],
+                        own,
                     }),
                 }
             }
         }
     }
     jobs
+}
+
+/// The stroke-speed limit of `spec` free within a healthy positioner's range, when it lies
+/// there and `free` does not free it already: the baseline fitted it next to a missing effect
+/// (a dead time too short, no travel stop), where it may have settled on a compromise that
+/// only the effect's refit can undo.
+pub(crate) fn healthy_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
+    let slew = composed::get(spec, Knob::Slew);
+    let taken = free
+        .iter()
+        .any(|f| matches!(f.knob, Knob::Slew | Knob::ClosingSlew));
+    let healthy = (NOMINAL_MIN_SLEW_PCT_PER_S..=FASTEST_PCT_PER_S).contains(&slew)
+        && spec.effects.closing_slew_pct_per_s == 0.0;
+    (healthy && !taken).then(|| {
+        Free::new(
+            Knob::Slew,
+            NOMINAL_MIN_SLEW_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            slew,
+        )
+    })
 }
 
 /// The variants to try for `effect` on top of `spec`, or none when it is already there or the
@@ -177,8 +210,16 @@ pub(crate) fn variants(
             ],
             vec![f(Knob::Breakaway, 0.05, 10.0, 0.5)],
         ],
-        Effect::Deadband if get(Knob::Deadband) == 0.0 => {
-            vec![vec![f(Knob::Deadband, 0.02, 10.0, 0.5)]]
+        // A band either on the input (the target moves only once O_P leaves it; the valve
+        // then closes in on it ever more slowly) or in the positioner (no action inside it,
+        // full action outside: the valve arrives still moving and stops at once).
+        Effect::Deadband
+            if get(Knob::Deadband) == 0.0 && get(Knob::PositionerDeadband) == 0.0 =>
+        {
+            vec![
+                vec![f(Knob::Deadband, 0.02, 10.0, 0.5)],
+                vec![f(Knob::PositionerDeadband, 0.02, 10.0, 0.5)],
+            ]
         }
         Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
             travel_limits(facts).into_iter().collect()
@@ -216,7 +257,7 @@ fn travel_limits(facts: &Facts) -> Option<Vec<Free>> {
     }
     // The drive winds up past the stop while O_P asks for more, and must come back first.
     if !free.is_empty() {
-        free.push(Free::new(Knob::Windup, 0.0, 50.0, 10.0));
+        free.push(Free::new(Knob::Windup, 0.0, MAX_WINDUP_PCT, 20.0));
     }
     (!free.is_empty()).then_some(free)
 }

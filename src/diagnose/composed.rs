@@ -123,6 +123,8 @@ pub enum Knob {
     Windup,
     /// Deadband width, %.
     Deadband,
+    /// Width of the positioner's deadband, %.
+    PositionerDeadband,
     /// Lowest travel, %.
     TravelMin,
     /// Highest travel, %.
@@ -149,6 +151,7 @@ impl Knob {
             | Knob::FrictionBand
             | Knob::Windup
             | Knob::Deadband
+            | Knob::PositionerDeadband
             | Knob::TravelMin
             | Knob::TravelMax
             | Knob::Quantum
@@ -173,6 +176,7 @@ impl Knob {
             Knob::FrictionBand => "friction_band_pct",
             Knob::Windup => "stop_windup_pct",
             Knob::Deadband => "deadband_pct",
+            Knob::PositionerDeadband => "positioner_deadband_pct",
             Knob::TravelMin => "travel_min_pct",
             Knob::TravelMax => "travel_max_pct",
             Knob::Quantum => "quantization_pct",
@@ -237,6 +241,7 @@ pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
         Knob::FrictionBand => e.friction_band_pct,
         Knob::Windup => e.stop_windup_pct,
         Knob::Deadband => e.deadband_pct,
+        Knob::PositionerDeadband => e.positioner_deadband_pct,
         Knob::TravelMin => spec.travel.min_pct,
         Knob::TravelMax => spec.travel.max_pct,
         Knob::Quantum => e.quantization_pct,
@@ -278,6 +283,7 @@ pub fn set(spec: &mut ModelSpec, knob: Knob, v: f64) {
         Knob::FrictionBand => e.friction_band_pct = v,
         Knob::Windup => e.stop_windup_pct = v,
         Knob::Deadband => e.deadband_pct = v,
+        Knob::PositionerDeadband => e.positioner_deadband_pct = v,
         Knob::TravelMin => spec.travel.min_pct = v,
         Knob::TravelMax => spec.travel.max_pct = v,
         Knob::Quantum => e.quantization_pct = v,

@@ -396,7 +396,7 @@ fn detail(
                 holds_opening: nu,
                 offset_after_closing_pct: down,
                 holds_closing: nd,
-                deadband_pct: g(Knob::Deadband),
+                deadband_pct: g(Knob::Deadband).max(g(Knob::PositionerDeadband)),
             }
         }
         Effect::Saturation => Detail::Saturation {

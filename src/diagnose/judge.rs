@@ -34,7 +34,7 @@ const MIN_EXCESS_SHARE: f64 = 0.1;
 const MAX_DELTA_BIC: f64 = -10.0;
 
 /// Smallest friction band worth naming, %: a healthy stem's is a tenth of a percent.
-const MIN_FRICTION_BAND_PCT: f64 = 0.3;
+pub(crate) const MIN_FRICTION_BAND_PCT: f64 = 0.3;
 /// The errors below which a minimum speed takes over from proportional action, for it to be
 /// worth naming, %: from a fifth of a percent to a few percent.
 const MIN_SPEED_BAND_PCT: f64 = 0.2;
@@ -42,6 +42,9 @@ const MAX_SPEED_BAND_PCT: f64 = 5.0;
 /// Share of a fitted minimum speed the valve must keep in the tails of its steps, where a
 /// proportional positioner would have slowed to a quarter of it or less.
 const MIN_FLOOR_SHOWN: f64 = 0.7;
+/// Fewest samples of step tails (see [`Facts::approach`]) a recording must have for a
+/// minimum speed to be named at all.
+const MIN_TAIL_SAMPLES: usize = 30;
 /// Smallest slip worth naming, %.
 pub(crate) const MIN_SLIP_PCT: f64 = 0.2;
 /// Smallest positioner deadband worth naming, %: the valve then stops short by a tenth of a
@@ -94,14 +97,22 @@ pub(crate) struct Judge<'a> {
 }
 
 impl Judge<'_> {
-    /// Scores a refitted candidate (`spec`, whose `free` knobs were refitted) against the
-    /// current model.
-    pub fn judge(&self, effect: Effect, spec: ModelSpec, errors: Errors, free: Vec<Free>) -> Trial {
+    /// Scores a refitted candidate (`spec`, whose `free` knobs were refitted, the first `own`
+    /// of them the effect's) against the current model.
+    pub fn judge(
+        &self,
+        effect: Effect,
+        spec: ModelSpec,
+        errors: Errors,
+        free: Vec<Free>,
+        own: usize,
+    ) -> Trial {
         let blocks = self.scorer.paired(self.current, &spec);
         let t_stat = blocks_helped(&blocks, self.sigma);
         let excess = (self.cur.held - self.held_noise).max(1e-12);
         let excess_share = (self.cur.held - errors.held) / excess.max(0.05 * self.cur.held);
-        let k_new = free
+        let own = &free[..own.min(free.len())];
+        let k_new = own
             .iter()
             .filter(|f| f.knob != Knob::Gain && f.knob != Knob::DeadTime)
             .count()
@@ -110,10 +121,10 @@ impl Judge<'_> {
             &self.cur,
             &errors,
             k_new,
-            self.scorer.n_fit(),
+            self.scorer.n_scored(),
             self.corr_len,
         );
-        let material = !pinned(&free, &spec) && material(effect, &spec, self.facts);
+        let material = !pinned(own, &spec) && material(effect, &spec, self.facts);
         Trial {
             effect,
             spec,
@@ -168,18 +179,20 @@ fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
     })
 }
 
-/// BIC change from `cur` to `new` on the fit blocks with `k_new` more parameters, counting
-/// independent samples (`n_fit` over the residual's correlation length, at least 10), not raw
-/// ones.
+/// BIC change from `cur` to `new` with `k_new` more parameters, on every scored sample (fit
+/// and held-out blocks: an effect the fit blocks barely exercise, such as a travel stop O_P
+/// asks to pass in a few blocks, is still charged for its parameters and credited for what it
+/// explains), counting independent samples (`n_scored` over the residual's correlation length,
+/// at least 10), not raw ones.
 pub(crate) fn bic_change(
     cur: &Errors,
     new: &Errors,
     k_new: usize,
-    n_fit: usize,
+    n_scored: usize,
     corr_len: f64,
 ) -> f64 {
-    let n_eff = (n_fit as f64 / corr_len).max(10.0);
-    n_eff * (new.fit / cur.fit).ln() + k_new as f64 * n_eff.ln()
+    let n_eff = (n_scored as f64 / corr_len).max(10.0);
+    n_eff * ((new.fit + new.held) / (cur.fit + cur.held)).ln() + k_new as f64 * n_eff.ln()
 }
 
 /// Whether a fitted effect is large enough to matter to a valve engineer, and agrees with what
@@ -215,13 +228,15 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
         // ... but only for small errors: a floor over several % is a constant-speed valve.
         // Where the recording shows the tails of steps well inside that band (beyond the
         // noise), V_P must still move at about the floor there, not slow down in proportion.
+        // A recording without step tails (a valve in closed loop answering a noisy controller
+        // output) cannot tell a floor from a rate limit or a filter: none is named there.
         Effect::MinSpeed => {
             let floor = g(Knob::MinSpeed);
             let band = floor / g(Knob::Gain);
             let lo = (2.5 * facts.noise_pct).max(band / 8.0);
             let kept = match facts.approach_speed(lo, 2.0 * lo) {
                 Some(speed) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * floor,
-                _ => true,
+                _ => facts.approach.len() >= MIN_TAIL_SAMPLES,
             };
             floor >= 0.1 && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band) && kept
         }
@@ -232,7 +247,9 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
             (g(Knob::Stickband) >= least && g(Knob::Stickband) * g(Knob::JumpFraction) >= least)
                 || g(Knob::Breakaway) >= least
         }
-        Effect::Deadband => g(Knob::Deadband) >= MIN_DEADBAND_PCT,
+        Effect::Deadband => {
+            g(Knob::Deadband).max(g(Knob::PositionerDeadband)) >= MIN_DEADBAND_PCT
+        }
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
         Effect::Quantization => g(Knob::Quantum) >= MIN_LATTICE_PCT,
         Effect::Calibration => {
@@ -367,7 +384,8 @@ mod tests {
                 .collect(),
             ..f.clone()
         };
-        assert!(material(Effect::MinSpeed, &floor, &f));
+        // Without step tails the recording cannot show a floor.
+        assert!(!material(Effect::MinSpeed, &floor, &f));
         assert!(material(
             Effect::MinSpeed,
             &floor,

@@ -16,7 +16,7 @@
 use rayon::prelude::*;
 use serde_json::{Map, Value};
 
-use super::candidates::{self, MAX_DEAD_TIME_S};
+use super::candidates::{self, MAX_DEAD_TIME_S, MAX_WINDUP_PCT};
 use super::composed::{self, Effect, Knob};
 use super::evidence::Evidence;
 use super::facts::Facts;
@@ -37,6 +37,11 @@ pub const ROUNDS: usize = 4;
 /// twenty times as much (a tenth of the excess), and each round refits every candidate on the
 /// whole recording.
 const RETRY_SHARE: f64 = 0.005;
+/// A winner that leaves less than this share of the held-out error dominated its round (see
+/// [`Search::run`]).
+const DOMINANT_LEFT: f64 = 0.5;
+/// Where the stop's wind-up restarts, as shares of its range (see [`Search::wind_up`]).
+const WINDUP_STARTS: [f64; 5] = [0.05, 0.2, 0.4, 0.7, 0.95];
 /// Share of the winner's held-out gain a look-alike must reach to be named beside it.
 const LOOK_ALIKE_SHARE: f64 = 0.8;
 
@@ -123,9 +128,15 @@ impl<'a> Search<'a> {
                 self.stick_slip();
                 break;
             };
+            // After a winner that took most of the error, what the others did was judged
+            // against a model that missed something far larger: all are tried again.
+            let dominant = winner.errors.held < DOMINANT_LEFT * self.cur.held;
             worth = best
                 .iter()
-                .filter(|t| self.cur.held - t.errors.held >= RETRY_SHARE * winner.errors.held)
+                .filter(|t| {
+                    dominant
+                        || self.cur.held - t.errors.held >= RETRY_SHARE * winner.errors.held
+                })
                 .map(|t| t.effect)
                 .collect();
             let alternatives = self.look_alikes(winner, &best);
@@ -169,7 +180,7 @@ impl<'a> Search<'a> {
                 &self.cur,
                 &errors,
                 0,
-                self.data.scorer.n_fit(),
+                self.data.scorer.n_scored(),
                 self.corr_len,
             ),
             support: None,
@@ -209,7 +220,7 @@ impl<'a> Search<'a> {
         jobs.par_iter()
             .map(|job| {
                 let (spec, errors) = refit_from(self.data.scorer, &self.current, &job.starts);
-                judge.judge(job.effect, spec, errors, job.starts[0].clone())
+                judge.judge(job.effect, spec, errors, job.starts[0].clone(), job.own)
             })
             .collect()
     }
@@ -274,6 +285,9 @@ impl<'a> Search<'a> {
         if joint {
             self.joint_refit();
         }
+        if self.freed.iter().any(|f| f.knob == Knob::Windup) {
+            self.wind_up();
+        }
         let sim = self.data.scorer.simulate(&self.current);
         let residual: Vec<f64> = self
             .data
@@ -300,6 +314,41 @@ impl<'a> Search<'a> {
             held_before = self.cur.held,
             held_after = errors.held,
             "polish"
+        );
+        if errors.fit < self.cur.fit && errors.held <= self.cur.held {
+            self.current = polished;
+            self.cur = errors;
+        }
+    }
+
+    /// The travel stop's wind-up refitted from starts spread over its whole range, each with
+    /// the stroke speed where it is and at the fastest speed the recording shows (the other
+    /// knobs from where they are): how long the drive takes to leave a stop is a narrow valley
+    /// the round's few starts can miss, it is set by the wind-up and the speed the drive
+    /// unwinds at together, and what it leaves, later effects (a slowdown of the open valve)
+    /// would be stretched to cover. Kept only if neither error rises.
+    fn wind_up(&mut self) {
+        let here = starting_at(&self.freed, &self.current);
+        let facts = self.data.facts;
+        let seen = facts.open_speed.max(facts.close_speed);
+        let starts: Vec<Vec<Free>> = (WINDUP_STARTS.iter())
+            .flat_map(|&share| [false, true].map(|at_seen| (share, at_seen)))
+            .map(|(share, at_seen)| {
+                (here.iter())
+                    .map(|f| match f.knob {
+                        Knob::Windup => f.from(share * MAX_WINDUP_PCT),
+                        Knob::Slew if at_seen => f.from(seen.clamp(f.def.lo, f.def.hi)),
+                        _ => *f,
+                    })
+                    .collect()
+            })
+            .collect();
+        let (polished, errors) = refit_from(self.data.scorer, &self.current, &starts);
+        tracing::debug!(
+            held_before = self.cur.held,
+            held_after = errors.held,
+            windup_pct = composed::get(&polished, Knob::Windup),
+            "stop wind-up"
         );
         if errors.fit < self.cur.fit && errors.held <= self.cur.held {
             self.current = polished;
@@ -337,7 +386,7 @@ impl<'a> Search<'a> {
                 &self.cur,
                 &errors,
                 k_new,
-                self.data.scorer.n_fit(),
+                self.data.scorer.n_scored(),
                 self.corr_len,
             ),
             support: None,

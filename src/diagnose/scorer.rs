@@ -160,6 +160,11 @@ impl<'a> Scorer<'a> {
     pub fn n_held(&self) -> usize {
         self.held_mask.iter().filter(|&&h| h).count()
     }
+
+    /// Number of samples scored, fitted or held out.
+    pub fn n_scored(&self) -> usize {
+        self.n_fit() + self.n_held()
+    }
 }
 
 #[cfg(test)]

@@ -362,10 +362,17 @@ fn effects_friction_and_sensor(c: &mut Checks, e: &Effects) {
         e.stop_windup_pct,
         "a wind-up past a travel stop in %, 0-100 (0 = none)",
     );
+    c.need(
+        (0.0..=10.0).contains(&e.positioner_deadband_pct),
+        t,
+        "positioner_deadband_pct",
+        e.positioner_deadband_pct,
+        "a positioner deadband in %, 0-10 (0 = none)",
+    );
 }
 
-/// Asymmetry, slowdown, breakaway, the friction band and the stop wind-up live in pin-cart
-/// II's core only.
+/// Asymmetry, slowdown, breakaway, the friction band, the stop wind-up and the positioner
+/// deadband live in pin-cart II's core only.
 fn effects_need_pincart2(c: &mut Checks, kind: ModelKind, e: &Effects) {
     if kind == ModelKind::Pincart2 {
         return;
@@ -405,5 +412,12 @@ fn effects_need_pincart2(c: &mut Checks, kind: ModelKind, e: &Effects) {
         "stop_windup_pct",
         e.stop_windup_pct,
         "a wind-up at the travel stops needs model = \"pincart2\" (the only core with a pin)",
+    );
+    c.need(
+        e.positioner_deadband_pct == 0.0,
+        t,
+        "positioner_deadband_pct",
+        e.positioner_deadband_pct,
+        "a positioner deadband needs model = \"pincart2\" (use deadband_pct with other models)",
     );
 }

@@ -3,9 +3,9 @@
 //! Each effect is a parameter of the composed valve that is off at its default, so "add a
 //! deadband" means setting `deadband_pct`, not writing a new model. Effects that live inside
 //! the pin-cart II core (backlash, state-dependent delay, slew rate, minimum speed) are
-//! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s`, `open_slowdown` and
-//! `breakaway_pct`, `friction_band_pct` and `stop_windup_pct` here, which only pin-cart II
-//! uses); the others wrap any core:
+//! parameters of [`super::PinCart2Params`] (plus `closing_slew_pct_per_s`, `open_slowdown`,
+//! `breakaway_pct`, `friction_band_pct`, `stop_windup_pct` and `positioner_deadband_pct` here,
+//! which only pin-cart II uses); the others wrap any core:
 //!
 //! ```text
 //! O_P ─▶ T_d ─▶ calibration ─▶ deadband ─▶ stiction ─▶ core ─▶ travel clamp ─▶ quantization ─▶ V_P
@@ -68,6 +68,13 @@ pub struct Effects {
     /// this far beyond the stop, and must come back before the valve leaves it.
     #[serde(skip_serializing_if = "is_zero")]
     pub stop_windup_pct: f64,
+    /// Deadband of pin-cart II's positioner, % (0 = none): the pin does not move while
+    /// |O_P - V_P| is within half this band and answers in full outside it, as a positioner
+    /// that ignores small errors. Unlike `deadband_pct` (a band on the input, after which the
+    /// valve closes in on the shifted target ever more slowly), the valve arrives at the
+    /// band's edge still moving at the positioner's speed there and stops at once.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub positioner_deadband_pct: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -92,6 +99,7 @@ impl Default for Effects {
             breakaway_pct: 0.0,
             friction_band_pct: 0.0,
             stop_windup_pct: 0.0,
+            positioner_deadband_pct: 0.0,
         }
     }
 }

@@ -82,6 +82,8 @@ enum PinLaw {
         slowdown: f64,
         /// The cart is a friction band crossed at the pushing speed, not in eq. (7)'s time.
         band: bool,
+        /// Half the positioner's deadband, %: no pin movement while |e| is within it.
+        hold: f64,
     },
 }
 
@@ -117,7 +119,8 @@ impl PinCart {
     /// speed and the slew limit fall with opening as `1 / (1 + r V / 100)` (a pneumatic chamber
     /// that grows with opening: slower response and slower stroke); `breakaway_pct` > 0 makes the cart stick
     /// whenever it stops, until the pin pushes that much beyond the side, then slip;
-    /// `friction_band_pct` > 0 makes the cart that wide and crossed at the pushing speed.
+    /// `friction_band_pct` > 0 makes the cart that wide and crossed at the pushing speed;
+    /// `positioner_deadband_pct` > 0 stops the pin while the error is within half of it.
     pub(crate) fn two(p: &PinCart2Params, fx: &Effects, dt: f64) -> Self {
         let close_max = if fx.closing_slew_pct_per_s > 0.0 {
             fx.closing_slew_pct_per_s
@@ -130,6 +133,7 @@ impl PinCart {
             close_max,
             slowdown: fx.open_slowdown,
             band,
+            hold: fx.positioner_deadband_pct / 2.0,
         };
         let width = if band {
             fx.friction_band_pct
@@ -175,7 +179,14 @@ impl PinCart {
                 close_max,
                 slowdown,
                 band,
-            } => self.pin_step_two(p, *close_max, *slowdown, *band, e),
+                hold,
+            } => {
+                if e.abs() <= *hold {
+                    0.0
+                } else {
+                    self.pin_step_two(p, *close_max, *slowdown, *band, e)
+                }
+            }
         };
         self.y += dy;
         // eq. (3): the cart follows only when the pin pushes a side; a stuck cart only once the
@@ -274,3 +285,7 @@ impl PinCart {
         self.y - self.v
     }
 }
+
+#[cfg(test)]
+#[path = "pincart_tests.rs"]
+mod tests;
