@@ -48,19 +48,14 @@ pub(crate) fn jobs(
     for &effect in effects {
         for variant in variants(effect, current, facts, td_max) {
             let own = variant.len();
+            let td_hi = if effect == Effect::DeadTime {
+                MAX_DEAD_TIME_S
+            } else {
+                td_max.max(td)
+            };
             for mut free in spread_starts(variant) {
-                free.push(free_gain(current, dt));
-                let hi = if effect == Effect::DeadTime {
-                    MAX_DEAD_TIME_S
-                } else {
-                    td_max.max(td)
-                };
-                if !free.iter().any(|f| f.knob == Knob::DeadTime) {
-                    free.push(Free::new(Knob::DeadTime, 0.0, hi, td));
-                }
-                if let Some(slew) = healthy_slew(current, &free) {
-                    free.push(slew);
-                }
+                let rest = rest_of_model(current, dt, td_hi, &free);
+                free.extend(rest);
                 // Variants that differ only in their own start share the spread starts.
                 let same_box = |starts: &[Vec<Free>]| {
                     starts[0].len() == free.len()
@@ -84,11 +79,24 @@ pub(crate) fn jobs(
     jobs
 }
 
+/// The model's own knobs a candidate refits with those of its effect (`own`): the positioner
+/// gain, the dead time up to `td_hi` and, while it is a healthy one, the stroke-speed limit;
+/// those `own` frees already are left out.
+pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free]) -> Vec<Free> {
+    let mut rest = vec![free_gain(spec, dt)];
+    if !own.iter().any(|f| f.knob == Knob::DeadTime) {
+        let td = composed::get(spec, Knob::DeadTime);
+        rest.push(Free::new(Knob::DeadTime, 0.0, td_hi.max(td), td));
+    }
+    rest.extend(healthy_slew(spec, own));
+    rest
+}
+
 /// The stroke-speed limit of `spec` free within a healthy positioner's range, when it lies
 /// there and `free` does not free it already: the baseline fitted it next to a missing effect
 /// (a dead time too short, no travel stop), where it may have settled on a compromise that
 /// only the effect's refit can undo.
-pub(crate) fn healthy_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
+fn healthy_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
     let slew = composed::get(spec, Knob::Slew);
     let taken = free
         .iter()
@@ -137,34 +145,7 @@ pub(crate) fn variants(
         Effect::StateDependentDelay
             if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>
         {
-            // The slowdown lowers the stroke speed with opening too, so the speed limit (at the
-            // closed end, where the valve is fastest) is refitted with it. Until a slow stroke
-            // has been found on its own, that limit stays a healthy one: a valve that is slow
-            // even when closed is `slew_rate`, judged on its own.
-            let limit = if slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
-                f(
-                    Knob::Slew,
-                    NOMINAL_MIN_SLEW_PCT_PER_S,
-                    FASTEST_PCT_PER_S,
-                    slew.min(FASTEST_PCT_PER_S),
-                )
-            } else {
-                f(
-                    Knob::Slew,
-                    SLOWEST_PCT_PER_S,
-                    FASTEST_PCT_PER_S,
-                    (1.5 * slew).min(FASTEST_PCT_PER_S),
-                )
-            };
-            let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), limit]];
-            let c = get(Knob::Crossing);
-            if c > 0.0 {
-                v.push(vec![
-                    f(Knob::Crossing, 0.0, 5.0, c * 0.5),
-                    f(Knob::CrossingSlope, -c / 100.0, 0.05, c / 100.0),
-                ]);
-            }
-            v
+            slowdown_variants(spec)
         }
         Effect::SlewRate
             if slew >= NOMINAL_MIN_SLEW_PCT_PER_S && spec.effects.closing_slew_pct_per_s == 0.0 =>
@@ -222,7 +203,7 @@ pub(crate) fn variants(
             ]
         }
         Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
-            travel_limits(facts).into_iter().collect()
+            travel_limits(facts)
         }
         // The sensor lattice is named from its evidence, not refitted (see `rounds`).
         Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
@@ -236,30 +217,70 @@ pub(crate) fn variants(
     }
 }
 
-/// The travel stops to fit, in a box of ±2 % around where the recording shows them.
-fn travel_limits(facts: &Facts) -> Option<Vec<Free>> {
-    let mut free = Vec::new();
-    if let Some(hi) = facts.stop_high_pct {
-        free.push(Free::new(
+/// An opening-dependent slowdown, and (with a crossing time) a crossing time that grows with
+/// opening. The slowdown lowers the stroke speed with opening too, so the speed limit (at the
+/// closed end, where the valve is fastest) is refitted with it. Until a slow stroke has been
+/// found on its own, that limit stays a healthy one: a valve that is slow even when closed is
+/// `slew_rate`, judged on its own.
+fn slowdown_variants(spec: &ModelSpec) -> Vec<Vec<Free>> {
+    let f = Free::new;
+    let slew = composed::get(spec, Knob::Slew);
+    let limit = if slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
+        f(
+            Knob::Slew,
+            NOMINAL_MIN_SLEW_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            slew.min(FASTEST_PCT_PER_S),
+        )
+    } else {
+        f(
+            Knob::Slew,
+            SLOWEST_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            (1.5 * slew).min(FASTEST_PCT_PER_S),
+        )
+    };
+    let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), limit]];
+    let c = composed::get(spec, Knob::Crossing);
+    if c > 0.0 {
+        v.push(vec![
+            f(Knob::Crossing, 0.0, 5.0, c * 0.5),
+            f(Knob::CrossingSlope, -c / 100.0, 0.05, c / 100.0),
+        ]);
+    }
+    v
+}
+
+/// The travel stops to fit, in a box of ±2 % around where the recording shows them, each
+/// with the drive's wind-up past it: each stop the recording shows on its own and, when it
+/// shows both, both together (an offset sensor can make V_P look held at the bottom when the
+/// stop is only at the top).
+fn travel_limits(facts: &Facts) -> Vec<Vec<Free>> {
+    let high = facts.stop_high_pct.map(|hi| {
+        Free::new(
             Knob::TravelMax,
             (hi - 2.0).max(1.0),
             (hi + 2.0).min(100.0),
             hi,
-        ));
-    }
-    if let Some(lo) = facts.stop_low_pct {
-        free.push(Free::new(
+        )
+    });
+    let low = facts.stop_low_pct.map(|lo| {
+        Free::new(
             Knob::TravelMin,
             (lo - 2.0).max(0.0),
             (lo + 2.0).min(99.0),
             lo,
-        ));
+        )
+    });
+    let mut sets: Vec<Vec<Free>> = [high, low].into_iter().flatten().map(|f| vec![f]).collect();
+    if let (Some(h), Some(l)) = (high, low) {
+        sets.push(vec![h, l]);
     }
     // The drive winds up past the stop while O_P asks for more, and must come back first.
-    if !free.is_empty() {
-        free.push(Free::new(Knob::Windup, 0.0, MAX_WINDUP_PCT, 20.0));
+    for set in &mut sets {
+        set.push(Free::new(Knob::Windup, 0.0, MAX_WINDUP_PCT, 20.0));
     }
-    (!free.is_empty()).then_some(free)
+    sets
 }
 
 /// Least-squares line through the settled holds: V_P = g O_P + o (1, 0 with too few holds).

@@ -61,6 +61,8 @@ pub struct Facts {
     /// How fast V_P closes in on where it settles after a step, against the distance left:
     /// (distance %, speed toward it %/s), sorted by distance (see [`approach`]).
     pub approach: Vec<(f64, f64)>,
+    /// The openings O_P asks for: its 5th and 95th percentiles, %.
+    pub op_span_pct: (f64, f64),
 }
 
 /// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
@@ -83,6 +85,10 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         stop_high_pct: stop(op, vp, dt, true),
         stop_low_pct: stop(op, vp, dt, false),
         approach: approach(op, vp, dt),
+        op_span_pct: {
+            let mut sorted = op.to_vec();
+            (quantile(&mut sorted, 0.05), quantile(&mut sorted, 0.95))
+        },
     }
 }
 
@@ -100,11 +106,13 @@ impl Facts {
     }
 }
 
-/// The tails of steps of O_P of at least 1 % held for 2 s: for each sample after V_P started
-/// moving (less than 80 % of the step left), the distance to the level V_P settles at (its
-/// mean over the last half second of the hold) and the speed toward it (the difference of means
-/// over 0.05 s before and after). A proportional positioner slows in proportion to the
-/// distance; one with a minimum speed keeps it until it stops, which is what this shows.
+/// The tails of moves into holds of O_P of at least 2 s (after a step, or at the end of a
+/// ramp) where V_P still had at least 1 % to go when the hold began: for each sample after V_P
+/// started moving (less than 80 % of that distance left), the distance to the level V_P
+/// settles at (its mean over the last half second of the hold) and the speed toward it (the
+/// difference of means over 0.05 s before and after). A proportional positioner slows in
+/// proportion to the distance; one with a minimum speed keeps it until it stops, which is
+/// what this shows.
 fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
     let h = ((0.05 / dt).round() as usize).max(1);
     let settle = ((0.5 / dt).round() as usize).max(1);
@@ -116,9 +124,13 @@ fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
         if b < op.len() && (op[b] - op[b - 1]).abs() <= 1e-9 {
             continue;
         }
-        let step = if a > 0 { op[a] - op[a - 1] } else { 0.0 };
-        if b - a >= min_hold && step.abs() >= 1.0 {
+        let (settled, step) = if a > 0 && b - a >= min_hold {
             let settled = (s[b] - s[b - settle]) / settle as f64;
+            (settled, settled - (s[a + h] - s[a]) / h as f64)
+        } else {
+            (0.0, 0.0)
+        };
+        if step.abs() >= 1.0 {
             for k in a + h..b - settle - h {
                 let here = (s[k + h / 2 + 1] - s[k - h / 2]) / (2 * (h / 2) + 1) as f64;
                 let left = (settled - here) * step.signum();

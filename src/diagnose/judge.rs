@@ -42,6 +42,12 @@ const MAX_SPEED_BAND_PCT: f64 = 5.0;
 /// Share of a fitted minimum speed the valve must keep in the tails of its steps, where a
 /// proportional positioner would have slowed to a quarter of it or less.
 const MIN_FLOOR_SHOWN: f64 = 0.7;
+/// Smallest error of the reading worth naming as a calibration error, % (a healthy positioner
+/// reads within a tenth of a percent).
+const MIN_CALIBRATION_PCT: f64 = 0.3;
+/// How much faster than a minimum speed the valve must be seen moving for the floor to be told
+/// from a slew limit.
+const FASTER_THAN_FLOOR: f64 = 1.5;
 /// Fewest samples of step tails (see [`Facts::approach`]) a recording must have for a
 /// minimum speed to be named at all.
 const MIN_TAIL_SAMPLES: usize = 30;
@@ -229,7 +235,9 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
         // Where the recording shows the tails of steps well inside that band (beyond the
         // noise), V_P must still move at about the floor there, not slow down in proportion.
         // A recording without step tails (a valve in closed loop answering a noisy controller
-        // output) cannot tell a floor from a rate limit or a filter: none is named there.
+        // output) cannot tell a floor from a rate limit or a filter: none is named there; nor
+        // can one where the valve never moves clearly faster than the floor (a valve that
+        // always moves at one speed is slew-limited, as far as any recording shows).
         Effect::MinSpeed => {
             let floor = g(Knob::MinSpeed);
             let band = floor / g(Knob::Gain);
@@ -238,7 +246,11 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
                 Some(speed) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * floor,
                 _ => facts.approach.len() >= MIN_TAIL_SAMPLES,
             };
-            floor >= 0.1 && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band) && kept
+            let faster = facts.open_speed.max(facts.close_speed) >= FASTER_THAN_FLOOR * floor;
+            floor >= 0.1
+                && (MIN_SPEED_BAND_PCT..=MAX_SPEED_BAND_PCT).contains(&band)
+                && kept
+                && faster
         }
         // Stick-slip needs the slip: a stickband without a jump is a deadband on the input.
         // A slip smaller than the reading's noise cannot be told from it.
@@ -252,8 +264,11 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
         }
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
         Effect::Quantization => g(Knob::Quantum) >= MIN_LATTICE_PCT,
+        // The error of the reading where the valve is operated, not far outside it.
         Effect::Calibration => {
-            (g(Knob::CalGain) - 1.0).abs() >= 0.01 || g(Knob::CalOffset).abs() >= 0.2
+            let error = |x: f64| ((g(Knob::CalGain) - 1.0) * x + g(Knob::CalOffset)).abs();
+            let (lo, hi) = facts.op_span_pct;
+            error(lo).max(error(hi)) >= MIN_CALIBRATION_PCT
         }
     }
 }
@@ -332,6 +347,7 @@ mod tests {
             stop_high_pct: None,
             stop_low_pct: None,
             approach: vec![],
+            op_span_pct: (20.0, 80.0),
         };
         let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
         let with = |knob, v| {
@@ -392,6 +408,13 @@ mod tests {
             &tails(|e| (5.0 * e).max(5.0))
         ));
         assert!(!material(Effect::MinSpeed, &floor, &tails(|e| 5.0 * e)));
+        // A valve never seen faster than 1.5 times the floor: a slew limit as far as it shows.
+        let never_faster = Facts {
+            open_speed: 6.0,
+            close_speed: 6.0,
+            ..tails(|e| (5.0 * e).max(5.0))
+        };
+        assert!(!material(Effect::MinSpeed, &floor, &never_faster));
     }
 
     #[test]

@@ -107,6 +107,7 @@ impl<'a> Search<'a> {
         // Effects worth trying this round: all at first, then those that helped enough before.
         let mut worth: Vec<Effect> = Effect::ALL.to_vec();
         for round in 0..ROUNDS {
+            self.refit_rest();
             let trials = self.trials(&worth);
             progress(((round + 1) * Effect::ALL.len()).min(total), total);
             let best = best_per_effect(&trials);
@@ -317,6 +318,47 @@ impl<'a> Search<'a> {
         );
         if errors.fit < self.cur.fit && errors.held <= self.cur.held {
             self.current = polished;
+            self.cur = errors;
+        }
+    }
+
+    /// The model's own gain, dead time and (healthy) stroke speed refitted before a round,
+    /// from where they are, from each moved alone across its box, and with the stroke speed
+    /// at the fastest speed the recording shows: every candidate refits them too, so what a
+    /// candidate then gains beyond the current model is its own effect's doing, not a better
+    /// fit of what the model already had. Kept only if neither error rises.
+    fn refit_rest(&mut self) {
+        let td = composed::get(&self.current, Knob::DeadTime);
+        let rest = candidates::rest_of_model(
+            &self.current,
+            self.data.rec.dt,
+            self.td_max.max(td),
+            &[],
+        );
+        let facts = self.data.facts;
+        let seen = facts.open_speed.max(facts.close_speed);
+        let moved = |i: usize, to: f64| {
+            let mut start = rest.clone();
+            start[i] = start[i].from(to.clamp(start[i].def.lo, start[i].def.hi));
+            start
+        };
+        let mut starts = vec![rest.clone()];
+        for (i, f) in rest.iter().enumerate() {
+            for share in [0.1, 0.4] {
+                starts.push(moved(i, f.def.from_unit(share)));
+            }
+            if f.knob == Knob::Slew {
+                starts.push(moved(i, seen));
+            }
+        }
+        let (refitted, errors) = refit_from(self.data.scorer, &self.current, &starts);
+        tracing::debug!(
+            held_before = self.cur.held,
+            held_after = errors.held,
+            "model refitted before the round"
+        );
+        if errors.fit < self.cur.fit && errors.held <= self.cur.held {
+            self.current = refitted;
             self.cur = errors;
         }
     }
