@@ -23,9 +23,9 @@
 //! behind the clock, and the log (which shows that held O_P in skipped rows) replays through
 //! [`crate::model::Valve::simulate`] to the log's precision. It starts at rest at its first O_P
 //! (`reset(op0, op0)`). Optional Gaussian measurement noise is added to the reported V_P only.
-//! A dead-time drift (`dead_time_drift_s_per_h`) delays O_P before the model by a time that
-//! grows with loop time up to `dead_time_drift_max_s`: a valve wearing over hours, for the
-//! live health check to notice.
+//! A drift ([`crate::model::drift`]: `dead_time_drift_s_per_h`, `friction_band_drift_pct_per_h`)
+//! wears the model with loop time, slot by slot: a valve wearing over hours, for the live health
+//! check to notice.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -33,7 +33,7 @@ use rand_distr::{Distribution, Normal};
 
 use super::config::{ValveConfig, ValveKind};
 use crate::modbus::client::{Link, ModbusValve, OpenError, MAX_BACKOFF};
-use crate::model::{DelayLine, ModelError, Valve};
+use crate::model::{Drift, ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
 pub use crate::modbus::client::Fault;
@@ -109,13 +109,10 @@ impl Backend {
                 } else {
                     None
                 };
-                let drift = (e.dead_time_drift_s_per_h > 0.0).then(|| Drift {
-                    line: DelayLine::with_capacity(e.dead_time_drift_max_s, period_s),
-                    per_slot_s: e.dead_time_drift_s_per_h / 3600.0 * period_s,
-                    period_s,
-                });
+                let valve = Valve::new(&spec, period_s)?;
+                let drift = Drift::new(&e.drift(), &valve)?;
                 Ok(Backend::Emulated(Box::new(Emulated {
-                    valve: Valve::new(&spec, period_s)?,
+                    valve,
                     last: None,
                     noise,
                     drift,
@@ -177,15 +174,6 @@ pub struct Emulated {
     drift: Option<Drift>,
 }
 
-/// The growing extra dead time of a wearing valve.
-#[derive(Debug)]
-struct Drift {
-    line: DelayLine,
-    /// Growth per slot, s.
-    per_slot_s: f64,
-    period_s: f64,
-}
-
 impl Emulated {
     /// Steps the model through slot `k` (holding the previous O_P over skipped slots).
     fn step_to(&mut self, op_pct: f64, k: u64) -> f64 {
@@ -193,7 +181,7 @@ impl Emulated {
             None => {
                 self.valve.reset(op_pct, op_pct);
                 if let Some(d) = &mut self.drift {
-                    d.line.reset(op_pct);
+                    d.reset(op_pct);
                 }
             }
             Some((last_k, held)) => {
@@ -210,19 +198,12 @@ impl Emulated {
         }
     }
 
-    /// One step of the model in slot `k`, through the drift's delay when there is one.
+    /// One step of the model in slot `k`, worn by the drift when there is one.
     fn step_model(&mut self, op_pct: f64, k: u64) -> f64 {
-        let op = match &mut self.drift {
-            Some(d) => {
-                // Whole samples: the model sees only O_Ps that were sent, never a blend (a
-                // blend that changes every slot would look like a new step to pin-cart II).
-                d.line
-                    .set_samples((d.per_slot_s * k as f64 / d.period_s) as usize);
-                d.line.push(op_pct)
-            }
-            None => op_pct,
-        };
-        self.valve.step(op)
+        match &mut self.drift {
+            Some(d) => d.step(&mut self.valve, op_pct, k),
+            None => self.valve.step(op_pct),
+        }
     }
 }
 
