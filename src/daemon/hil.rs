@@ -6,13 +6,17 @@
 //! register and reads V_P from the position register and the loop's state from the status
 //! register, whatever valve is behind (emulated, or a positioner over Modbus). A set-point outside
 //! `[source] op_min_pct..op_max_pct` is refused with exception 03, an unmapped or read-only
-//! address with 02. The server answers any unit id.
+//! address with 02. The server answers any unit id. With several valves driven by the
+//! controller, each has its own bank, watchdog and status word, served side by side as
+//! [`Blocks`]: the k-th such valve of the file at the map's addresses plus k × `block_size`.
 //!
 //! Each cycle the loop asks [`Controller::op_at`] for the last accepted set-point and hands the
 //! cycle's row to [`Controller::feedback`], which publishes V_P (the last one read is kept when a
 //! cycle read none) and the status bits:
 //! - bit [`VALVE_FAULT_BIT`] (1): the last cycle read no V_P (timeout, error, disconnected);
-//! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P.
+//! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P;
+//! - bit [`HEALTH_ALARM_BIT`] (3): the live health check (`[health]`) is in alarm for the
+//!   valve; set by the health thread ([`super::health`]) at each window, not by the loop.
 //!
 //! Until the first write the O_P is `initial_pct`. Watchdog: when no set-point write has been
 //! accepted for `watchdog_s` of loop time (counted from the start of the loop, so a controller
@@ -34,6 +38,7 @@ use tokio_modbus::Request;
 
 use super::config::{OnStop, SafetyConfig, SourceConfig};
 use super::logger::Sample;
+use crate::modbus::blocks::Blocks;
 use crate::modbus::server::{OutOfRange, RegisterBank};
 use crate::modbus::tcp_server::{self, Reply, Respond};
 use crate::net::{Health, Limits};
@@ -42,7 +47,9 @@ use crate::net::{Health, Limits};
 pub const VALVE_FAULT_BIT: u8 = 1;
 /// Status register bit set while the watchdog holds the safe O_P.
 pub const WATCHDOG_BIT: u8 = 2;
-/// The status bits the daemon owns.
+/// Status register bit set while the valve's health is in alarm (with `[health]`).
+pub const HEALTH_ALARM_BIT: u8 = 3;
+/// The status bits the loop owns (the health thread owns [`HEALTH_ALARM_BIT`]).
 const STATUS_MASK: u16 = (1 << VALVE_FAULT_BIT) | (1 << WATCHDOG_BIT);
 
 /// The loop's side of the `modbus-server` source: set-points in, V_P and status out, watchdog.
@@ -142,19 +149,19 @@ impl Controller {
     }
 }
 
-/// A process controller's connection: every request is answered from the bank at once.
-struct Controlled(Arc<RegisterBank>);
+/// A process controller's connection: every request is answered from the banks at once.
+struct Controlled(Arc<Blocks>);
 
 impl Respond for Controlled {
-    fn respond(&mut self, request: &Request<'_>) -> Reply {
+    fn respond(&mut self, _unit: u8, request: &Request<'_>) -> Reply {
         Reply::Answer(self.0.handle(request), Duration::ZERO)
     }
 }
 
-/// Serves `bank` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
+/// Serves `banks` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
 pub async fn serve(
     listener: TcpListener,
-    bank: Arc<RegisterBank>,
+    bank: Arc<Blocks>,
     limits: Limits,
     health: Arc<Health>,
 ) {
