@@ -16,7 +16,11 @@
 //! `disconnected`), the link is reopened in the background of later cycles (also when the
 //! device was not there at start, unless `--require-device`), and the number of reconnections
 //! goes into the summary. A real device runs on its own clock, so slots the loop
-//! skipped are simply not sent.
+//! skipped are simply not sent. Valves on one serial bus ([`Backend::open_all`]) share one link:
+//! the port is opened once, each valve addresses its slave id, the bus budget is checked (and
+//! logged) once for their sum, and each valve's cycle deadline is its share of the period
+//! ([`crate::modbus::budget::BusBudget::deadlines`]), so a device that does not answer costs
+//! its own share and its own rows only.
 //!
 //! The `emulated` backend steps a [`crate::model::Valve`] once per slot, in real time: slots the
 //! loop skipped are stepped with the O_P the valve was holding, so the emulated valve never falls
@@ -31,7 +35,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::config::{ValveConfig, ValveKind};
+use std::time::Duration;
+
+use super::config::{bus, ValveConfig, ValveKind};
 use crate::modbus::client::{Link, ModbusValve, OpenError, MAX_BACKOFF};
 use crate::model::{Drift, ModelError, Valve};
 
@@ -82,16 +88,7 @@ impl Backend {
                 let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
                 // The bus budget is logged by its own check, once.
                 valve.check_budget()?;
-                match valve.connect_now().await {
-                    Ok(()) => {}
-                    Err(e) if require_device => return Err(e.into()),
-                    Err(e) => tracing::warn!(
-                        "{e}; running without it: cycles are logged as `disconnected` and the \
-                         link is retried (every {} s at most) until the device answers \
-                         (--require-device stops instead)",
-                        MAX_BACKOFF.as_secs()
-                    ),
-                }
+                connect(&mut valve, require_device).await?;
                 Ok(Backend::Modbus(Box::new(valve)))
             }
             ValveKind::Emulated => {
@@ -119,6 +116,54 @@ impl Backend {
                 })))
             }
         }
+    }
+
+    /// Opens every valve of `cfgs`, in order (see [`Backend::open`]); valves that share a
+    /// serial port share one link, opened once, with the bus budget checked for all of them and
+    /// the cycle deadline split between them.
+    pub async fn open_all(
+        cfgs: &[ValveConfig],
+        period_s: f64,
+        require_device: bool,
+    ) -> Result<Vec<Backend>, BackendError> {
+        let buses = bus::buses(cfgs);
+        let mut backends: Vec<Backend> = Vec::with_capacity(cfgs.len());
+        for (i, cfg) in cfgs.iter().enumerate() {
+            let on_bus = buses.iter().find(|(_, m)| m.contains(&i));
+            let (Some((port, members)), Some(rtu)) = (on_bus, &cfg.rtu) else {
+                backends.push(Backend::open(cfg, period_s, require_device).await?);
+                continue;
+            };
+            let budget = bus::budget(cfgs, port, members, period_s);
+            let timeouts: Vec<Option<f64>> = (members.iter())
+                .map(|&j| cfgs[j].rtu.as_ref().and_then(|l| l.timeout_ms))
+                .collect();
+            let deadlines = budget.deadlines(&timeouts).map_err(|message| {
+                BackendError::Modbus(OpenError::Setting {
+                    section: "valve.modbus-rtu",
+                    key: "timeout_ms",
+                    message,
+                })
+            })?;
+            let at = members.iter().position(|&j| j == i).unwrap_or(0);
+            let link = Link::Rtu(rtu.clone());
+            let first = match backends.get(members[0]) {
+                Some(Backend::Modbus(m)) if at > 0 => Some(m),
+                _ => None,
+            };
+            let mut valve = match first {
+                Some(first) => first.sharing(link, cfg.registers, period_s)?,
+                None => {
+                    budget.check().map_err(OpenError::from)?;
+                    let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
+                    connect(&mut valve, require_device).await?;
+                    valve
+                }
+            };
+            valve.set_timeout(Duration::from_secs_f64(deadlines[at]));
+            backends.push(Backend::Modbus(Box::new(valve)));
+        }
+        Ok(backends)
     }
 
     /// Sends `op_pct` as the O_P of loop slot `k` and returns the valve position V_P (%).
@@ -160,6 +205,24 @@ impl Backend {
         match self {
             Backend::Emulated(e) => format!("emulated {}", e.valve.spec().model.display_name()),
             Backend::Modbus(m) => m.describe(),
+        }
+    }
+}
+
+/// Connects `valve` now; a device that is not there is an error with `require_device`,
+/// otherwise the valve starts disconnected and its cycles retry the link.
+async fn connect(valve: &mut ModbusValve, require_device: bool) -> Result<(), BackendError> {
+    match valve.connect_now().await {
+        Ok(()) => Ok(()),
+        Err(e) if require_device => Err(e.into()),
+        Err(e) => {
+            tracing::warn!(
+                "{e}; running without it: cycles are logged as `disconnected` and the link is \
+                 retried (every {} s at most) until the device answers (--require-device stops \
+                 instead)",
+                MAX_BACKOFF.as_secs()
+            );
+            Ok(())
         }
     }
 }

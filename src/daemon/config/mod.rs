@@ -19,6 +19,7 @@
 //!
 //! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
 
+pub mod bus;
 mod health;
 mod source;
 mod valve;

@@ -199,14 +199,17 @@ pub(super) fn check_all(
 ) -> Result<(), TomlError> {
     let parts = parts(c.text);
     let several = valves.len() > 1;
-    let mut seen: Vec<String> = Vec::new();
-    for (i, v) in valves.iter_mut().enumerate() {
+    let check_of = |i: usize| {
         let (line_offset, text) = parts.get(i).copied().unwrap_or((0, c.text));
-        let vc = Check {
+        Check {
             text,
             line_offset: c.line_offset + line_offset,
             ..c.under("")
-        };
+        }
+    };
+    let mut seen: Vec<String> = Vec::new();
+    for (i, v) in valves.iter_mut().enumerate() {
+        let vc = check_of(i);
         match &v.name {
             None if several => {
                 return Err(vc.bad(
@@ -233,7 +236,7 @@ pub(super) fn check_all(
             s.check_in(&vc.under("valve."), timing)?;
         }
     }
-    Ok(())
+    super::bus::check(valves, check_of, timing)
 }
 
 impl ValveConfig {
