@@ -55,6 +55,8 @@ const STATUS_MASK: u16 = (1 << VALVE_FAULT_BIT) | (1 << WATCHDOG_BIT);
 /// The loop's side of the `modbus-server` source: set-points in, V_P and status out, watchdog.
 #[derive(Debug)]
 pub struct Controller {
+    /// The valve's name, in the watchdog's messages.
+    valve: String,
     bank: Arc<RegisterBank>,
     watchdog_s: f64,
     /// The O_P the watchdog sends (`go-to`), or None to hold the last one.
@@ -84,6 +86,7 @@ impl Controller {
         )
         .with_setpoint(initial);
         Controller {
+            valve: super::config::UNNAMED.to_string(),
             bank: Arc::new(bank),
             watchdog_s: cfg.watchdog_s,
             safe_pct,
@@ -92,6 +95,14 @@ impl Controller {
             last_write_t_s: 0.0,
             tripped: false,
             trips: 0,
+        }
+    }
+
+    /// The same controller for the valve `name` (in its messages).
+    pub fn named(self, name: &str) -> Controller {
+        Controller {
+            valve: name.to_string(),
+            ..self
         }
     }
 
@@ -111,6 +122,7 @@ impl Controller {
             if self.tripped {
                 self.tripped = false;
                 tracing::warn!(
+                    valve = %self.valve,
                     "watchdog: set-point writes resumed at t = {t_s:.2} s, following the process \
                      controller again (O_P {setpoint:.2} %)"
                 );
@@ -122,6 +134,7 @@ impl Controller {
                 self.op_pct = safe;
             }
             tracing::warn!(
+                valve = %self.valve,
                 "watchdog: no set-point from the process controller for {:.2} s at t = {t_s:.2} s, \
                  sending the safe O_P {:.2} %",
                 self.watchdog_s,

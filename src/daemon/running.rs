@@ -46,7 +46,9 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let period = config.loop_.period();
     // Sockets are bound before the valves are opened, so a taken port stops the start first.
     let mut sources: Vec<Source> = (config.valves.iter())
-        .map(|v| Source::new(config.source_of(v), &config.safety, period.as_secs_f64()))
+        .map(|v| {
+            Source::new(config.source_of(v), &config.safety, period.as_secs_f64()).named(v.label())
+        })
         .collect();
     let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
     let metrics = config

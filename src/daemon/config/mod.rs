@@ -36,7 +36,7 @@ pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
     SineConfig, SourceConfig, SourceKind, StepsConfig,
 };
-pub use valve::{EmulatedConfig, ValveConfig, ValveKind};
+pub use valve::{EmulatedConfig, ValveConfig, ValveKind, UNNAMED};
 
 /// The default configuration, `config/emulated.toml`, embedded so default == file by construction.
 pub const DEFAULT_TOML: &str = include_str!("../../../config/emulated.toml");
