@@ -65,7 +65,9 @@ fn two_units_on_one_pty_are_driven_through_one_port() {
         "the bus budget is logged once:\n{stderr}"
     );
     assert!(
-        stderr.contains("level 6.8 ms (FC 23) + cyclone 6.8 ms (FC 23) = 13.6 ms on the wire per cycle"),
+        stderr.contains(
+            "level 6.8 ms (FC 23) + cyclone 6.8 ms (FC 23) = 13.6 ms on the wire per cycle"
+        ),
         "{stderr}"
     );
     let level = rows(dir.path(), "level");

@@ -115,7 +115,10 @@ fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
     // grows by 1.5 s per hour, so the reversal delay passes the first window's (which saw
     // +0.25 % of band on average) by 0.3 s after about 17 min at mid travel; the alarm
     // comes within one window and one cadence of that, whatever openings the steps visit.
-    assert!(first.0 > 900.0 && first.0 <= 1020.0 + 600.0 + 60.0, "{first:?}");
+    assert!(
+        first.0 > 900.0 && first.0 <= 1020.0 + 600.0 + 60.0,
+        "{first:?}"
+    );
     assert!(first.2.contains("reversal delay"), "{first:?}");
     assert!(!first.2.contains("dead time"), "{first:?}");
     assert!(rows.last().unwrap().1, "{rows:?}");

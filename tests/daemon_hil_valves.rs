@@ -41,8 +41,8 @@ fn config(dir: &Path) -> std::path::PathBuf {
 const WATCHDOG: u16 = 1 << 2;
 const ALARM: u16 = 1 << 3;
 
-#[tokio::test(flavor = "current_thread")]
-async fn a_controller_drives_two_valves_each_with_its_block_watchdog_and_alarm_bit() {
+#[test]
+fn a_controller_drives_two_valves_each_with_its_block_watchdog_and_alarm_bit() {
     let _turn = common::sim::real_time_turn();
     let dir = tempfile::tempdir().unwrap();
     let mut child = Command::new(BIN)
@@ -63,34 +63,40 @@ async fn a_controller_drives_two_valves_each_with_its_block_watchdog_and_alarm_b
         .trim()
         .strip_prefix("modbus-server: ")
         .unwrap_or_else(|| panic!("no modbus-server line: {line:?}"));
-    let mut ctx = tokio_modbus::client::tcp::connect_slave(addr.parse().unwrap(), Slave(1))
-        .await
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
         .unwrap();
-    // Valve a: steps of 1.2 s (same-direction steps and reversals) for the health check;
-    // valve b: 60 % for 3 s, then nothing.
-    let levels = [300u16, 400, 500, 400, 300, 400, 500, 400, 300, 400, 500];
-    let start = Instant::now();
-    while start.elapsed() < Duration::from_millis(12_500) {
-        let t = start.elapsed().as_secs_f64();
-        let a = levels[((t / 1.2) as usize).min(levels.len() - 1)];
-        ctx.write_single_register(0, a).await.unwrap().unwrap();
-        if t < 3.0 {
-            ctx.write_single_register(10, 600).await.unwrap().unwrap();
+    rt.block_on(async {
+        let mut ctx = tokio_modbus::client::tcp::connect_slave(addr.parse().unwrap(), Slave(1))
+            .await
+            .unwrap();
+        // Valve a: steps of 1.2 s (same-direction steps and reversals) for the health check;
+        // valve b: 60 % for 3 s, then nothing.
+        let levels = [300u16, 400, 500, 400, 300, 400, 500, 400, 300, 400, 500];
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_millis(12_500) {
+            let t = start.elapsed().as_secs_f64();
+            let a = levels[((t / 1.2) as usize).min(levels.len() - 1)];
+            ctx.write_single_register(0, a).await.unwrap().unwrap();
+            if t < 3.0 {
+                ctx.write_single_register(10, 600).await.unwrap().unwrap();
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
         }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    let a = ctx.read_holding_registers(0, 3).await.unwrap().unwrap();
-    let b = ctx.read_holding_registers(10, 3).await.unwrap().unwrap();
-    assert_eq!(a[0], 500, "a's last set-point: {a:?}");
-    assert!(a[2] & ALARM != 0 && a[2] & WATCHDOG == 0, "a: {a:?}");
-    assert_eq!(b[0], 600, "b's set-point: {b:?}");
-    assert!((595..=605).contains(&b[1]), "b held at 60 %: {b:?}");
-    assert!(b[2] & WATCHDOG != 0 && b[2] & ALARM == 0, "b: {b:?}");
-    assert_eq!(
-        ctx.read_holding_registers(0, 13).await.unwrap(),
-        Err(ExceptionCode::IllegalDataAddress),
-        "a read across blocks"
-    );
+        let a = ctx.read_holding_registers(0, 3).await.unwrap().unwrap();
+        let b = ctx.read_holding_registers(10, 3).await.unwrap().unwrap();
+        assert_eq!(a[0], 500, "a's last set-point: {a:?}");
+        assert!(a[2] & ALARM != 0 && a[2] & WATCHDOG == 0, "a: {a:?}");
+        assert_eq!(b[0], 600, "b's set-point: {b:?}");
+        assert!((595..=605).contains(&b[1]), "b held at 60 %: {b:?}");
+        assert!(b[2] & WATCHDOG != 0 && b[2] & ALARM == 0, "b: {b:?}");
+        assert_eq!(
+            ctx.read_holding_registers(0, 13).await.unwrap(),
+            Err(ExceptionCode::IllegalDataAddress),
+            "a read across blocks"
+        );
+    });
     if have_mbpoll() {
         let (host, port) = addr.rsplit_once(':').unwrap();
         let out = Command::new("mbpoll")
@@ -100,7 +106,10 @@ async fn a_controller_drives_two_valves_each_with_its_block_watchdog_and_alarm_b
             .expect("mbpoll runs");
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(out.status.success(), "{text}");
-        assert!(text.contains("[11]: \t600"), "b's set-point via mbpoll: {text}");
+        assert!(
+            text.contains("[11]: \t600"),
+            "b's set-point via mbpoll: {text}"
+        );
         assert!(text.contains("[13]: \t4"), "b's status via mbpoll: {text}");
     }
     let out = child.wait_with_output().unwrap();
@@ -124,7 +133,12 @@ async fn a_controller_drives_two_valves_each_with_its_block_watchdog_and_alarm_b
         let log = std::fs::read_dir(dir.path())
             .unwrap()
             .map(|e| e.unwrap().path())
-            .find(|p| p.file_name().unwrap().to_string_lossy().starts_with(&format!("vb-{name}-")))
+            .find(|p| {
+                p.file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .starts_with(&format!("vb-{name}-"))
+            })
             .unwrap();
         let text = std::fs::read_to_string(log).unwrap();
         assert_eq!(text.contains(",watchdog,"), want, "{name}'s watchdog rows");

@@ -370,11 +370,18 @@ fn units_of(args: &Args, map: RegisterMap, config_unit: Option<u8>) -> anyhow::R
         model: None,
         settings: Vec::new(),
     }];
-    let args_units = if args.unit.is_empty() { &one[..] } else { &args.unit[..] };
+    let args_units = if args.unit.is_empty() {
+        &one[..]
+    } else {
+        &args.unit[..]
+    };
     let mut units: Vec<Unit> = Vec::with_capacity(args_units.len());
     for a in args_units {
         if units.iter().any(|u| u.id == a.id) {
-            bail!("--unit {}: two units at one address; give each its own id", a.id);
+            bail!(
+                "--unit {}: two units at one address; give each its own id",
+                a.id
+            );
         }
         units.push(Unit::new(a, &defaults, map)?);
     }

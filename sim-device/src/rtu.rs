@@ -245,11 +245,22 @@ mod tests {
         d.banks.at(2).unwrap().set_position_pct(12.3);
         let reply = d.reply(&seal(vec![2, 3, 0, 1, 0, 1], false)).unwrap().0;
         assert_eq!(reply, seal(vec![2, 3, 2, 0, 123], false));
-        let reply = d.reply(&seal(vec![1, 6, 0, 0, 0x01, 0xF4], false)).unwrap().0;
+        let reply = d
+            .reply(&seal(vec![1, 6, 0, 0, 0x01, 0xF4], false))
+            .unwrap()
+            .0;
         assert_eq!(reply, seal(vec![1, 6, 0, 0, 0x01, 0xF4], false));
         assert_eq!(d.banks.at(1).unwrap().setpoint_pct(), 50.0);
-        assert_eq!(d.banks.at(2).unwrap().setpoint_pct(), 0.0, "unit 2 untouched");
-        assert_eq!(d.reply(&seal(vec![3, 3, 0, 1, 0, 1], false)), None, "no unit 3");
+        assert_eq!(
+            d.banks.at(2).unwrap().setpoint_pct(),
+            0.0,
+            "unit 2 untouched"
+        );
+        assert_eq!(
+            d.reply(&seal(vec![3, 3, 0, 1, 0, 1], false)),
+            None,
+            "no unit 3"
+        );
         // A broadcast reaches both.
         assert_eq!(d.reply(&seal(vec![0, 6, 0, 0, 0x00, 0x64], false)), None);
         assert!(d.banks.all().all(|b| b.setpoint_pct() == 10.0));

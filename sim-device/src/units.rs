@@ -46,21 +46,38 @@ pub fn parse_unit(s: &str) -> Result<UnitArg, String> {
     };
     let id: u8 = match id.trim().parse() {
         Ok(n) if (1..=247).contains(&n) => n,
-        _ => return Err(format!("`{id}`: a unit id is 1-247 (write ID or ID=MODEL[,KEY=VALUE...])")),
+        _ => {
+            return Err(format!(
+                "`{id}`: a unit id is 1-247 (write ID or ID=MODEL[,KEY=VALUE...])"
+            ))
+        }
     };
     let Some(rest) = rest else {
-        return Ok(UnitArg { id, model: None, settings: Vec::new() });
+        return Ok(UnitArg {
+            id,
+            model: None,
+            settings: Vec::new(),
+        });
     };
     let mut parts = rest.split(',');
-    let model = parts.next().map(str::trim).filter(|m| !m.is_empty()).map(String::from);
+    let model = parts
+        .next()
+        .map(str::trim)
+        .filter(|m| !m.is_empty())
+        .map(String::from);
     let mut settings = Vec::new();
     for part in parts {
         let Some((key, value)) = part.split_once('=') else {
-            return Err(format!("`{part}`: a unit's setting is KEY=VALUE, e.g. friction_band_drift_pct_per_h=2"));
+            return Err(format!(
+                "`{part}`: a unit's setting is KEY=VALUE, e.g. friction_band_drift_pct_per_h=2"
+            ));
         };
         let key = key.trim();
         if !KEYS.contains(&key) {
-            return Err(format!("`{key}`: unknown unit setting (one of {})", KEYS.join(", ")));
+            return Err(format!(
+                "`{key}`: unknown unit setting (one of {})",
+                KEYS.join(", ")
+            ));
         }
         let value: f64 = value
             .trim()
@@ -68,7 +85,11 @@ pub fn parse_unit(s: &str) -> Result<UnitArg, String> {
             .map_err(|_| format!("{key}=`{value}`: not a number"))?;
         settings.push((key.to_string(), value));
     }
-    Ok(UnitArg { id, model, settings })
+    Ok(UnitArg {
+        id,
+        model,
+        settings,
+    })
 }
 
 /// The settings a unit may have of its own.
@@ -117,14 +138,19 @@ impl Unit {
             *slot = *value;
         }
         if !(noise_pct.is_finite() && noise_pct >= 0.0) {
-            bail!("unit {}: noise_pct {noise_pct}: a standard deviation in %, >= 0", arg.id);
+            bail!(
+                "unit {}: noise_pct {noise_pct}: a standard deviation in %, >= 0",
+                arg.id
+            );
         }
         let valve = Valve::new(&spec, MODEL_DT)?;
         let drift = Drift::new(&drift, &valve).with_context(|| format!("unit {}", arg.id))?;
         Ok(Unit {
             id: arg.id,
             bank: Arc::new(RegisterBank::new(map, 0.0, 100.0, OutOfRange::KeepAndFlag)),
-            noise: (noise_pct > 0.0).then(|| Normal::new(0.0, noise_pct)).transpose()?,
+            noise: (noise_pct > 0.0)
+                .then(|| Normal::new(0.0, noise_pct))
+                .transpose()?,
             valve,
             drift,
             seed: defaults.seed ^ u64::from(arg.id),
@@ -133,8 +159,16 @@ impl Unit {
 
     /// A line for the log.
     pub fn describe(&self) -> String {
-        let worn = if self.drift.is_some() { ", drifting" } else { "" };
-        format!("unit {}: {} valve{worn}", self.id, self.valve.spec().model.display_name())
+        let worn = if self.drift.is_some() {
+            ", drifting"
+        } else {
+            ""
+        };
+        format!(
+            "unit {}: {} valve{worn}",
+            self.id,
+            self.valve.spec().model.display_name()
+        )
     }
 
     /// Steps the valve at 100 Hz in real time from the bank's set-point and reports its
@@ -174,7 +208,10 @@ impl Banks {
 
     /// The bank at RTU address `id`, if a unit is there.
     pub fn at(&self, id: u8) -> Option<&RegisterBank> {
-        self.0.iter().find(|(i, _)| *i == id).map(|(_, b)| b.as_ref())
+        self.0
+            .iter()
+            .find(|(i, _)| *i == id)
+            .map(|(_, b)| b.as_ref())
     }
 
     /// Every bank (a broadcast reaches them all).
@@ -208,7 +245,11 @@ mod tests {
     fn unit_arguments() {
         assert_eq!(
             parse_unit("3"),
-            Ok(UnitArg { id: 3, model: None, settings: vec![] })
+            Ok(UnitArg {
+                id: 3,
+                model: None,
+                settings: vec![]
+            })
         );
         assert_eq!(
             parse_unit("2=physical,friction_band_drift_pct_per_h=2,noise_pct=0.1"),
@@ -222,8 +263,12 @@ mod tests {
             })
         );
         assert!(parse_unit("0=pincart2").unwrap_err().contains("1-247"));
-        assert!(parse_unit("1=pincart2,wear=3").unwrap_err().contains("unknown unit setting"));
-        assert!(parse_unit("1=pincart2,noise_pct").unwrap_err().contains("KEY=VALUE"));
+        assert!(parse_unit("1=pincart2,wear=3")
+            .unwrap_err()
+            .contains("unknown unit setting"));
+        assert!(parse_unit("1=pincart2,noise_pct")
+            .unwrap_err()
+            .contains("KEY=VALUE"));
     }
 
     #[test]
@@ -235,8 +280,15 @@ mod tests {
             seed: 1,
         };
         let arg = parse_unit("4=fopdt,friction_band_drift_pct_per_h=1").unwrap();
-        let e = Unit::new(&arg, &d, RegisterMap::device_default()).err().unwrap();
+        let e = Unit::new(&arg, &d, RegisterMap::device_default())
+            .err()
+            .unwrap();
         assert!(format!("{e:#}").contains("only a pin-cart model"), "{e:#}");
-        assert!(Unit::new(&parse_unit("4=pincart1,friction_band_drift_pct_per_h=1").unwrap(), &d, RegisterMap::device_default()).is_ok());
+        assert!(Unit::new(
+            &parse_unit("4=pincart1,friction_band_drift_pct_per_h=1").unwrap(),
+            &d,
+            RegisterMap::device_default()
+        )
+        .is_ok());
     }
 }

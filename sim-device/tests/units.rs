@@ -21,7 +21,14 @@ async fn connect(sim: &Sim) -> Context {
 
 #[tokio::test]
 async fn each_unit_id_has_its_own_valve_and_others_get_0b() {
-    let sim = Sim::start(&["--tcp", "127.0.0.1:0", "--unit", "1", "--unit", "2=modelless"]);
+    let sim = Sim::start(&[
+        "--tcp",
+        "127.0.0.1:0",
+        "--unit",
+        "1",
+        "--unit",
+        "2=modelless",
+    ]);
     let mut ctx = connect(&sim).await;
     ctx.set_slave(Slave(2));
     ctx.write_single_register(0, 420).await.unwrap().unwrap();
@@ -37,7 +44,10 @@ async fn each_unit_id_has_its_own_valve_and_others_get_0b() {
     ctx.set_slave(Slave(1));
     let words = ctx.read_holding_registers(0, 2).await.unwrap().unwrap();
     assert_eq!(words[0], 300);
-    assert!(words[1] < 300, "pin-cart II has not arrived after 0.1 s: {words:?}");
+    assert!(
+        words[1] < 300,
+        "pin-cart II has not arrived after 0.1 s: {words:?}"
+    );
     ctx.set_slave(Slave(3));
     assert_eq!(
         ctx.read_holding_registers(0, 2).await.unwrap(),
@@ -59,7 +69,10 @@ async fn delay_of_step(ctx: &mut Context, to: u16) -> f64 {
         if words[0] == to {
             return start.elapsed().as_secs_f64();
         }
-        assert!(start.elapsed() < Duration::from_secs(3), "V_P never reached {to}");
+        assert!(
+            start.elapsed() < Duration::from_secs(3),
+            "V_P never reached {to}"
+        );
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
 }
@@ -83,21 +96,39 @@ async fn a_unit_with_dead_time_drift_answers_later_as_it_runs() {
     assert!(early < 0.1 * early_at + 0.1, "{early} s after {early_at} s");
     // Written at about `late_at - late`, seen `late` later, when the dead time is a tenth of
     // the time run: late ≈ 0.1 * late_at.
-    assert!(late > 0.25 && (late - 0.1 * late_at).abs() < 0.1, "{late} s after {late_at} s");
+    assert!(
+        late > 0.25 && (late - 0.1 * late_at).abs() < 0.1,
+        "{late} s after {late_at} s"
+    );
 }
 
 #[test]
 fn bad_units_fail_saying_why() {
     for (args, want) in [
         (
-            vec!["--tcp", "127.0.0.1:0", "--unit", "1=fopdt,friction_band_drift_pct_per_h=1"],
+            vec![
+                "--tcp",
+                "127.0.0.1:0",
+                "--unit",
+                "1=fopdt,friction_band_drift_pct_per_h=1",
+            ],
             "only a pin-cart model (pincart1, pincart2) has a friction band to widen",
         ),
         (
-            vec!["--tcp", "127.0.0.1:0", "--unit", "1", "--unit", "1=modelless"],
+            vec![
+                "--tcp",
+                "127.0.0.1:0",
+                "--unit",
+                "1",
+                "--unit",
+                "1=modelless",
+            ],
             "--unit 1: two units at one address",
         ),
-        (vec!["--tcp", "127.0.0.1:0", "--unit", "300"], "a unit id is 1-247"),
+        (
+            vec!["--tcp", "127.0.0.1:0", "--unit", "300"],
+            "a unit id is 1-247",
+        ),
     ] {
         let (ok, err) = run_to_end(&args);
         assert!(!ok, "{args:?}");

@@ -172,12 +172,7 @@ impl Respond for Controlled {
 }
 
 /// Serves `banks` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
-pub async fn serve(
-    listener: TcpListener,
-    bank: Arc<Blocks>,
-    limits: Limits,
-    health: Arc<Health>,
-) {
+pub async fn serve(listener: TcpListener, bank: Arc<Blocks>, limits: Limits, health: Arc<Health>) {
     let what = "Modbus server for the process controller";
     tcp_server::serve(what, listener, limits, health, move |peer| {
         tracing::info!("process controller connected from {peer}");

@@ -42,7 +42,11 @@ impl Listeners {
         sources: &[Source],
         metrics: Option<&LoopMetrics>,
     ) -> Result<Listeners, DaemonError> {
-        let banks: Vec<_> = sources.iter().filter_map(Source::served_bank).cloned().collect();
+        let banks: Vec<_> = sources
+            .iter()
+            .filter_map(Source::served_bank)
+            .cloned()
+            .collect();
         let served = config.controller_source().filter(|_| !banks.is_empty());
         let modbus = match served {
             Some(source_cfg) => {

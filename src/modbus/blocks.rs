@@ -152,7 +152,11 @@ mod tests {
             Request::ReadHoldingRegisters(3, 1),
             Request::ReadWriteMultipleRegisters(0, 1, 10, Cow::Owned(vec![1])),
         ] {
-            assert_eq!(b.handle(&req), Err(ExceptionCode::IllegalDataAddress), "{req:?}");
+            assert_eq!(
+                b.handle(&req),
+                Err(ExceptionCode::IllegalDataAddress),
+                "{req:?}"
+            );
         }
         assert_eq!(
             b.handle(&Request::ReadCoils(0, 1)),

@@ -235,7 +235,10 @@ impl BusBudget {
                 format!("{name} {:.1} ms ({})", b.cycle_s * 1e3, fcs.join(" + "))
             })
             .collect();
-        let (baud, bits) = self.valves.first().map_or((0, 0), |(_, b)| (b.baud, b.bits_per_char));
+        let (baud, bits) = self
+            .valves
+            .first()
+            .map_or((0, 0), |(_, b)| (b.baud, b.bits_per_char));
         format!(
             "{} valves on {} take {} = {:.1} ms on the wire per cycle at {baud} baud, {bits} \
              bits/char = {:.0} % of the {:.1} ms loop period; the bus carries at most {:.1} Hz",
@@ -261,7 +264,10 @@ impl BusBudget {
                 let fc23 = if several.is_empty() {
                     String::new()
                 } else {
-                    format!(", set [valve.registers] fc23 = true for {}", several.join(", "))
+                    format!(
+                        ", set [valve.registers] fc23 = true for {}",
+                        several.join(", ")
+                    )
                 };
                 Err(BudgetError(format!(
                     "{}: refusing {:.1} Hz (raise [valve.modbus-rtu] baud of every valve on {}{fc23}, lower [loop] rate_hz to {:.0} or less, or put fewer valves on this bus)",
@@ -425,7 +431,11 @@ mod tests {
         let default = Plan::new(&RegisterMap::default());
         // An FC 23 valve and an FC 16 + FC 3 one at 115200 8E1: 6.6 + 12.2 ms, too slow.
         let b = bus(115200, 0.01, &[&fc23(), &default]);
-        assert!((b.cycle_s - 0.006_600_7 - 0.012_246_5).abs() < 1e-6, "{}", b.cycle_s);
+        assert!(
+            (b.cycle_s - 0.006_600_7 - 0.012_246_5).abs() < 1e-6,
+            "{}",
+            b.cycle_s
+        );
         let e = b.check().unwrap_err().to_string();
         assert!(
             e.starts_with("bus budget: 2 valves on /dev/ttyS9 take v0 6.6 ms (FC 23) + v1 12.2 ms (FC 16 + FC 3) = 18.8 ms on the wire per cycle at 115200 baud, 11 bits/char = 188 % of the 10.0 ms loop period; the bus carries at most 53.1 Hz: refusing 100.0 Hz"),
@@ -448,12 +458,21 @@ mod tests {
         // they share 80 % of the period, 8 ms each.
         let b = bus(115200, 0.02, &[&fc23(), &fc23()]);
         let d = b.deadlines(&[None, None]).unwrap();
-        assert!((d[0] - 0.008).abs() < 1e-9 && (d[1] - 0.008).abs() < 1e-9, "{d:?}");
+        assert!(
+            (d[0] - 0.008).abs() < 1e-9 && (d[1] - 0.008).abs() < 1e-9,
+            "{d:?}"
+        );
         // A given deadline is kept; the other gets what is left of 16 ms.
         let d = b.deadlines(&[Some(9.0), None]).unwrap();
-        assert!((d[0] - 0.009).abs() < 1e-9 && (d[1] - 0.007).abs() < 1e-9, "{d:?}");
+        assert!(
+            (d[0] - 0.009).abs() < 1e-9 && (d[1] - 0.007).abs() < 1e-9,
+            "{d:?}"
+        );
         let e = b.deadlines(&[Some(12.0), Some(9.0)]).unwrap_err();
-        assert!(e.contains("add up to 21.0 ms, more than the 20.0 ms loop period"), "{e}");
+        assert!(
+            e.contains("add up to 21.0 ms, more than the 20.0 ms loop period"),
+            "{e}"
+        );
         let e = b.deadlines(&[Some(12.0), None]).unwrap_err();
         assert!(e.contains("leave 4.0 ms of the 20.0 ms loop period to the valves without one, which need 6.6 ms"), "{e}");
         // A bus that needs more than 80 % shares the whole period.

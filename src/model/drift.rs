@@ -64,10 +64,30 @@ impl DriftSpec {
     /// The first setting out of range, or a friction band drift of a `model` without a band.
     pub fn violation(&self, model: ModelKind) -> Option<DriftViolation> {
         let ranges = [
-            ("dead_time_drift_s_per_h", self.dead_time_drift_s_per_h, 3600.0, "a growth of the dead time in s per hour"),
-            ("dead_time_drift_max_s", self.dead_time_drift_max_s, 60.0, "the most dead time the drift adds, s"),
-            ("friction_band_drift_pct_per_h", self.friction_band_drift_pct_per_h, 100.0, "a widening of the friction band in % per hour"),
-            ("friction_band_drift_max_pct", self.friction_band_drift_max_pct, 100.0, "the most the friction band widens, %"),
+            (
+                "dead_time_drift_s_per_h",
+                self.dead_time_drift_s_per_h,
+                3600.0,
+                "a growth of the dead time in s per hour",
+            ),
+            (
+                "dead_time_drift_max_s",
+                self.dead_time_drift_max_s,
+                60.0,
+                "the most dead time the drift adds, s",
+            ),
+            (
+                "friction_band_drift_pct_per_h",
+                self.friction_band_drift_pct_per_h,
+                100.0,
+                "a widening of the friction band in % per hour",
+            ),
+            (
+                "friction_band_drift_max_pct",
+                self.friction_band_drift_max_pct,
+                100.0,
+                "the most the friction band widens, %",
+            ),
         ];
         for (key, value, hi, what) in ranges {
             if !(value.is_finite() && (0.0..=hi).contains(&value)) {
@@ -214,7 +234,10 @@ mod tests {
             dead_time_drift_s_per_h: -1.0,
             ..DriftSpec::default()
         };
-        assert_eq!(bad.violation(ModelKind::Pincart2).unwrap().key, "dead_time_drift_s_per_h");
+        assert_eq!(
+            bad.violation(ModelKind::Pincart2).unwrap().key,
+            "dead_time_drift_s_per_h"
+        );
         assert!(Drift::new(&DriftSpec::default(), &valve(ModelKind::Fopdt))
             .unwrap()
             .is_none());

@@ -64,7 +64,9 @@ pub(super) fn check<'a>(
             if !same {
                 return Err(c.bad(t, "port", format!("{port} is also valve `{}`'s port, with other line settings: one serial line has one baud rate, parity, data and stop bits; give both the same", first.label())));
             }
-            if let Some(&j) = (members.iter()).find(|&&j| j < i && rtu(&valves[j]).is_some_and(|o| o.slave_id == l.slave_id)) {
+            if let Some(&j) = (members.iter())
+                .find(|&&j| j < i && rtu(&valves[j]).is_some_and(|o| o.slave_id == l.slave_id))
+            {
                 return Err(c.bad(t, "slave_id", format!("{} is also valve `{}`'s slave id on {port}: each device on a bus has its own address", l.slave_id, valves[j].label())));
             }
         }
@@ -77,8 +79,9 @@ pub(super) fn check<'a>(
             };
             return Err(last.bad(t, "port", message));
         }
-        let timeouts: Vec<Option<f64>> =
-            (members.iter()).map(|&i| rtu(&valves[i]).and_then(|l| l.timeout_ms)).collect();
+        let timeouts: Vec<Option<f64>> = (members.iter())
+            .map(|&i| rtu(&valves[i]).and_then(|l| l.timeout_ms))
+            .collect();
         if let Err(message) = bus.deadlines(&timeouts) {
             return Err(last.bad(t, "timeout_ms", message));
         }

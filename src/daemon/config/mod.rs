@@ -330,9 +330,11 @@ impl Config {
         self.loop_.check_in(&c)?;
         self.source.check_in(&c, &self.loop_)?;
         valve::check_all(&mut self.valves, &c, &self.loop_)?;
-        if let Some(v) = (self.valves.iter())
-            .find(|v| v.source.as_ref().is_some_and(|s| s.kind == SourceKind::ModbusServer))
-        {
+        if let Some(v) = (self.valves.iter()).find(|v| {
+            v.source
+                .as_ref()
+                .is_some_and(|s| s.kind == SourceKind::ModbusServer)
+        }) {
             return Err(c.bad(
                 "valve.source",
                 "kind",

@@ -408,7 +408,13 @@ impl ModbusServerConfig {
         self.registers.check_in(c.text, c.path, section)?;
         if let Some(st) = self.registers.status {
             let bit = st.setpoint_error_bit;
-            if [hil::VALVE_FAULT_BIT, hil::WATCHDOG_BIT, hil::HEALTH_ALARM_BIT].contains(&bit) {
+            if [
+                hil::VALVE_FAULT_BIT,
+                hil::WATCHDOG_BIT,
+                hil::HEALTH_ALARM_BIT,
+            ]
+            .contains(&bit)
+            {
                 return Err(TomlError::Invalid {
                     path: c.path.to_path_buf(),
                     line: toml_file::line_of(c.text, Some(section), "status")

@@ -275,14 +275,15 @@ fn errors_in_a_later_valve_name_its_line() {
 
 #[test]
 fn a_process_controller_drives_several_valves_from_blocks_that_hold_its_map() {
-    let two = "[source]\nkind = \"modbus-server\"\n[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n";
+    let two =
+        "[source]\nkind = \"modbus-server\"\n[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n";
     let c = Config::from_toml(two, Path::new("c.toml")).unwrap();
     assert_eq!(c.controller_source().unwrap().modbus_server.block_size, 10);
-    let e = err(&format!(
-        "{two}[source.modbus-server]\nblock_size = 2\n"
-    ));
+    let e = err(&format!("{two}[source.modbus-server]\nblock_size = 2\n"));
     assert!(
-        e.starts_with("c.toml:8: source.modbus-server.block_size: 2 registers per valve cannot hold the map"),
+        e.starts_with(
+            "c.toml:8: source.modbus-server.block_size: 2 registers per valve cannot hold the map"
+        ),
         "{e}"
     );
     assert!(e.contains("set block_size = 3 or more"), "{e}");

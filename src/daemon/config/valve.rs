@@ -334,12 +334,19 @@ impl EmulatedConfig {
                 format!("cannot use model file `{}`: {err} (a model file looks like config/models/pincart2.toml)", file.display()),
             ));
         }
-        let model = self.model_spec().map(|s| s.model).unwrap_or(ModelKind::Pincart2);
+        let model = self
+            .model_spec()
+            .map(|s| s.model)
+            .unwrap_or(ModelKind::Pincart2);
         match self.drift().violation(model) {
             Some(v) => Err(c.bad(
                 t,
                 v.key,
-                format!("{} is not allowed: {}", crate::human::num(v.value), v.allowed),
+                format!(
+                    "{} is not allowed: {}",
+                    crate::human::num(v.value),
+                    v.allowed
+                ),
             )),
             None => Ok(()),
         }

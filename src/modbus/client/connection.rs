@@ -334,4 +334,3 @@ async fn call(
         }
     }
 }
-
