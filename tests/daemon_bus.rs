@@ -10,8 +10,9 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
+use common::logs;
 use common::sim::{config, real_time_turn, run_cmd, SimDevice, RTU_CONFIG};
 
 const SHIPPED: &str = "config/two-valves-rtu.toml";
@@ -19,14 +20,7 @@ const PORT: &str = "/tmp/vb-sim-bus";
 
 /// (op, vp, status, latency_us) of every row of the log of valve `name` in `dir`.
 fn rows(dir: &Path, name: &str) -> Vec<(f64, Option<f64>, String, Option<f64>)> {
-    let files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| {
-            let f = p.file_name().unwrap().to_string_lossy().into_owned();
-            f.starts_with(&format!("vb-{name}-")) && f.ends_with(".csv")
-        })
-        .collect();
+    let files = logs(dir, &format!("vb-{name}-"));
     assert_eq!(files.len(), 1, "{files:?}");
     let mut r = csv::Reader::from_path(&files[0]).unwrap();
     r.records()

@@ -130,16 +130,7 @@ fn a_controller_drives_two_valves_each_with_its_block_watchdog_and_alarm_bit() {
     assert_eq!(tripped.len(), 1, "one watchdog trips: {stderr}");
     assert!(tripped[0].contains("valve=b"), "b's: {stderr}");
     for (name, want) in [("a", false), ("b", true)] {
-        let log = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .find(|p| {
-                p.file_name()
-                    .unwrap()
-                    .to_string_lossy()
-                    .starts_with(&format!("vb-{name}-"))
-            })
-            .unwrap();
+        let log = &common::logs(dir.path(), &format!("vb-{name}-"))[0];
         let text = std::fs::read_to_string(log).unwrap();
         assert_eq!(text.contains(",watchdog,"), want, "{name}'s watchdog rows");
     }

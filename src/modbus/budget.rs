@@ -43,6 +43,15 @@ pub enum Verdict {
 }
 
 impl Verdict {
+    /// Logs a budget that fits, `described`: a warning when the margin is thin.
+    fn log(self, described: &str) {
+        if self == Verdict::Thin {
+            tracing::warn!("thin bus margin: {described}");
+        } else {
+            tracing::info!("bus budget: {described}");
+        }
+    }
+
     /// The verdict on a cycle taking `usage` of the period.
     fn of(usage: f64) -> Verdict {
         if usage > 1.0 {
@@ -182,12 +191,8 @@ impl Budget {
                     self.max_rate_hz().floor()
                 )))
             }
-            Verdict::Thin => {
-                tracing::warn!("thin bus margin: {}", self.describe());
-                Ok(self)
-            }
-            Verdict::Fits => {
-                tracing::info!("bus budget: {}", self.describe());
+            fits => {
+                fits.log(&self.describe());
                 Ok(self)
             }
         }
@@ -277,12 +282,8 @@ impl BusBudget {
                     (1.0 / self.cycle_s).floor()
                 )))
             }
-            Verdict::Thin => {
-                tracing::warn!("thin bus margin: {}", self.describe());
-                Ok(self)
-            }
-            Verdict::Fits => {
-                tracing::info!("bus budget: {}", self.describe());
+            fits => {
+                fits.log(&self.describe());
                 Ok(self)
             }
         }
