@@ -3,7 +3,9 @@
 //!
 //! A [`Connection`] serves one valve on TCP, or every valve of one serial bus: each exchange
 //! addresses the unit of the valve it is for (its link's slave or unit id) and names that valve
-//! in its faults, so a unit that is absent or slow costs its own transactions only. The rules
+//! in its faults, so a unit that does not answer costs its own transactions only (one that
+//! answers after its deadline puts its reply on the wire during the next valve's transaction,
+//! which it can spoil, as on any RTU bus: its deadline must cover its answers). The rules
 //! for keeping, dropping and reopening the link are in [`super`]'s documentation. Not here:
 //! the cycle's plan, deadlines and decoding ([`super::ModbusValve`]).
 
