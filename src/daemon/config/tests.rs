@@ -314,3 +314,49 @@ fn drift_settings_are_checked() {
         "{e}"
     );
 }
+
+#[test]
+fn valves_on_one_serial_port_share_its_line_and_its_period() {
+    let valve = |name: &str, slave: u8, extra: &str| {
+        format!(
+            "[[valve]]\nname = \"{name}\"\nkind = \"modbus-rtu\"\n[valve.modbus-rtu]\nport = \"/dev/ttyS7\"\nbaud = 115200\nslave_id = {slave}\n{extra}[valve.registers]\nfc23 = true\n"
+        )
+    };
+    let bus = |a: &str, b: &str| format!("[loop]\nrate_hz = 50.0\n{a}{b}");
+    let ok = bus(&valve("a", 1, ""), &valve("b", 2, ""));
+    let c = Config::from_toml(&ok, Path::new("c.toml")).unwrap();
+    assert_eq!(
+        bus::buses(&c.valves),
+        vec![("/dev/ttyS7".to_string(), vec![0, 1])]
+    );
+    let e = err(&bus(&valve("a", 1, ""), &valve("b", 1, "")));
+    assert!(
+        e.starts_with(
+            "c.toml:18: valve.modbus-rtu.slave_id: 1 is also valve `a`'s slave id on /dev/ttyS7"
+        ),
+        "{e}"
+    );
+    let e = err(&bus(
+        &valve("a", 1, ""),
+        &valve("b", 2, "parity = \"none\"\n"),
+    ));
+    assert!(
+        e.contains(
+            "valve.modbus-rtu.port: /dev/ttyS7 is also valve `a`'s port, with other line settings"
+        ),
+        "{e}"
+    );
+    let e = err(&bus(
+        &valve("a", 1, "timeout_ms = 12.0\n"),
+        &valve("b", 2, "timeout_ms = 9.0\n"),
+    ));
+    assert!(
+        e.contains("valve.modbus-rtu.timeout_ms: the timeout_ms of the valves on /dev/ttyS7 add up to 21.0 ms, more than the 20.0 ms loop period"),
+        "{e}"
+    );
+    let e = err(&ok.replace("rate_hz = 50.0", "rate_hz = 100.0"));
+    assert!(
+        e.contains("valve.modbus-rtu.port: bus budget: 2 valves on /dev/ttyS7"),
+        "{e}"
+    );
+}
