@@ -3,6 +3,9 @@
 //!   the alarm within one window (10 min) and a minute of the drift passing the 0.2 s limit
 //!   over the baseline (the first window), with a warning naming the dead time and the alarm in
 //!   `health-worn.csv`;
+//! - `config/friction-drift.toml`, a valve whose friction band widens by 3 % per hour beside a
+//!   healthy one, raises the alarm on the reversal delay within the window after it has grown
+//!   past the 0.3 s limit, and the healthy valve raises none;
 //! - `config/two-valves.toml`, two healthy valves, runs 3 simulated hours (180 windows each)
 //!   without an alarm; README shows the 24-hour run.
 
@@ -96,4 +99,31 @@ fn healthy_valves_raise_no_alarm_over_hours() {
         assert!(rows.iter().all(|r| r.2.is_empty()), "{name}: {rows:?}");
     }
     assert!(!stderr.contains("health alarm"), "{stderr}");
+}
+
+#[test]
+fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("friction-drift.toml", "3600", dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    let rows = health_rows(&dir.path().join("health-packing.csv"));
+    assert_eq!(rows.len(), 51, "{rows:?}");
+    let first = rows.iter().find(|r| r.1).expect("an alarm");
+    // The band is 3 % per hour wider: at mid travel eq. 7's crossing (0.5 s for B_L = 1 %)
+    // grows by 1.5 s per hour, so the reversal delay passes the first window's (which saw
+    // +0.25 % of band on average) by 0.3 s after about 17 min at mid travel; the alarm
+    // comes within one window and one cadence of that, whatever openings the steps visit.
+    assert!(
+        first.0 > 900.0 && first.0 <= 1020.0 + 600.0 + 60.0,
+        "{first:?}"
+    );
+    assert!(first.2.contains("reversal delay"), "{first:?}");
+    assert!(!first.2.contains("dead time"), "{first:?}");
+    assert!(rows.last().unwrap().1, "{rows:?}");
+    let healthy = health_rows(&dir.path().join("health-healthy.csv"));
+    assert_eq!(healthy.len(), 51);
+    assert!(healthy.iter().all(|r| !r.1), "{healthy:?}");
+    assert!(stderr.contains("health alarm: reversal delay"), "{stderr}");
 }

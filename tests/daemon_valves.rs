@@ -4,8 +4,12 @@
 //! - a valve whose device is not there logs its own rows as `disconnected` while every cycle
 //!   of the other valve reads its V_P; the run exits 1 naming that valve.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::{Command, Output};
+
+use common::logs;
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 const TWO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/two-valves.toml");
@@ -16,20 +20,6 @@ fn run(args: &[&str]) -> Output {
         .env("RUST_LOG", "info")
         .output()
         .unwrap()
-}
-
-/// The log files of `dir` whose names start with `prefix`.
-fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| {
-            let name = p.file_name().unwrap().to_string_lossy().into_owned();
-            name.starts_with(prefix) && name.ends_with(".csv")
-        })
-        .collect();
-    files.sort();
-    files
 }
 
 /// (op, vp, status) of every row of `path`.

@@ -1,7 +1,7 @@
 //! What the loop calls every cycle for the `modbus-server` source and the Prometheus metrics
 //! allocates nothing: reading the controller's set-point, publishing V_P and status, and
 //! updating the metric handles. Nor does stepping a model (the physical valve, with its internal
-//! steps and seeded sensor noise). A counting global allocator (this test binary only) counts the
+//! steps and seeded sensor noise), nor a drifting one. A counting global allocator (this test binary only) counts the
 //! allocations made on the calling thread around those calls.
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -14,7 +14,7 @@ use valve_bridge::daemon::config::Config;
 use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::logger::{Sample, Status};
 use valve_bridge::daemon::source::Source;
-use valve_bridge::model::{bundled, ModelKind, Valve};
+use valve_bridge::model::{bundled, Drift, DriftSpec, ModelKind, Valve};
 
 struct Counting;
 
@@ -116,4 +116,27 @@ fn stepping_a_physical_valve_does_not_allocate() {
     });
     assert_eq!(counted, 0, "allocations in 2000 steps");
     assert!(last.is_finite());
+}
+
+#[test]
+fn stepping_a_drifting_valve_does_not_allocate() {
+    let mut valve = Valve::new(&bundled(ModelKind::Pincart2), 0.01).unwrap();
+    let spec = DriftSpec {
+        dead_time_drift_s_per_h: 3600.0,
+        dead_time_drift_max_s: 1.0,
+        friction_band_drift_pct_per_h: 100.0,
+        ..DriftSpec::default()
+    };
+    let mut drift = Drift::new(&spec, &valve).unwrap().unwrap();
+    valve.reset(30.0, 30.0);
+    drift.reset(30.0);
+    let mut last = 0.0;
+    let counted = allocations(|| {
+        for k in 0..2000u64 {
+            let op = if (k / 300) % 2 == 0 { 30.0 } else { 70.0 };
+            last = drift.step(&mut valve, op, k);
+        }
+    });
+    assert_eq!(counted, 0, "allocations in 2000 steps");
+    assert!(last > 29.0, "{last}");
 }

@@ -5,10 +5,17 @@
 //! register 0, `i16` position in 1, status word in 2) from a [`RegisterBank`], over Modbus TCP
 //! (`--tcp ADDR`), on a pseudo-terminal it opens itself (`--pty`) or on a serial device
 //! (`--serial PATH`). Its valve is a model from `config/models/` (pin-cart II by default) stepped
-//! at 100 Hz in real time from the last accepted set-point. A set-point outside 0-100 % keeps the
-//! last value and raises the status error bit, as Bürkert positioners do. Faults can be injected
-//! for tests: response delay, dropped responses, corrupted CRC (RTU), exception responses and
-//! TCP disconnects; `--baud-emulation` makes a pty answer as slowly as a real line would.
+//! at 100 Hz in real time from the last accepted set-point, optionally wearing over hours (a
+//! growing dead time or friction band, the daemon's [`valve_bridge::model::drift`]). Repeated
+//! `--unit ID=MODEL[,KEY=VALUE...]` serve several valves at their own addresses on the same
+//! port, each with its own model and registers ([`units`]): on RTU a request to an address no
+//! unit has gets no reply, as on a real bus; on TCP, with several units, a request to a unit id
+//! none has gets exception 0B (gateway target device failed to respond), and with one unit any
+//! unit id is answered. A set-point outside 0-100 % keeps the last value and raises the status
+//! error bit, as Bürkert positioners do. Faults can be injected for tests (on every unit's
+//! requests, numbered across the device): response delay, dropped responses, corrupted CRC
+//! (RTU), exception responses and TCP disconnects; `--baud-emulation` makes a pty answer as
+//! slowly as a real line would.
 //!
 //! On start it prints one line per endpoint on stdout, `tcp: 127.0.0.1:5502` and
 //! `pty: /dev/pts/5`, for a client (or a test) to connect to. The TCP server survives accept
@@ -20,6 +27,7 @@
 mod faults;
 mod rtu;
 mod tcp;
+mod units;
 
 use std::io::Write;
 use std::net::SocketAddr;
@@ -29,25 +37,19 @@ use std::time::Duration;
 
 use anyhow::{bail, Context as _};
 use clap::Parser;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 use serde::Deserialize;
 use tokio::net::TcpListener;
 use tokio_serial::{SerialPort, SerialStream};
 use valve_bridge::modbus::link::{Parity, RtuLink};
 use valve_bridge::modbus::map::RegisterMap;
 use valve_bridge::modbus::serial;
-use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
-use valve_bridge::model::{self, ModelKind, ModelSpec, Valve};
+use valve_bridge::model::DriftSpec;
 use valve_bridge::net::{Health, Limits};
 use valve_bridge::toml_file;
 
 use faults::{FaultConfig, Faults};
 use rtu::{LineSpeed, RtuDevice};
-
-/// The model's step, 10 ms (100 Hz).
-const MODEL_DT: f64 = model::DEFAULT_SAMPLE_PERIOD_S;
+use units::{Banks, Defaults, Unit, UnitArg};
 
 /// A fake valve positioner speaking Modbus TCP and RTU.
 #[derive(Parser, Debug)]
@@ -78,15 +80,32 @@ struct Args {
     /// [valve.modbus-rtu] slave_id / [valve.modbus-tcp] unit_id the RTU address.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// RTU slave address answered (default: from --config, else 1).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=247))]
-    unit: Option<u8>,
-    /// The valve: a bundled model name (pincart2, fopdt, ...) or a model file.
+    /// A unit served: its RTU slave address / TCP unit id, `ID`, or with a model and settings
+    /// of its own, `ID=MODEL[,KEY=VALUE...]` (keys: noise_pct and the drift options' names
+    /// with `_`, e.g. `2=pincart2,friction_band_drift_pct_per_h=2`). Repeat for several valves
+    /// on one port (default: one unit, from --config, else 1).
+    #[arg(long, value_name = "ID[=MODEL,...]", value_parser = units::parse_unit)]
+    unit: Vec<UnitArg>,
+    /// The valve of every unit without a model of its own: a bundled model name (pincart2,
+    /// fopdt, ...) or a model file.
     #[arg(long, default_value = "pincart2")]
     model: String,
     /// Standard deviation of Gaussian noise on the reported position, %.
     #[arg(long, default_value_t = 0.0)]
     noise_pct: f64,
+    /// Dead time added per hour of running, s/h (a wearing valve; 0 = none).
+    #[arg(long, default_value_t = 0.0)]
+    dead_time_drift_s_per_h: f64,
+    /// The most dead time the drift adds, s.
+    #[arg(long, default_value_t = DriftSpec::default().dead_time_drift_max_s)]
+    dead_time_drift_max_s: f64,
+    /// Friction band widening per hour of running, % of travel per hour (pin-cart models;
+    /// 0 = none).
+    #[arg(long, default_value_t = 0.0)]
+    friction_band_drift_pct_per_h: f64,
+    /// The most the friction band widens, %.
+    #[arg(long, default_value_t = DriftSpec::default().friction_band_drift_max_pct)]
+    friction_band_drift_max_pct: f64,
     /// Seed of the noise and of --drop-prob.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -175,13 +194,6 @@ fn load_config(path: &Path) -> anyhow::Result<(RegisterMap, Option<u8>)> {
     ))
 }
 
-fn load_model(name: &str) -> anyhow::Result<ModelSpec> {
-    match name.parse::<ModelKind>() {
-        Ok(kind) => Ok(model::bundled(kind)),
-        Err(_) => Ok(ModelSpec::load(Path::new(name))?),
-    }
-}
-
 fn main() -> std::process::ExitCode {
     valve_bridge::init_tracing();
     let result = tokio::runtime::Runtime::new()
@@ -258,9 +270,8 @@ async fn run(args: Args) -> anyhow::Result<()> {
         Some(path) => load_config(path)?,
         None => (RegisterMap::device_default(), None),
     };
-    let unit = args.unit.or(config_unit).unwrap_or(1);
-    let spec = load_model(&args.model)?;
-    let bank = Arc::new(RegisterBank::new(map, 0.0, 100.0, OutOfRange::KeepAndFlag));
+    let units = units_of(&args, map, config_unit)?;
+    let banks = Banks::of(&units);
     let faults = Arc::new(Faults::new(FaultConfig {
         delay: Duration::from_millis(args.delay_ms),
         delay_every: args.delay_every,
@@ -272,21 +283,17 @@ async fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
     }));
     tracing::info!(
-        "sim-device: {} valve, set-point at {} {}, position at {} {}",
-        spec.model.display_name(),
+        "sim-device: set-point at {} {}, position at {} {}",
         map.setpoint.table,
         map.setpoint.address,
         map.position.table,
         map.position.address
     );
-
-    let valve = Valve::new(&spec, MODEL_DT)?;
-    let noise = if args.noise_pct > 0.0 {
-        Some(Normal::new(0.0, args.noise_pct)?)
-    } else {
-        None
-    };
-    let stepping = tokio::spawn(step_valve(Arc::clone(&bank), valve, noise, args.seed));
+    let mut stepping = tokio::task::JoinSet::new();
+    for unit in units {
+        tracing::info!("{}", unit.describe());
+        stepping.spawn(unit.step());
+    }
 
     let mut servers: tokio::task::JoinSet<anyhow::Result<()>> = tokio::task::JoinSet::new();
     let health = Arc::new(Health::default());
@@ -301,7 +308,7 @@ async fn run(args: Args) -> anyhow::Result<()> {
         };
         let serving = tcp::serve(
             listener,
-            Arc::clone(&bank),
+            banks.clone(),
             Arc::clone(&faults),
             limits,
             Arc::clone(&health),
@@ -313,9 +320,8 @@ async fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.pty || args.serial.is_some() {
         let device = RtuDevice {
-            bank: Arc::clone(&bank),
+            banks,
             faults: Arc::clone(&faults),
-            slave: unit,
             line: args.baud_emulation.map(|baud| LineSpeed {
                 baud,
                 bits_per_char: line(&args, "").bits_per_char(),
@@ -341,8 +347,45 @@ async fn run(args: Args) -> anyhow::Result<()> {
             None => Ok(()),
         },
     };
-    stepping.abort();
+    stepping.abort_all();
     result
+}
+
+/// The units of the command line (`--unit`, else one at the address of `--config`, else 1),
+/// each serving `map`; two units at one address are refused.
+fn units_of(args: &Args, map: RegisterMap, config_unit: Option<u8>) -> anyhow::Result<Vec<Unit>> {
+    let defaults = Defaults {
+        model: args.model.clone(),
+        noise_pct: args.noise_pct,
+        drift: DriftSpec {
+            dead_time_drift_s_per_h: args.dead_time_drift_s_per_h,
+            dead_time_drift_max_s: args.dead_time_drift_max_s,
+            friction_band_drift_pct_per_h: args.friction_band_drift_pct_per_h,
+            friction_band_drift_max_pct: args.friction_band_drift_max_pct,
+        },
+        seed: args.seed,
+    };
+    let one = [UnitArg {
+        id: config_unit.unwrap_or(1),
+        model: None,
+        settings: Vec::new(),
+    }];
+    let args_units = if args.unit.is_empty() {
+        &one[..]
+    } else {
+        &args.unit[..]
+    };
+    let mut units: Vec<Unit> = Vec::with_capacity(args_units.len());
+    for a in args_units {
+        if units.iter().any(|u| u.id == a.id) {
+            bail!(
+                "--unit {}: two units at one address; give each its own id",
+                a.id
+            );
+        }
+        units.push(Unit::new(a, &defaults, map)?);
+    }
+    Ok(units)
 }
 
 /// Waits for SIGINT or SIGTERM and names it.
@@ -391,24 +434,4 @@ fn spawn_rtu(
         servers.spawn(async move { device.serve(port).await.with_context(|| name) });
     }
     Ok(())
-}
-
-/// Steps the valve at 100 Hz in real time from the bank's set-point and reports its position.
-async fn step_valve(
-    bank: Arc<RegisterBank>,
-    mut valve: Valve,
-    noise: Option<Normal<f64>>,
-    seed: u64,
-) {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    valve.reset(bank.setpoint_pct(), 0.0);
-    let mut tick = tokio::time::interval(Duration::from_secs_f64(MODEL_DT));
-    // Burst: after a stall the model catches up, so it never falls behind the clock.
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
-    loop {
-        tick.tick().await;
-        let vp = valve.step(bank.setpoint_pct());
-        let n = noise.map(|d| d.sample(&mut rng)).unwrap_or(0.0);
-        bank.set_position_pct(vp + n);
-    }
 }

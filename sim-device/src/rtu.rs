@@ -8,8 +8,9 @@
 //! (address, PDU, CRC) is built here.
 //!
 //! A request frame ends when its function code says it is complete, or, for function codes
-//! whose length is not known here, at an idle gap. Frames with a bad CRC or for another slave
-//! are ignored (a device on a bus stays silent); broadcasts (address 0) are executed unanswered.
+//! whose length is not known here, at an idle gap. Frames with a bad CRC or for an address no
+//! unit has are ignored (a device on a bus stays silent); broadcasts (address 0) are executed
+//! by every unit, unanswered. Each unit answers from its own bank.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -18,9 +19,10 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_modbus::bytes::{Bytes, BytesMut};
 use tokio_modbus::{ExceptionCode, Request};
 use tokio_serial::SerialStream;
-use valve_bridge::modbus::server::{response_pdu, RegisterBank};
+use valve_bridge::modbus::server::response_pdu;
 
 use crate::faults::{Action, Decision, Faults};
+use crate::units::Banks;
 
 const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
 
@@ -45,12 +47,10 @@ impl LineSpeed {
 /// Everything the RTU server needs besides the port.
 #[derive(Debug, Clone)]
 pub struct RtuDevice {
-    /// The registers.
-    pub bank: Arc<RegisterBank>,
+    /// The registers of each unit, by slave address.
+    pub banks: Banks,
     /// Fault injection.
     pub faults: Arc<Faults>,
-    /// Slave address answered.
-    pub slave: u8,
     /// Optional line-speed emulation.
     pub line: Option<LineSpeed>,
 }
@@ -94,17 +94,25 @@ impl RtuDevice {
             return None;
         }
         let (slave, pdu) = (body[0], &body[1..]);
-        if slave != self.slave && slave != 0 {
+        let request = Request::try_from(Bytes::copy_from_slice(pdu));
+        if slave == 0 {
+            if let Ok(req) = &request {
+                for bank in self.banks.all() {
+                    // Unanswered: an exception has nowhere to go.
+                    let _ = bank.handle(req);
+                }
+            }
             return None;
         }
+        let bank = self.banks.at(slave)?;
         let fc = pdu[0];
         let Decision { action, delay } = self.faults.next();
-        let result = match Request::try_from(Bytes::copy_from_slice(pdu)) {
+        let result = match request {
             _ if action == Action::Exception => Err(ExceptionCode::ServerDeviceFailure),
-            Ok(req) => self.bank.handle(&req),
+            Ok(req) => bank.handle(&req),
             Err(_) => Err(ExceptionCode::IllegalFunction),
         };
-        if slave == 0 || action == Action::Drop {
+        if action == Action::Drop {
             return None;
         }
         let mut adu = vec![slave];
@@ -161,18 +169,37 @@ impl RtuDevice {
 mod tests {
     use super::*;
     use crate::faults::FaultConfig;
+    use crate::units::{parse_unit, Defaults, Unit};
     use valve_bridge::modbus::map::RegisterMap;
-    use valve_bridge::modbus::server::OutOfRange;
+    use valve_bridge::model::DriftSpec;
 
-    fn device(faults: FaultConfig) -> RtuDevice {
-        let bank = RegisterBank::new(RegisterMap::default(), 0.0, 100.0, OutOfRange::KeepAndFlag);
-        bank.set_position_pct(50.0);
+    /// A device with units at `ids`, every position at 50 %.
+    fn device_at(ids: &[u8], faults: FaultConfig) -> RtuDevice {
+        let defaults = Defaults {
+            model: "pincart2".into(),
+            noise_pct: 0.0,
+            drift: DriftSpec::default(),
+            seed: 1,
+        };
+        let units: Vec<Unit> = (ids.iter())
+            .map(|id| {
+                let arg = parse_unit(&id.to_string()).unwrap();
+                Unit::new(&arg, &defaults, RegisterMap::default()).unwrap()
+            })
+            .collect();
+        let banks = Banks::of(&units);
+        for b in banks.all() {
+            b.set_position_pct(50.0);
+        }
         RtuDevice {
-            bank: Arc::new(bank),
+            banks,
             faults: Arc::new(Faults::new(faults)),
-            slave: 7,
             line: None,
         }
+    }
+
+    fn device(faults: FaultConfig) -> RtuDevice {
+        device_at(&[7], faults)
     }
 
     #[test]
@@ -209,7 +236,34 @@ mod tests {
         assert_eq!(d.reply(&seal(vec![8, 3, 0, 1, 0, 1], false)), None);
         // Broadcast write is executed, unanswered.
         assert_eq!(d.reply(&seal(vec![0, 6, 0, 0, 0x01, 0x2C], false)), None);
-        assert_eq!(d.bank.setpoint_pct(), 30.0);
+        assert_eq!(d.banks.at(7).unwrap().setpoint_pct(), 30.0);
+    }
+
+    #[test]
+    fn each_unit_answers_from_its_own_bank_and_others_stay_silent() {
+        let d = device_at(&[1, 2], FaultConfig::default());
+        d.banks.at(2).unwrap().set_position_pct(12.3);
+        let reply = d.reply(&seal(vec![2, 3, 0, 1, 0, 1], false)).unwrap().0;
+        assert_eq!(reply, seal(vec![2, 3, 2, 0, 123], false));
+        let reply = d
+            .reply(&seal(vec![1, 6, 0, 0, 0x01, 0xF4], false))
+            .unwrap()
+            .0;
+        assert_eq!(reply, seal(vec![1, 6, 0, 0, 0x01, 0xF4], false));
+        assert_eq!(d.banks.at(1).unwrap().setpoint_pct(), 50.0);
+        assert_eq!(
+            d.banks.at(2).unwrap().setpoint_pct(),
+            0.0,
+            "unit 2 untouched"
+        );
+        assert_eq!(
+            d.reply(&seal(vec![3, 3, 0, 1, 0, 1], false)),
+            None,
+            "no unit 3"
+        );
+        // A broadcast reaches both.
+        assert_eq!(d.reply(&seal(vec![0, 6, 0, 0, 0x00, 0x64], false)), None);
+        assert!(d.banks.all().all(|b| b.setpoint_pct() == 10.0));
     }
 
     #[test]
@@ -225,7 +279,7 @@ mod tests {
             .unwrap()
             .0;
         assert_eq!(reply, seal(vec![7, 16, 0, 0, 0, 1], false));
-        assert_eq!(d.bank.setpoint_pct(), 70.0);
+        assert_eq!(d.banks.at(7).unwrap().setpoint_pct(), 70.0);
         // 2: corrupted CRC.
         let reply = d.reply(&seal(vec![7, 3, 0, 1, 0, 1], false)).unwrap().0;
         assert_eq!(reply, seal(vec![7, 3, 2, 0x01, 0xF4], true));

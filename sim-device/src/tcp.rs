@@ -4,22 +4,26 @@
 //!
 //! Each connection counts its own requests for `--disconnect-after` (the N-th request of a
 //! connection closes it, unanswered); the other faults follow the device-wide numbering of
-//! [`Faults`]. Framing and the accept loop are the library's; only the faults are decided here.
+//! [`Faults`]. A request goes to the unit of its MBAP unit id ([`Banks::for_tcp`]: any id with
+//! one unit); with several units, an id none has gets exception 0B (gateway target device
+//! failed to respond), what a gateway answers for a device that is not on its bus. Framing and
+//! the accept loop are the library's; only the faults and the unit are decided here.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::time::Duration;
 
 use tokio::net::TcpListener;
 use tokio_modbus::{ExceptionCode, Request};
-use valve_bridge::modbus::server::RegisterBank;
 use valve_bridge::modbus::tcp_server::{self, Reply, Respond};
 use valve_bridge::net::{Health, Limits};
 
 use crate::faults::{Action, Decision, Faults};
+use crate::units::Banks;
 
 /// One client connection of the device.
 struct Connection {
-    bank: Arc<RegisterBank>,
+    banks: Banks,
     faults: Arc<Faults>,
     /// Requests on this connection so far.
     served: u64,
@@ -27,7 +31,7 @@ struct Connection {
 }
 
 impl Respond for Connection {
-    fn respond(&mut self, request: &Request<'_>) -> Reply {
+    fn respond(&mut self, unit: u8, request: &Request<'_>) -> Reply {
         self.served += 1;
         if matches!(self.faults.disconnect_after(), Some(limit) if self.served >= limit) {
             tracing::info!(
@@ -37,19 +41,22 @@ impl Respond for Connection {
             );
             return Reply::Close;
         }
+        let Some(bank) = self.banks.for_tcp(unit) else {
+            return Reply::Answer(Err(ExceptionCode::GatewayTargetDevice), Duration::ZERO);
+        };
         let Decision { action, delay } = self.faults.next();
         match action {
             Action::Drop => Reply::Silent,
             Action::Exception => Reply::Answer(Err(ExceptionCode::ServerDeviceFailure), delay),
-            Action::Answer | Action::CorruptCrc => Reply::Answer(self.bank.handle(request), delay),
+            Action::Answer | Action::CorruptCrc => Reply::Answer(bank.handle(request), delay),
         }
     }
 }
 
-/// Serves `bank` over Modbus TCP on `listener` within `limits`, forever.
+/// Serves `banks` over Modbus TCP on `listener` within `limits`, forever.
 pub async fn serve(
     listener: TcpListener,
-    bank: Arc<RegisterBank>,
+    banks: Banks,
     faults: Arc<Faults>,
     limits: Limits,
     health: Arc<Health>,
@@ -57,7 +64,7 @@ pub async fn serve(
     tcp_server::serve("Modbus TCP", listener, limits, health, move |peer| {
         tracing::info!("client connected from {peer}");
         Connection {
-            bank: Arc::clone(&bank),
+            banks: banks.clone(),
             faults: Arc::clone(&faults),
             served: 0,
             peer,

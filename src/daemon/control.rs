@@ -120,10 +120,7 @@ pub(super) fn spawn(
         .spawn(move || {
             // On an error here `ready_tx` is dropped unsent and spawn() reads the error from the join.
             let rt = current_thread_runtime("loop runtime")?;
-            let mut backends = Vec::with_capacity(valves.len());
-            for valve in &valves {
-                backends.push(rt.block_on(Backend::open(valve, period_s, require_device))?);
-            }
+            let backends = rt.block_on(Backend::open_all(&valves, period_s, require_device))?;
             ready_tx
                 .send(backends.iter().map(Backend::describe).collect())
                 .map_err(|_| DaemonError::Panicked("calling"))?;

@@ -16,21 +16,25 @@
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
 //! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
-//! `valve_bridge_health_alarm` gauge and the summary.
+//! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
+//! bit [`HEALTH_ALARM_BIT`] of its status word.
 
 use std::collections::VecDeque;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, Sender};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::config::HealthConfig;
 use super::exporter::HealthMetrics;
+use super::hil::HEALTH_ALARM_BIT;
 use super::logger::{fixed, Sample};
 use super::DaemonError;
 use crate::fit::seeds::travel_speed;
 use crate::fit::steps::{analyse, StepOptions};
 use crate::metrics::stats::median;
+use crate::modbus::server::RegisterBank;
 use crate::model::Valve;
 use crate::recording::RecordingView;
 use crate::report::plot;
@@ -187,6 +191,8 @@ struct Monitor {
     report: HealthReport,
     csv: csv::Writer<File>,
     metrics: Option<HealthMetrics>,
+    /// The process controller's register bank of the valve, for the alarm bit.
+    status: Option<Arc<RegisterBank>>,
     /// Loop time of each compared window and its figures over the baseline's, for the plot.
     history: Vec<(f64, [f64; 6])>,
 }
@@ -215,12 +221,14 @@ pub const HEADER: [&str; 10] = [
     "note",
 ];
 
-/// One valve to watch: its name, its health file's name, its baseline model and its metrics.
+/// One valve to watch: its name, its health file's name, its baseline model, its metrics and
+/// the register bank whose status word carries its alarm (a valve a controller drives).
 pub struct Watched {
     pub name: String,
     pub file_name: String,
     pub baseline_model: Option<Valve>,
     pub metrics: Option<HealthMetrics>,
+    pub status: Option<Arc<RegisterBank>>,
 }
 
 /// The running health thread: where the loggers send rows (with the valve's index), and the
@@ -268,6 +276,7 @@ pub fn start(
             },
             csv,
             metrics: w.metrics,
+            status: w.status,
             history: Vec::new(),
         });
     }
@@ -382,6 +391,10 @@ impl Monitor {
             tracing::info!(valve = %self.name, t_s, "health back within its limits");
         }
         self.alarm = alarm;
+        if let Some(bank) = &self.status {
+            let bit = 1 << HEALTH_ALARM_BIT;
+            bank.report(None, bit, if alarm { bit } else { 0 });
+        }
         if let Some(b) = base {
             let ratio = |now: Option<f64>, then: Option<f64>| match (now, then) {
                 (Some(n), Some(t)) if t > 0.0 => n / t,

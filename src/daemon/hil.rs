@@ -6,13 +6,17 @@
 //! register and reads V_P from the position register and the loop's state from the status
 //! register, whatever valve is behind (emulated, or a positioner over Modbus). A set-point outside
 //! `[source] op_min_pct..op_max_pct` is refused with exception 03, an unmapped or read-only
-//! address with 02. The server answers any unit id.
+//! address with 02. The server answers any unit id. With several valves driven by the
+//! controller, each has its own bank, watchdog and status word, served side by side as
+//! [`Blocks`]: the k-th such valve of the file at the map's addresses plus k × `block_size`.
 //!
 //! Each cycle the loop asks [`Controller::op_at`] for the last accepted set-point and hands the
 //! cycle's row to [`Controller::feedback`], which publishes V_P (the last one read is kept when a
 //! cycle read none) and the status bits:
 //! - bit [`VALVE_FAULT_BIT`] (1): the last cycle read no V_P (timeout, error, disconnected);
-//! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P.
+//! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P;
+//! - bit [`HEALTH_ALARM_BIT`] (3): the live health check (`[health]`) is in alarm for the
+//!   valve; set by the health thread ([`super::health`]) at each window, not by the loop.
 //!
 //! Until the first write the O_P is `initial_pct`. Watchdog: when no set-point write has been
 //! accepted for `watchdog_s` of loop time (counted from the start of the loop, so a controller
@@ -34,6 +38,7 @@ use tokio_modbus::Request;
 
 use super::config::{OnStop, SafetyConfig, SourceConfig};
 use super::logger::Sample;
+use crate::modbus::blocks::Blocks;
 use crate::modbus::server::{OutOfRange, RegisterBank};
 use crate::modbus::tcp_server::{self, Reply, Respond};
 use crate::net::{Health, Limits};
@@ -42,12 +47,16 @@ use crate::net::{Health, Limits};
 pub const VALVE_FAULT_BIT: u8 = 1;
 /// Status register bit set while the watchdog holds the safe O_P.
 pub const WATCHDOG_BIT: u8 = 2;
-/// The status bits the daemon owns.
+/// Status register bit set while the valve's health is in alarm (with `[health]`).
+pub const HEALTH_ALARM_BIT: u8 = 3;
+/// The status bits the loop owns (the health thread owns [`HEALTH_ALARM_BIT`]).
 const STATUS_MASK: u16 = (1 << VALVE_FAULT_BIT) | (1 << WATCHDOG_BIT);
 
 /// The loop's side of the `modbus-server` source: set-points in, V_P and status out, watchdog.
 #[derive(Debug)]
 pub struct Controller {
+    /// The valve's name, in the watchdog's messages.
+    valve: String,
     bank: Arc<RegisterBank>,
     watchdog_s: f64,
     /// The O_P the watchdog sends (`go-to`), or None to hold the last one.
@@ -77,6 +86,7 @@ impl Controller {
         )
         .with_setpoint(initial);
         Controller {
+            valve: super::config::UNNAMED.to_string(),
             bank: Arc::new(bank),
             watchdog_s: cfg.watchdog_s,
             safe_pct,
@@ -85,6 +95,14 @@ impl Controller {
             last_write_t_s: 0.0,
             tripped: false,
             trips: 0,
+        }
+    }
+
+    /// The same controller for the valve `name` (in its messages).
+    pub fn named(self, name: &str) -> Controller {
+        Controller {
+            valve: name.to_string(),
+            ..self
         }
     }
 
@@ -104,6 +122,7 @@ impl Controller {
             if self.tripped {
                 self.tripped = false;
                 tracing::warn!(
+                    valve = %self.valve,
                     "watchdog: set-point writes resumed at t = {t_s:.2} s, following the process \
                      controller again (O_P {setpoint:.2} %)"
                 );
@@ -115,6 +134,7 @@ impl Controller {
                 self.op_pct = safe;
             }
             tracing::warn!(
+                valve = %self.valve,
                 "watchdog: no set-point from the process controller for {:.2} s at t = {t_s:.2} s, \
                  sending the safe O_P {:.2} %",
                 self.watchdog_s,
@@ -142,22 +162,17 @@ impl Controller {
     }
 }
 
-/// A process controller's connection: every request is answered from the bank at once.
-struct Controlled(Arc<RegisterBank>);
+/// A process controller's connection: every request is answered from the banks at once.
+struct Controlled(Arc<Blocks>);
 
 impl Respond for Controlled {
-    fn respond(&mut self, request: &Request<'_>) -> Reply {
+    fn respond(&mut self, _unit: u8, request: &Request<'_>) -> Reply {
         Reply::Answer(self.0.handle(request), Duration::ZERO)
     }
 }
 
-/// Serves `bank` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
-pub async fn serve(
-    listener: TcpListener,
-    bank: Arc<RegisterBank>,
-    limits: Limits,
-    health: Arc<Health>,
-) {
+/// Serves `banks` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
+pub async fn serve(listener: TcpListener, bank: Arc<Blocks>, limits: Limits, health: Arc<Health>) {
     let what = "Modbus server for the process controller";
     tcp_server::serve(what, listener, limits, health, move |peer| {
         tracing::info!("process controller connected from {peer}");

@@ -16,7 +16,7 @@ use super::exporter::{self, LoopMetrics};
 use super::hil;
 use super::source::Source;
 use super::DaemonError;
-use crate::modbus::server::RegisterBank;
+use crate::modbus::blocks::Blocks;
 use crate::net::{Health, Limits};
 
 /// One bound listening socket, what it serves, its limits and its health.
@@ -30,23 +30,26 @@ struct Served<T> {
 
 /// The listening sockets of a daemon, bound, with what each serves.
 pub(super) struct Listeners {
-    modbus: Option<Served<Arc<RegisterBank>>>,
+    modbus: Option<Served<Arc<Blocks>>>,
     exporter: Option<Served<LoopMetrics>>,
 }
 
 impl Listeners {
-    /// Binds the Modbus server (when `source`, the first valve's, serves a bank) and the metrics endpoint (when
-    /// there are `metrics`).
+    /// Binds the Modbus server (when `sources`, the valves' in order, serve banks: one block
+    /// each) and the metrics endpoint (when there are `metrics`).
     pub(super) fn bind(
         config: &Config,
-        source: Option<&Source>,
+        sources: &[Source],
         metrics: Option<&LoopMetrics>,
     ) -> Result<Listeners, DaemonError> {
-        let served = source
-            .and_then(Source::served_bank)
-            .zip(config.controller_source());
+        let banks: Vec<_> = sources
+            .iter()
+            .filter_map(Source::served_bank)
+            .cloned()
+            .collect();
+        let served = config.controller_source().filter(|_| !banks.is_empty());
         let modbus = match served {
-            Some((bank, source_cfg)) => {
+            Some(source_cfg) => {
                 let cfg = &source_cfg.modbus_server;
                 let (listener, addr) = bind("[source.modbus-server] listen", cfg.listen.0)?;
                 Some(Served {
@@ -54,7 +57,7 @@ impl Listeners {
                     addr,
                     limits: cfg.limits(),
                     health: Arc::default(),
-                    what: Arc::clone(bank),
+                    what: Arc::new(Blocks::new(banks, cfg.block_size)),
                 })
             }
             None => None,

@@ -46,7 +46,9 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let period = config.loop_.period();
     // Sockets are bound before the valves are opened, so a taken port stops the start first.
     let mut sources: Vec<Source> = (config.valves.iter())
-        .map(|v| Source::new(config.source_of(v), &config.safety, period.as_secs_f64()))
+        .map(|v| {
+            Source::new(config.source_of(v), &config.safety, period.as_secs_f64()).named(v.label())
+        })
         .collect();
     let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
     let metrics = config
@@ -54,7 +56,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .as_ref()
         .map(|_| LoopMetrics::new(&names, config.health.is_some()))
         .transpose()?;
-    let listeners = Listeners::bind(&config, sources.first(), metrics.as_ref())?;
+    let listeners = Listeners::bind(&config, &sources, metrics.as_ref())?;
     // The backends are opened on the loop thread, inside the runtime that will drive their I/O;
     // the rest of the loop is handed over once they are open, so a valve that cannot be reached
     // stops the start before any log file is created.
@@ -75,7 +77,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
-    let health = start_health(&config, &dir, metrics.as_ref())?;
+    let health = start_health(&config, &dir, metrics.as_ref(), &sources)?;
     let mut lanes = Vec::with_capacity(config.valves.len());
     let mut loggers = Vec::with_capacity(config.valves.len());
     for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
@@ -130,11 +132,13 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     })
 }
 
-/// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`.
+/// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, and the
+/// alarm bit in the status word of each valve a process controller drives (`sources`).
 fn start_health(
     config: &Config,
     dir: &std::path::Path,
     metrics: Option<&LoopMetrics>,
+    sources: &[Source],
 ) -> Result<Option<health::Health>, DaemonError> {
     let Some(cfg) = &config.health else {
         return Ok(None);
@@ -164,6 +168,7 @@ fn start_health(
                 .map_or("health.csv".into(), |n| format!("health-{n}.csv")),
             baseline_model,
             metrics: metrics.and_then(|m| m.health(i)),
+            status: sources.get(i).and_then(Source::served_bank).cloned(),
         });
     }
     health::start(cfg, dir, period_s, watched).map(Some)

@@ -53,6 +53,17 @@ impl Source {
         }
     }
 
+    /// The same source for the valve `name` (a controller names it in its messages).
+    pub fn named(self, name: &str) -> Source {
+        match self.kind {
+            Kind::Controller(c) => Source {
+                kind: Kind::Controller(c.named(name)),
+                ..self
+            },
+            _ => self,
+        }
+    }
+
     /// The O_P at loop time `t_s` (s from the first cycle), clamped; `None` once a replay is over.
     pub fn op_at(&mut self, t_s: f64) -> Option<f64> {
         let raw = match &mut self.kind {

@@ -16,24 +16,30 @@
 //! `disconnected`), the link is reopened in the background of later cycles (also when the
 //! device was not there at start, unless `--require-device`), and the number of reconnections
 //! goes into the summary. A real device runs on its own clock, so slots the loop
-//! skipped are simply not sent.
+//! skipped are simply not sent. Valves on one serial bus ([`Backend::open_all`]) share one link:
+//! the port is opened once, each valve addresses its slave id, the bus budget is checked (and
+//! logged) once for their sum, and each valve's cycle deadline is its share of the period
+//! ([`crate::modbus::budget::BusBudget::deadlines`]), so a device that does not answer costs
+//! its own share and its own rows only.
 //!
 //! The `emulated` backend steps a [`crate::model::Valve`] once per slot, in real time: slots the
 //! loop skipped are stepped with the O_P the valve was holding, so the emulated valve never falls
 //! behind the clock, and the log (which shows that held O_P in skipped rows) replays through
 //! [`crate::model::Valve::simulate`] to the log's precision. It starts at rest at its first O_P
 //! (`reset(op0, op0)`). Optional Gaussian measurement noise is added to the reported V_P only.
-//! A dead-time drift (`dead_time_drift_s_per_h`) delays O_P before the model by a time that
-//! grows with loop time up to `dead_time_drift_max_s`: a valve wearing over hours, for the
-//! live health check to notice.
+//! A drift ([`crate::model::drift`]: `dead_time_drift_s_per_h`, `friction_band_drift_pct_per_h`)
+//! wears the model with loop time, slot by slot: a valve wearing over hours, for the live health
+//! check to notice.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::config::{ValveConfig, ValveKind};
+use std::time::Duration;
+
+use super::config::{bus, ValveConfig, ValveKind};
 use crate::modbus::client::{Link, ModbusValve, OpenError, MAX_BACKOFF};
-use crate::model::{DelayLine, ModelError, Valve};
+use crate::model::{Drift, ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
 pub use crate::modbus::client::Fault;
@@ -82,16 +88,7 @@ impl Backend {
                 let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
                 // The bus budget is logged by its own check, once.
                 valve.check_budget()?;
-                match valve.connect_now().await {
-                    Ok(()) => {}
-                    Err(e) if require_device => return Err(e.into()),
-                    Err(e) => tracing::warn!(
-                        "{e}; running without it: cycles are logged as `disconnected` and the \
-                         link is retried (every {} s at most) until the device answers \
-                         (--require-device stops instead)",
-                        MAX_BACKOFF.as_secs()
-                    ),
-                }
+                connect(&mut valve, require_device).await?;
                 Ok(Backend::Modbus(Box::new(valve)))
             }
             ValveKind::Emulated => {
@@ -109,19 +106,64 @@ impl Backend {
                 } else {
                     None
                 };
-                let drift = (e.dead_time_drift_s_per_h > 0.0).then(|| Drift {
-                    line: DelayLine::with_capacity(e.dead_time_drift_max_s, period_s),
-                    per_slot_s: e.dead_time_drift_s_per_h / 3600.0 * period_s,
-                    period_s,
-                });
+                let valve = Valve::new(&spec, period_s)?;
+                let drift = Drift::new(&e.drift(), &valve)?;
                 Ok(Backend::Emulated(Box::new(Emulated {
-                    valve: Valve::new(&spec, period_s)?,
+                    valve,
                     last: None,
                     noise,
                     drift,
                 })))
             }
         }
+    }
+
+    /// Opens every valve of `cfgs`, in order (see [`Backend::open`]); valves that share a
+    /// serial port share one link, opened once, with the bus budget checked for all of them and
+    /// the cycle deadline split between them.
+    pub async fn open_all(
+        cfgs: &[ValveConfig],
+        period_s: f64,
+        require_device: bool,
+    ) -> Result<Vec<Backend>, BackendError> {
+        let buses = bus::buses(cfgs);
+        let mut backends: Vec<Backend> = Vec::with_capacity(cfgs.len());
+        for (i, cfg) in cfgs.iter().enumerate() {
+            let on_bus = buses.iter().find(|(_, m)| m.contains(&i));
+            let (Some((port, members)), Some(rtu)) = (on_bus, &cfg.rtu) else {
+                backends.push(Backend::open(cfg, period_s, require_device).await?);
+                continue;
+            };
+            let budget = bus::budget(cfgs, port, members, period_s);
+            let timeouts: Vec<Option<f64>> = (members.iter())
+                .map(|&j| cfgs[j].rtu.as_ref().and_then(|l| l.timeout_ms))
+                .collect();
+            let deadlines = budget.deadlines(&timeouts).map_err(|message| {
+                BackendError::Modbus(OpenError::Setting {
+                    section: "valve.modbus-rtu",
+                    key: "timeout_ms",
+                    message,
+                })
+            })?;
+            let at = members.iter().position(|&j| j == i).unwrap_or(0);
+            let link = Link::Rtu(rtu.clone());
+            let first = match backends.get(members[0]) {
+                Some(Backend::Modbus(m)) if at > 0 => Some(m),
+                _ => None,
+            };
+            let mut valve = match first {
+                Some(first) => first.sharing(link, cfg.registers, period_s)?,
+                None => {
+                    budget.check().map_err(OpenError::from)?;
+                    let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
+                    connect(&mut valve, require_device).await?;
+                    valve
+                }
+            };
+            valve.set_timeout(Duration::from_secs_f64(deadlines[at]));
+            backends.push(Backend::Modbus(Box::new(valve)));
+        }
+        Ok(backends)
     }
 
     /// Sends `op_pct` as the O_P of loop slot `k` and returns the valve position V_P (%).
@@ -167,6 +209,24 @@ impl Backend {
     }
 }
 
+/// Connects `valve` now; a device that is not there is an error with `require_device`,
+/// otherwise the valve starts disconnected and its cycles retry the link.
+async fn connect(valve: &mut ModbusValve, require_device: bool) -> Result<(), BackendError> {
+    match valve.connect_now().await {
+        Ok(()) => Ok(()),
+        Err(e) if require_device => Err(e.into()),
+        Err(e) => {
+            tracing::warn!(
+                "{e}; running without it: cycles are logged as `disconnected` and the link is \
+                 retried (every {} s at most) until the device answers (--require-device stops \
+                 instead)",
+                MAX_BACKOFF.as_secs()
+            );
+            Ok(())
+        }
+    }
+}
+
 /// The emulated valve: a model, the last slot it was stepped to, and the noise generator.
 #[derive(Debug)]
 pub struct Emulated {
@@ -177,15 +237,6 @@ pub struct Emulated {
     drift: Option<Drift>,
 }
 
-/// The growing extra dead time of a wearing valve.
-#[derive(Debug)]
-struct Drift {
-    line: DelayLine,
-    /// Growth per slot, s.
-    per_slot_s: f64,
-    period_s: f64,
-}
-
 impl Emulated {
     /// Steps the model through slot `k` (holding the previous O_P over skipped slots).
     fn step_to(&mut self, op_pct: f64, k: u64) -> f64 {
@@ -193,7 +244,7 @@ impl Emulated {
             None => {
                 self.valve.reset(op_pct, op_pct);
                 if let Some(d) = &mut self.drift {
-                    d.line.reset(op_pct);
+                    d.reset(op_pct);
                 }
             }
             Some((last_k, held)) => {
@@ -210,19 +261,12 @@ impl Emulated {
         }
     }
 
-    /// One step of the model in slot `k`, through the drift's delay when there is one.
+    /// One step of the model in slot `k`, worn by the drift when there is one.
     fn step_model(&mut self, op_pct: f64, k: u64) -> f64 {
-        let op = match &mut self.drift {
-            Some(d) => {
-                // Whole samples: the model sees only O_Ps that were sent, never a blend (a
-                // blend that changes every slot would look like a new step to pin-cart II).
-                d.line
-                    .set_samples((d.per_slot_s * k as f64 / d.period_s) as usize);
-                d.line.push(op_pct)
-            }
-            None => op_pct,
-        };
-        self.valve.step(op)
+        match &mut self.drift {
+            Some(d) => d.step(&mut self.valve, op_pct, k),
+            None => self.valve.step(op_pct),
+        }
     }
 }
 

@@ -6,6 +6,11 @@
 //! the Modbus serial-line guide prescribes), and the device's turnaround (its response time). A
 //! cycle is the sum over the plan's transactions. The verdict refuses a rate the link cannot
 //! carry and flags a thin margin; it is computed once at start-up, not measured.
+//!
+//! Several valves on one serial bus ([`BusBudget`]) take turns on the wire within each cycle:
+//! the bus's cycle is the sum of theirs, and that sum must fit the period. Each valve's cycle
+//! deadline is then a share of the period ([`BusBudget::deadlines`]), so a valve that does not
+//! answer costs its own share and never holds the others past the cycle.
 
 use super::link::RtuLink;
 use super::plan::Plan;
@@ -35,6 +40,28 @@ pub enum Verdict {
     Thin,
     /// Does not fit.
     TooSlow,
+}
+
+impl Verdict {
+    /// Logs a budget that fits, `described`: a warning when the margin is thin.
+    fn log(self, described: &str) {
+        if self == Verdict::Thin {
+            tracing::warn!("thin bus margin: {described}");
+        } else {
+            tracing::info!("bus budget: {described}");
+        }
+    }
+
+    /// The verdict on a cycle taking `usage` of the period.
+    fn of(usage: f64) -> Verdict {
+        if usage > 1.0 {
+            Verdict::TooSlow
+        } else if usage > THIN_USAGE {
+            Verdict::Thin
+        } else {
+            Verdict::Fits
+        }
+    }
 }
 
 /// The wire time of one cycle on an RTU line.
@@ -112,14 +139,7 @@ impl Budget {
 
     /// Fits, thin or too slow.
     pub fn verdict(&self) -> Verdict {
-        let u = self.usage();
-        if u > 1.0 {
-            Verdict::TooSlow
-        } else if u > THIN_USAGE {
-            Verdict::Thin
-        } else {
-            Verdict::Fits
-        }
+        Verdict::of(self.usage())
     }
 
     /// The figures in one line.
@@ -171,15 +191,146 @@ impl Budget {
                     self.max_rate_hz().floor()
                 )))
             }
-            Verdict::Thin => {
-                tracing::warn!("thin bus margin: {}", self.describe());
-                Ok(self)
-            }
-            Verdict::Fits => {
-                tracing::info!("bus budget: {}", self.describe());
+            fits => {
+                fits.log(&self.describe());
                 Ok(self)
             }
         }
+    }
+}
+
+/// One cycle of every valve on one serial bus.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BusBudget {
+    /// The serial port.
+    pub port: String,
+    /// Each valve's name and budget, in the order they transact.
+    pub valves: Vec<(String, Budget)>,
+    /// The whole bus's cycle, s.
+    pub cycle_s: f64,
+    /// Loop period, s.
+    pub period_s: f64,
+}
+
+impl BusBudget {
+    /// The bus on `port` carrying `valves` (name and budget, for one loop period) in turn.
+    pub fn new(port: &str, valves: Vec<(String, Budget)>) -> BusBudget {
+        let cycle_s = valves.iter().map(|(_, b)| b.cycle_s).sum();
+        let period_s = valves.first().map_or(1.0, |(_, b)| b.period_s);
+        BusBudget {
+            port: port.to_string(),
+            valves,
+            cycle_s,
+            period_s,
+        }
+    }
+
+    /// Bus cycle over period.
+    pub fn usage(&self) -> f64 {
+        self.cycle_s / self.period_s
+    }
+
+    /// The figures in one line.
+    pub fn describe(&self) -> String {
+        let parts: Vec<String> = (self.valves.iter())
+            .map(|(name, b)| {
+                let fcs: Vec<String> = (b.transactions.iter())
+                    .map(|t| format!("FC {}", t.function_code))
+                    .collect();
+                format!("{name} {:.1} ms ({})", b.cycle_s * 1e3, fcs.join(" + "))
+            })
+            .collect();
+        let (baud, bits) = self
+            .valves
+            .first()
+            .map_or((0, 0), |(_, b)| (b.baud, b.bits_per_char));
+        format!(
+            "{} valves on {} take {} = {:.1} ms on the wire per cycle at {baud} baud, {bits} \
+             bits/char = {:.0} % of the {:.1} ms loop period; the bus carries at most {:.1} Hz",
+            self.valves.len(),
+            self.port,
+            parts.join(" + "),
+            self.cycle_s * 1e3,
+            self.usage() * 100.0,
+            self.period_s * 1e3,
+            1.0 / self.cycle_s,
+        )
+    }
+
+    /// `Ok` unless the bus's cycle does not fit the period, with what to change; logs the
+    /// budget (a warning when the margin is thin).
+    pub fn check(self) -> Result<BusBudget, BudgetError> {
+        match Verdict::of(self.usage()) {
+            Verdict::TooSlow => {
+                let several: Vec<&str> = (self.valves.iter())
+                    .filter(|(_, b)| b.transactions.len() > 1)
+                    .map(|(name, _)| name.as_str())
+                    .collect();
+                let fc23 = if several.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        ", set [valve.registers] fc23 = true for {}",
+                        several.join(", ")
+                    )
+                };
+                Err(BudgetError(format!(
+                    "{}: refusing {:.1} Hz (raise [valve.modbus-rtu] baud of every valve on {}{fc23}, lower [loop] rate_hz to {:.0} or less, or put fewer valves on this bus)",
+                    self.describe(),
+                    1.0 / self.period_s,
+                    self.port,
+                    (1.0 / self.cycle_s).floor()
+                )))
+            }
+            fits => {
+                fits.log(&self.describe());
+                Ok(self)
+            }
+        }
+    }
+
+    /// Each valve's cycle deadline, s, from its `timeout_ms` (None: not given). The valves
+    /// transact one after the other, so their deadlines add up: a valve with `timeout_ms`
+    /// keeps it, and the others share what is left of 80 % of the period (all of it when the
+    /// bus needs more than 80 %) in proportion to their wire time, so each can finish a normal
+    /// cycle and all of them together, every one timing out, still end within the period.
+    /// Refused when the given deadlines add up to more than the period, or leave another valve
+    /// less than its wire time.
+    pub fn deadlines(&self, timeouts_ms: &[Option<f64>]) -> Result<Vec<f64>, String> {
+        let given: f64 = timeouts_ms.iter().flatten().sum::<f64>() / 1e3;
+        let period_ms = self.period_s * 1e3;
+        if given > self.period_s {
+            return Err(format!(
+                "the timeout_ms of the valves on {} add up to {:.1} ms, more than the {period_ms:.1} ms loop period: a valve that does not answer would hold the others past the cycle; lower them, or leave them out to share the period",
+                self.port,
+                given * 1e3
+            ));
+        }
+        let share = if self.usage() <= crate::modbus::client::DEFAULT_TIMEOUT_SHARE {
+            crate::modbus::client::DEFAULT_TIMEOUT_SHARE
+        } else {
+            1.0
+        };
+        let wire: Vec<f64> = self.valves.iter().map(|(_, b)| b.cycle_s).collect();
+        let open: f64 = (wire.iter().zip(timeouts_ms))
+            .filter(|(_, t)| t.is_none())
+            .map(|(w, _)| w)
+            .sum();
+        let left = share * self.period_s - given;
+        if open > 0.0 && left < open {
+            return Err(format!(
+                "the timeout_ms given on {} leave {:.1} ms of the {period_ms:.1} ms loop period to the valves without one, which need {:.1} ms on the wire: lower the timeouts given, or give every valve its own",
+                self.port,
+                left.max(0.0) * 1e3,
+                open * 1e3
+            ));
+        }
+        Ok((wire.iter().zip(timeouts_ms))
+            .map(|(w, t)| match t {
+                Some(ms) => ms / 1e3,
+                None => left * w / open,
+            })
+            .collect())
     }
 }
 
@@ -267,5 +418,67 @@ mod tests {
         assert!((b.usage() - 0.76).abs() < 0.01);
         assert_eq!(b.verdict(), Verdict::Thin);
         assert!(b.check().is_ok());
+    }
+
+    fn bus(baud: u32, period_s: f64, plans: &[&Plan]) -> BusBudget {
+        let valves = (plans.iter().enumerate())
+            .map(|(i, p)| (format!("v{i}"), Budget::rtu(&link(baud), p, period_s)))
+            .collect();
+        BusBudget::new("/dev/ttyS9", valves)
+    }
+
+    #[test]
+    fn a_bus_adds_its_valves_up_and_names_what_to_change() {
+        let default = Plan::new(&RegisterMap::default());
+        // An FC 23 valve and an FC 16 + FC 3 one at 115200 8E1: 6.6 + 12.2 ms, too slow.
+        let b = bus(115200, 0.01, &[&fc23(), &default]);
+        assert!(
+            (b.cycle_s - 0.006_600_7 - 0.012_246_5).abs() < 1e-6,
+            "{}",
+            b.cycle_s
+        );
+        let e = b.check().unwrap_err().to_string();
+        assert!(
+            e.starts_with("bus budget: 2 valves on /dev/ttyS9 take v0 6.6 ms (FC 23) + v1 12.2 ms (FC 16 + FC 3) = 18.8 ms on the wire per cycle at 115200 baud, 11 bits/char = 188 % of the 10.0 ms loop period; the bus carries at most 53.1 Hz: refusing 100.0 Hz"),
+            "{e}"
+        );
+        assert!(
+            e.ends_with("(raise [valve.modbus-rtu] baud of every valve on /dev/ttyS9, set [valve.registers] fc23 = true for v1, lower [loop] rate_hz to 53 or less, or put fewer valves on this bus)"),
+            "{e}"
+        );
+        // One FC 23 valve fits 100 Hz, two do not even at 460800 baud (the fixed 1.75 ms
+        // silences and the turnarounds take 9 ms of the 10), two fit 50 Hz at 115200.
+        assert!(bus(115200, 0.01, &[&fc23()]).check().is_ok());
+        assert!(bus(460800, 0.01, &[&fc23(), &fc23()]).check().is_err());
+        assert!(bus(115200, 0.02, &[&fc23(), &fc23()]).check().is_ok());
+    }
+
+    #[test]
+    fn deadlines_share_the_period_by_wire_time() {
+        // Two FC 23 valves at 115200 baud and 50 Hz: 6.6 ms each of the 20 ms (66 %), so
+        // they share 80 % of the period, 8 ms each.
+        let b = bus(115200, 0.02, &[&fc23(), &fc23()]);
+        let d = b.deadlines(&[None, None]).unwrap();
+        assert!(
+            (d[0] - 0.008).abs() < 1e-9 && (d[1] - 0.008).abs() < 1e-9,
+            "{d:?}"
+        );
+        // A given deadline is kept; the other gets what is left of 16 ms.
+        let d = b.deadlines(&[Some(9.0), None]).unwrap();
+        assert!(
+            (d[0] - 0.009).abs() < 1e-9 && (d[1] - 0.007).abs() < 1e-9,
+            "{d:?}"
+        );
+        let e = b.deadlines(&[Some(12.0), Some(9.0)]).unwrap_err();
+        assert!(
+            e.contains("add up to 21.0 ms, more than the 20.0 ms loop period"),
+            "{e}"
+        );
+        let e = b.deadlines(&[Some(12.0), None]).unwrap_err();
+        assert!(e.contains("leave 4.0 ms of the 20.0 ms loop period to the valves without one, which need 6.6 ms"), "{e}");
+        // A bus that needs more than 80 % shares the whole period.
+        let thin = bus(115200, 0.015, &[&fc23(), &fc23()]);
+        let d = thin.deadlines(&[None, None]).unwrap();
+        assert!((d[0] - 0.0075).abs() < 1e-9, "{d:?}");
     }
 }

@@ -83,6 +83,14 @@ impl Link {
         }
     }
 
+    /// The unit (TCP) or slave (RTU) id the valve answers at.
+    pub fn unit_id(&self) -> u8 {
+        match self {
+            Link::Tcp(l) => l.unit_id,
+            Link::Rtu(l) => l.slave_id,
+        }
+    }
+
     /// The configured deadline of a cycle, ms.
     pub fn timeout_ms(&self) -> Option<f64> {
         match self {

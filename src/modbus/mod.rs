@@ -15,10 +15,12 @@
 //! - [`exception`]: Modbus exception codes in words.
 //! - [`server`]: [`server::RegisterBank`], the device side (used by `sim-device`, and by a
 //!   Modbus server that the loop can offer to a process controller).
+//! - [`blocks`]: several banks on one server, a block of addresses each (one per valve).
 //! - [`tcp_server`]: a Modbus TCP server that stays up, answering from a [`tcp_server::Respond`].
 //!
 //! Not here: the loop, its clock and its log (`daemon`), and any valve model (`model`).
 
+pub mod blocks;
 pub mod budget;
 pub mod client;
 pub mod exception;

@@ -3,9 +3,9 @@
 //!
 //! Connections come from [`crate::net::serve`] (accept errors retried, connections capped).
 //! Each connection reads MBAP frames (transaction id, protocol 0, length, unit id, PDU),
-//! decodes the request with tokio-modbus, asks its [`Respond`] what to do and writes the
-//! reply with the request's transaction and unit id. A connection that sends no request for
-//! [`Limits::idle_timeout`] is closed (and counted in [`Health`]). Any unit id is answered.
+//! decodes the request with tokio-modbus, asks its [`Respond`] what to do with it and the unit
+//! id it is for, and writes the reply with the request's transaction and unit id. A connection
+//! that sends no request for [`Limits::idle_timeout`] is closed (and counted in [`Health`]).
 //!
 //! Written here rather than with tokio-modbus's `server::tcp::Server` because that one stops
 //! serving at the first `accept()` error (and cancels every open connection when it returns),
@@ -40,8 +40,8 @@ pub enum Reply {
 
 /// Answers the requests of one connection, in order.
 pub trait Respond: Send + 'static {
-    /// The reply to `request`.
-    fn respond(&mut self, request: &Request<'_>) -> Reply;
+    /// The reply to `request`, sent to unit id `unit`.
+    fn respond(&mut self, unit: u8, request: &Request<'_>) -> Reply;
 }
 
 /// Serves Modbus TCP on `listener` forever (drop the task to stop); `what` names it in the log,
@@ -105,7 +105,7 @@ async fn connection<R: Respond>(
         stream.read_exact(&mut pdu).await?;
         let fc = pdu[0];
         let reply = match Request::try_from(Bytes::from(pdu)) {
-            Ok(request) => responder.respond(&request),
+            Ok(request) => responder.respond(header[6], &request),
             Err(_) => Reply::Answer(Err(ExceptionCode::IllegalFunction), Duration::ZERO),
         };
         let (result, delay) = match reply {
@@ -136,7 +136,7 @@ mod tests {
     struct Bank(Arc<RegisterBank>);
 
     impl Respond for Bank {
-        fn respond(&mut self, request: &Request<'_>) -> Reply {
+        fn respond(&mut self, _unit: u8, request: &Request<'_>) -> Reply {
             Reply::Answer(self.0.handle(request), Duration::ZERO)
         }
     }

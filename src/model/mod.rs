@@ -18,6 +18,7 @@
 
 mod checks;
 mod delay;
+pub mod drift;
 mod effects;
 mod fopdt;
 mod physical;
@@ -29,6 +30,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 pub use delay::DelayLine;
+pub use drift::{Drift, DriftSpec};
 pub use effects::Effects;
 pub use fopdt::FopdtParams;
 pub use physical::PhysicalParams;
@@ -435,6 +437,15 @@ impl Valve {
             Core::Physical(_) => {}
         }
         self.effects.output(clamped)
+    }
+
+    /// Widens a pin-cart model's cart, its friction band, by `extra_pct` % of travel over the
+    /// model's (see [`drift`]); other models have no band and are left alone.
+    #[inline]
+    pub fn widen_band(&mut self, extra_pct: f64) {
+        if let Core::PinCart(c) = &mut self.core {
+            c.widen(extra_pct);
+        }
     }
 
     /// Runs the whole O_P sequence from rest at (`op[0]`, `vp0`), writing V_P into `out`.

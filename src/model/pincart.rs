@@ -92,6 +92,9 @@ enum PinLaw {
 pub(crate) struct PinCart {
     law: PinLaw,
     half: f64,
+    /// The half-width the cart was built with; eq. (7) crosses it in the crossing time, so a
+    /// wider cart (a drifting friction band) takes longer in proportion.
+    half0: f64,
     /// Stick-slip: how far beyond a side the pin must push a cart that has stopped, %.
     breakaway: f64,
     /// How far beyond the cart the pin may go on while a travel stop holds the cart, %.
@@ -151,6 +154,7 @@ impl PinCart {
         PinCart {
             law,
             half: backlash / 2.0,
+            half0: backlash / 2.0,
             breakaway: 0.0,
             windup: 0.0,
             stuck: false,
@@ -164,6 +168,7 @@ impl PinCart {
     pub(crate) fn reset(&mut self, vp0: f64) {
         self.v = vp0;
         self.y = vp0;
+        self.half = self.half0;
         self.stuck = false;
     }
 
@@ -261,8 +266,21 @@ impl PinCart {
             // its far side. A crossing time of 0 means no apparent backlash. The slower chamber
             // of an opening-dependent slowdown also takes longer to cross the friction band.
             let t = (p.crossing_time_s(self.v) * (1.0 + slowdown * self.v / 100.0)).max(self.dt);
-            along((2.0 * self.half * self.dt / t).min(self.half - along(rel)))
+            along((2.0 * self.half0 * self.dt / t).min(self.half - along(rel)))
         }
+    }
+
+    /// Widens the cart (the friction band) by `extra_pct` over its built width. A pin that
+    /// pushes a side stays on it (the pressure that holds the stem against the larger friction),
+    /// so the valve does not move; the wider band shows on the next reversal.
+    #[inline]
+    pub(crate) fn widen(&mut self, extra_pct: f64) {
+        let half = self.half0 + extra_pct.max(0.0) / 2.0;
+        let rel = self.y - self.v;
+        if rel.abs() >= self.half - 1e-12 {
+            self.y = self.v + half.copysign(rel);
+        }
+        self.half = half;
     }
 
     /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart,

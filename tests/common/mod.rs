@@ -4,6 +4,22 @@
 pub mod sim;
 pub mod tools;
 
+use std::path::{Path, PathBuf};
+
+/// The log files of `dir` whose names start with `prefix` (`vb-NAME-`), oldest first.
+pub fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            name.starts_with(prefix) && name.ends_with(".csv")
+        })
+        .collect();
+    files.sort();
+    files
+}
+
 /// Panics if `text`, meant for people, holds a number with a float artefact: seven or more
 /// decimals (`0.09999999999999999`, `49.400000000000006`).
 pub fn assert_for_people(text: &str) {

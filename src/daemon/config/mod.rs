@@ -19,6 +19,7 @@
 //!
 //! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
 
+pub mod bus;
 mod health;
 mod source;
 mod valve;
@@ -35,7 +36,7 @@ pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
     SineConfig, SourceConfig, SourceKind, StepsConfig,
 };
-pub use valve::{EmulatedConfig, ValveConfig, ValveKind};
+pub use valve::{EmulatedConfig, ValveConfig, ValveKind, UNNAMED};
 
 /// The default configuration, `config/emulated.toml`, embedded so default == file by construction.
 pub const DEFAULT_TOML: &str = include_str!("../../../config/emulated.toml");
@@ -329,21 +330,20 @@ impl Config {
         self.loop_.check_in(&c)?;
         self.source.check_in(&c, &self.loop_)?;
         valve::check_all(&mut self.valves, &c, &self.loop_)?;
-        if self.valves.len() > 1 {
-            if let Some(v) =
-                (self.valves.iter()).find(|v| self.source_of(v).kind == SourceKind::ModbusServer)
-            {
-                let at = if v.source.is_some() {
-                    "valve.source"
-                } else {
-                    "source"
-                };
-                return Err(c.bad(
-                    at,
-                    "kind",
-                    format!("valve `{}`: a process controller (kind = \"modbus-server\") drives one valve per daemon; give the other valves generated sources or run one daemon per valve", v.label()),
-                ));
-            }
+        if let Some(v) = (self.valves.iter()).find(|v| {
+            v.source
+                .as_ref()
+                .is_some_and(|s| s.kind == SourceKind::ModbusServer)
+        }) {
+            return Err(c.bad(
+                "valve.source",
+                "kind",
+                format!("valve `{}`: the process controller's server is the [source] table (kind = \"modbus-server\"), one for every valve it drives: leave this valve's [valve.source] out to have the controller drive it", v.label()),
+            ));
+        }
+        if let Some(s) = self.controller_source() {
+            let driven = self.valves.iter().filter(|v| v.source.is_none()).count();
+            s.modbus_server.check_blocks(&c, driven)?;
         }
         self.safety.check_in(&c)?;
         self.log.check_in(&c)?;
@@ -373,11 +373,11 @@ impl Config {
         valve.source.as_ref().unwrap_or(&self.source)
     }
 
-    /// The source of the process controller, when the (single) valve is driven by one.
+    /// The source of the process controller (`[source]`), when it drives a valve.
     pub fn controller_source(&self) -> Option<&SourceConfig> {
-        (self.valves.first())
+        (self.valves.iter())
             .map(|v| self.source_of(v))
-            .filter(|s| s.kind == SourceKind::ModbusServer)
+            .find(|s| s.kind == SourceKind::ModbusServer)
     }
 }
 

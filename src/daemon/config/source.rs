@@ -139,6 +139,10 @@ pub struct ModbusServerConfig {
     pub max_connections: usize,
     /// A connection without a request for this long is closed, s.
     pub idle_timeout_s: f64,
+    /// With several valves driven by the controller: registers per valve's block; the k-th
+    /// such valve (from 0, in the order of the file) is served at the map's addresses plus
+    /// k × block_size.
+    pub block_size: u16,
 }
 
 impl ModbusServerConfig {
@@ -160,6 +164,7 @@ impl Default for ModbusServerConfig {
             registers: RegisterMap::device_default(),
             max_connections: 8,
             idle_timeout_s: 60.0,
+            block_size: 10,
         }
     }
 }
@@ -403,7 +408,13 @@ impl ModbusServerConfig {
         self.registers.check_in(c.text, c.path, section)?;
         if let Some(st) = self.registers.status {
             let bit = st.setpoint_error_bit;
-            if bit == hil::VALVE_FAULT_BIT || bit == hil::WATCHDOG_BIT {
+            if [
+                hil::VALVE_FAULT_BIT,
+                hil::WATCHDOG_BIT,
+                hil::HEALTH_ALARM_BIT,
+            ]
+            .contains(&bit)
+            {
                 return Err(TomlError::Invalid {
                     path: c.path.to_path_buf(),
                     line: toml_file::line_of(c.text, Some(section), "status")
@@ -411,13 +422,42 @@ impl ModbusServerConfig {
                         .unwrap_or(1),
                     key: format!("{section}.status.setpoint_error_bit"),
                     message: format!(
-                        "{bit} is taken: the daemon reports a valve fault in bit {} and the \
-                         watchdog in bit {} of the status register; use 0 or 3-15",
+                        "{bit} is taken: the daemon reports a valve fault in bit {}, the \
+                         watchdog in bit {} and a health alarm in bit {} of the status \
+                         register; use 0 or 4-15",
                         hil::VALVE_FAULT_BIT,
-                        hil::WATCHDOG_BIT
+                        hil::WATCHDOG_BIT,
+                        hil::HEALTH_ALARM_BIT
                     ),
                 });
             }
+        }
+        Ok(())
+    }
+
+    /// The checks of the blocks of `valves` valves driven by the controller: every register of
+    /// the map inside one block, and every block inside the 65536 addresses.
+    pub(super) fn check_blocks(&self, c: &Check<'_>, valves: usize) -> Result<(), TomlError> {
+        if valves < 2 {
+            return Ok(());
+        }
+        let m = &self.registers;
+        let status = m.status.map(|s| u32::from(s.address) + 1).unwrap_or(0);
+        let top = m.setpoint.span().end.max(m.position.span().end).max(status);
+        let size = u32::from(self.block_size);
+        if top > size {
+            return Err(c.bad(
+                "source.modbus-server",
+                "block_size",
+                format!("{size} registers per valve cannot hold the map of [source.modbus-server.registers], which reaches address {}: set block_size = {top} or more, or move the registers down", top - 1),
+            ));
+        }
+        if size * valves as u32 > 1 << 16 {
+            return Err(c.bad(
+                "source.modbus-server",
+                "block_size",
+                format!("{valves} blocks of {size} registers do not fit the 65536 register addresses: lower block_size"),
+            ));
         }
         Ok(())
     }

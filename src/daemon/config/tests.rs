@@ -271,10 +271,29 @@ fn errors_in_a_later_valve_name_its_line() {
     );
     let e = err("[[valve]]\nname = \"a b\"\n");
     assert!(e.contains("letters, digits"), "{e}");
-    let e = err(
-        "[source]\nkind = \"modbus-server\"\n[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n",
+}
+
+#[test]
+fn a_process_controller_drives_several_valves_from_blocks_that_hold_its_map() {
+    let two =
+        "[source]\nkind = \"modbus-server\"\n[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n";
+    let c = Config::from_toml(two, Path::new("c.toml")).unwrap();
+    assert_eq!(c.controller_source().unwrap().modbus_server.block_size, 10);
+    let e = err(&format!("{two}[source.modbus-server]\nblock_size = 2\n"));
+    assert!(
+        e.starts_with(
+            "c.toml:8: source.modbus-server.block_size: 2 registers per valve cannot hold the map"
+        ),
+        "{e}"
     );
-    assert!(e.contains("drives one valve per daemon"), "{e}");
+    assert!(e.contains("set block_size = 3 or more"), "{e}");
+    let e = err("[[valve]]\nname = \"a\"\n[valve.source]\nkind = \"modbus-server\"\n");
+    assert!(
+        e.starts_with("c.toml:4: valve.source.kind: valve `a`: the process controller's server is the [source] table"),
+        "{e}"
+    );
+    let e = err("[source]\nkind = \"modbus-server\"\n[source.modbus-server.registers]\nstatus = { table = \"holding\", address = 2, setpoint_error_bit = 3 }\n");
+    assert!(e.contains("a health alarm in bit 3"), "{e}");
 }
 
 #[test]
@@ -282,6 +301,62 @@ fn drift_settings_are_checked() {
     let e = err("[valve.emulated]\ndead_time_drift_s_per_h = -0.1\n");
     assert!(
         e.starts_with("c.toml:2: valve.emulated.dead_time_drift_s_per_h"),
+        "{e}"
+    );
+    let e = err("[valve.emulated]\nmodel = \"fopdt\"\nfriction_band_drift_pct_per_h = 1.0\n");
+    assert!(
+        e.starts_with("c.toml:3: valve.emulated.friction_band_drift_pct_per_h: 1 is not allowed: only a pin-cart model"),
+        "{e}"
+    );
+    let e = err("[valve.emulated]\nfriction_band_drift_max_pct = 500.0\n");
+    assert!(
+        e.starts_with("c.toml:2: valve.emulated.friction_band_drift_max_pct: 500 is not allowed"),
+        "{e}"
+    );
+}
+
+#[test]
+fn valves_on_one_serial_port_share_its_line_and_its_period() {
+    let valve = |name: &str, slave: u8, extra: &str| {
+        format!(
+            "[[valve]]\nname = \"{name}\"\nkind = \"modbus-rtu\"\n[valve.modbus-rtu]\nport = \"/dev/ttyS7\"\nbaud = 115200\nslave_id = {slave}\n{extra}[valve.registers]\nfc23 = true\n"
+        )
+    };
+    let bus = |a: &str, b: &str| format!("[loop]\nrate_hz = 50.0\n{a}{b}");
+    let ok = bus(&valve("a", 1, ""), &valve("b", 2, ""));
+    let c = Config::from_toml(&ok, Path::new("c.toml")).unwrap();
+    assert_eq!(
+        bus::buses(&c.valves),
+        vec![("/dev/ttyS7".to_string(), vec![0, 1])]
+    );
+    let e = err(&bus(&valve("a", 1, ""), &valve("b", 1, "")));
+    assert!(
+        e.starts_with(
+            "c.toml:18: valve.modbus-rtu.slave_id: 1 is also valve `a`'s slave id on /dev/ttyS7"
+        ),
+        "{e}"
+    );
+    let e = err(&bus(
+        &valve("a", 1, ""),
+        &valve("b", 2, "parity = \"none\"\n"),
+    ));
+    assert!(
+        e.contains(
+            "valve.modbus-rtu.port: /dev/ttyS7 is also valve `a`'s port, with other line settings"
+        ),
+        "{e}"
+    );
+    let e = err(&bus(
+        &valve("a", 1, "timeout_ms = 12.0\n"),
+        &valve("b", 2, "timeout_ms = 9.0\n"),
+    ));
+    assert!(
+        e.contains("valve.modbus-rtu.timeout_ms: the timeout_ms of the valves on /dev/ttyS7 add up to 21.0 ms, more than the 20.0 ms loop period"),
+        "{e}"
+    );
+    let e = err(&ok.replace("rate_hz = 50.0", "rate_hz = 100.0"));
+    assert!(
+        e.contains("valve.modbus-rtu.port: bus budget: 2 valves on /dev/ttyS7"),
         "{e}"
     );
 }

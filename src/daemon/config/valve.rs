@@ -13,7 +13,7 @@ use serde::Deserialize;
 use super::{Check, LoopConfig, SourceConfig};
 use crate::modbus::link::{RtuLink, TcpLink};
 use crate::modbus::map::RegisterMap;
-use crate::model::{bundled, ModelError, ModelKind, ModelSpec};
+use crate::model::{bundled, DriftSpec, ModelError, ModelKind, ModelSpec};
 use crate::toml_file::{self, TomlError};
 
 /// `[valve]`: which backend, and the settings of each kind.
@@ -96,6 +96,11 @@ pub struct EmulatedConfig {
     pub dead_time_drift_s_per_h: f64,
     /// The most dead time the drift adds, s.
     pub dead_time_drift_max_s: f64,
+    /// The friction band (pin-cart models) widening by this much per hour of loop time, % of
+    /// travel per hour (0 = none).
+    pub friction_band_drift_pct_per_h: f64,
+    /// The most the friction band widens, %.
+    pub friction_band_drift_max_pct: f64,
 }
 
 impl EmulatedConfig {
@@ -104,6 +109,16 @@ impl EmulatedConfig {
         match &self.model_file {
             Some(file) => ModelSpec::load(file),
             None => Ok(bundled(self.model.unwrap_or(ModelKind::Pincart2))),
+        }
+    }
+
+    /// The valve's wear ([`crate::model::drift`]).
+    pub fn drift(&self) -> DriftSpec {
+        DriftSpec {
+            dead_time_drift_s_per_h: self.dead_time_drift_s_per_h,
+            dead_time_drift_max_s: self.dead_time_drift_max_s,
+            friction_band_drift_pct_per_h: self.friction_band_drift_pct_per_h,
+            friction_band_drift_max_pct: self.friction_band_drift_max_pct,
         }
     }
 }
@@ -115,8 +130,10 @@ impl Default for EmulatedConfig {
             model_file: None,
             noise_std_pct: 0.0,
             noise_seed: 1,
-            dead_time_drift_s_per_h: 0.0,
-            dead_time_drift_max_s: 2.0,
+            dead_time_drift_s_per_h: DriftSpec::default().dead_time_drift_s_per_h,
+            dead_time_drift_max_s: DriftSpec::default().dead_time_drift_max_s,
+            friction_band_drift_pct_per_h: DriftSpec::default().friction_band_drift_pct_per_h,
+            friction_band_drift_max_pct: DriftSpec::default().friction_band_drift_max_pct,
         }
     }
 }
@@ -182,14 +199,17 @@ pub(super) fn check_all(
 ) -> Result<(), TomlError> {
     let parts = parts(c.text);
     let several = valves.len() > 1;
-    let mut seen: Vec<String> = Vec::new();
-    for (i, v) in valves.iter_mut().enumerate() {
+    let check_of = |i: usize| {
         let (line_offset, text) = parts.get(i).copied().unwrap_or((0, c.text));
-        let vc = Check {
+        Check {
             text,
             line_offset: c.line_offset + line_offset,
             ..c.under("")
-        };
+        }
+    };
+    let mut seen: Vec<String> = Vec::new();
+    for (i, v) in valves.iter_mut().enumerate() {
+        let vc = check_of(i);
         match &v.name {
             None if several => {
                 return Err(vc.bad(
@@ -216,7 +236,7 @@ pub(super) fn check_all(
             s.check_in(&vc.under("valve."), timing)?;
         }
     }
-    Ok(())
+    super::bus::check(valves, check_of, timing)
 }
 
 impl ValveConfig {
@@ -299,22 +319,6 @@ impl EmulatedConfig {
             100.0,
             "a noise standard deviation in %",
         )?;
-        c.range(
-            t,
-            "dead_time_drift_s_per_h",
-            self.dead_time_drift_s_per_h,
-            0.0,
-            3600.0,
-            "a growth of the dead time in s per hour",
-        )?;
-        c.range(
-            t,
-            "dead_time_drift_max_s",
-            self.dead_time_drift_max_s,
-            0.0,
-            60.0,
-            "the most dead time the drift adds, s",
-        )?;
         if self.model.is_some() && self.model_file.is_some() {
             return Err(c.bad(
                 t,
@@ -330,6 +334,21 @@ impl EmulatedConfig {
                 format!("cannot use model file `{}`: {err} (a model file looks like config/models/pincart2.toml)", file.display()),
             ));
         }
-        Ok(())
+        let model = self
+            .model_spec()
+            .map(|s| s.model)
+            .unwrap_or(ModelKind::Pincart2);
+        match self.drift().violation(model) {
+            Some(v) => Err(c.bad(
+                t,
+                v.key,
+                format!(
+                    "{} is not allowed: {}",
+                    crate::human::num(v.value),
+                    v.allowed
+                ),
+            )),
+            None => Ok(()),
+        }
     }
 }

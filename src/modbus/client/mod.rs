@@ -1,8 +1,11 @@
 //! The Modbus valve client: one cycle = write O_P, read V_P (and status), with a deadline.
 //!
-//! [`ModbusValve`] owns at most one tokio-modbus client context, over TCP or RTU: never more
-//! than one connection per device. Each [`ModbusValve::transact`] runs the cycle's [`Plan`]
-//! under one deadline (`timeout_ms`, by default 80 % of the loop period), because
+//! [`ModbusValve`] drives one device over at most one tokio-modbus client context, over TCP or
+//! RTU: never more than one connection per device. Valves on one serial bus share a single
+//! link ([`ModbusValve::sharing`]: one open port, each valve addressing its own slave id, one
+//! transaction after the other since the loop drives them in turn). Each
+//! [`ModbusValve::transact`] runs the cycle's [`Plan`] under one deadline (`timeout_ms`, by
+//! default 80 % of the loop period, on a shared bus a share of it set by the caller), because
 //! tokio-modbus's async client has no timeout of its own.
 //!
 //! A late or lost reply costs its own cycle only. The link is kept after a timeout, a CRC error
@@ -23,21 +26,19 @@
 //! Not here: retries within a cycle (the next cycle is the retry), fault counting (the loop
 //! counts what it receives), and any notion of the loop's clock.
 
-use std::io;
-use std::net::SocketAddr;
+mod connection;
+
 use std::sync::Arc;
 use std::time::Duration;
 
+use tokio::sync::Mutex;
 use tokio::time::Instant;
-use tokio_modbus::client::{rtu, tcp, Context, Reader, Writer};
-use tokio_modbus::Slave;
 
 use super::budget::{Budget, BudgetError};
-use super::exception;
 pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction};
-use super::wire::{rtu_frame_fault, RtuWire, TcpWire, WireState};
+use connection::Connection;
 
 /// Wait after a failed connection attempt; doubles with each further one, up to [`MAX_BACKOFF`].
 pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
@@ -104,26 +105,15 @@ pub struct Reading {
 
 /// A Modbus positioner driven one cycle at a time (see the module documentation).
 pub struct ModbusValve {
+    /// This valve's link: its unit, its name in the log.
     link: Link,
-    tcp_addr: Option<SocketAddr>,
     map: RegisterMap,
     plan: Plan,
     timeout: Duration,
     budget: Option<Budget>,
-    ctx: Option<Context>,
-    wire: Arc<WireState>,
-    /// The current connection has answered at least once.
-    answered: bool,
-    /// When the device last answered (or the connection opened).
-    last_answer: Instant,
-    /// Why the link is down, for the cycles that find it so.
-    down_because: String,
-    /// Late replies (TCP) counted so far on this connection.
-    late_seen: u64,
-    next_attempt: Instant,
-    backoff: Duration,
-    reconnects: u64,
-    attempts: u64,
+    /// The link, this valve's alone or its bus's. Locked for a transaction; never contended,
+    /// since the valves of a bus take turns on one thread.
+    conn: Arc<Mutex<Connection>>,
     sent_pct: Option<f64>,
 }
 
@@ -134,8 +124,8 @@ impl std::fmt::Debug for ModbusValve {
             .field("link", &self.link)
             .field("map", &self.map)
             .field("timeout", &self.timeout)
-            .field("connected", &self.ctx.is_some())
-            .field("reconnects", &self.reconnects)
+            .field("connected", &self.is_connected())
+            .field("reconnects", &self.reconnects())
             .finish()
     }
 }
@@ -144,6 +134,27 @@ impl ModbusValve {
     /// Checks the settings and the map for a loop of period `period_s`, and works out the
     /// cycle's transactions and (RTU) its bus budget; connects nothing yet.
     pub fn new(link: Link, map: RegisterMap, period_s: f64) -> Result<ModbusValve, OpenError> {
+        ModbusValve::build(link, map, period_s, None)
+    }
+
+    /// Another valve on this valve's serial bus: the same link (opened once, reopened for
+    /// both), `link`'s slave id and deadline, its own map. `link` must name the same port with
+    /// the same line settings (the configuration checks it).
+    pub fn sharing(
+        &self,
+        link: Link,
+        map: RegisterMap,
+        period_s: f64,
+    ) -> Result<ModbusValve, OpenError> {
+        ModbusValve::build(link, map, period_s, Some(Arc::clone(&self.conn)))
+    }
+
+    fn build(
+        link: Link,
+        map: RegisterMap,
+        period_s: f64,
+        conn: Option<Arc<Mutex<Connection>>>,
+    ) -> Result<ModbusValve, OpenError> {
         let section = link.section();
         let violation = match &link {
             Link::Tcp(l) => l.violation(),
@@ -172,23 +183,15 @@ impl ModbusValve {
             }
             Link::Rtu(l) => (None, Some(Budget::rtu(l, &plan, period_s))),
         };
+        let conn =
+            conn.unwrap_or_else(|| Arc::new(Mutex::new(Connection::new(link.clone(), tcp_addr))));
         Ok(ModbusValve {
             link,
-            tcp_addr,
             map,
             plan,
             timeout,
             budget,
-            ctx: None,
-            wire: Arc::default(),
-            answered: false,
-            last_answer: Instant::now(),
-            down_because: "not connected yet".into(),
-            late_seen: 0,
-            next_attempt: Instant::now(),
-            backoff: FIRST_BACKOFF,
-            reconnects: 0,
-            attempts: 0,
+            conn,
             sent_pct: None,
         })
     }
@@ -205,7 +208,8 @@ impl ModbusValve {
     /// valve stays usable: its cycles report `disconnected` and retry with backoff.
     pub async fn connect_now(&mut self) -> Result<(), OpenError> {
         let deadline = Instant::now() + OPEN_TIMEOUT;
-        match self.attempt(deadline).await {
+        let attempt = self.conn.lock().await.attempt(deadline).await;
+        match attempt {
             Ok(()) => Ok(()),
             Err(reason) => Err(match &self.link {
                 Link::Tcp(l) => OpenError::TcpConnect {
@@ -252,19 +256,20 @@ impl ModbusValve {
         self.budget.as_ref()
     }
 
-    /// How many times a cycle (re)opened the link (not counting a connection made at start).
+    /// How many times a cycle (re)opened the link (not counting a connection made at start;
+    /// on a shared bus, the bus's).
     pub fn reconnects(&self) -> u64 {
-        self.reconnects
+        self.conn.try_lock().map_or(0, |c| c.reconnects)
     }
 
-    /// Connection attempts so far (the first one included).
+    /// Connection attempts so far (the first one included; on a shared bus, the bus's).
     pub fn attempts(&self) -> u64 {
-        self.attempts
+        self.conn.try_lock().map_or(0, |c| c.attempts)
     }
 
     /// True while a context is open.
     pub fn is_connected(&self) -> bool {
-        self.ctx.is_some()
+        self.conn.try_lock().is_ok_and(|c| c.is_connected())
     }
 
     /// The set-point the device acknowledged in the last cycle, as it received it, %.
@@ -275,96 +280,6 @@ impl ModbusValve {
     /// A short description for the log.
     pub fn describe(&self) -> String {
         self.link.describe()
-    }
-
-    /// One connection attempt within `deadline`; on failure, the reason, and the next attempt
-    /// waits the backoff (which doubles).
-    async fn attempt(&mut self, deadline: Instant) -> Result<(), String> {
-        self.ctx = None;
-        self.attempts += 1;
-        let allowed = deadline.saturating_duration_since(Instant::now());
-        let wire = Arc::new(WireState::default());
-        let connecting = async {
-            match &self.link {
-                Link::Tcp(l) => {
-                    let addr = self
-                        .tcp_addr
-                        .ok_or_else(|| io::Error::other("no resolved address"))?;
-                    let stream = tokio::net::TcpStream::connect(addr).await?;
-                    // One small request per cycle: latency matters more than throughput.
-                    stream.set_nodelay(true)?;
-                    let wire = TcpWire::new(stream, Arc::clone(&wire));
-                    Ok::<_, io::Error>(tcp::attach_slave(wire, Slave(l.unit_id)))
-                }
-                Link::Rtu(l) => {
-                    let port = super::serial::open(l).map_err(io::Error::from)?;
-                    let wire = RtuWire::new(port, Arc::clone(&wire));
-                    Ok(rtu::attach_slave(wire, Slave(l.slave_id)))
-                }
-            }
-        };
-        match tokio::time::timeout_at(deadline, connecting).await {
-            Ok(Ok(ctx)) => {
-                self.ctx = Some(ctx);
-                self.wire = wire;
-                self.late_seen = 0;
-                self.answered = false;
-                self.last_answer = Instant::now();
-                Ok(())
-            }
-            failed => {
-                self.next_attempt = Instant::now() + self.backoff;
-                self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
-                Err(match failed {
-                    Ok(Err(e)) => e.to_string(),
-                    _ => format!("no connection within {} ms", allowed.as_millis()),
-                })
-            }
-        }
-    }
-
-    /// Drops the link because `why`. It is reopened at once if it had answered (a device that
-    /// restarted), otherwise after the backoff (a device that takes connections but never
-    /// answers on them).
-    fn drop_link(&mut self, why: String) {
-        self.ctx = None;
-        if self.answered {
-            self.next_attempt = Instant::now();
-            self.backoff = FIRST_BACKOFF;
-        } else {
-            self.next_attempt = Instant::now() + self.backoff;
-            self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
-        }
-        self.down_because = why;
-    }
-
-    /// Reopens the link if the backoff allows, within `deadline`.
-    async fn reconnect(&mut self, deadline: Instant) -> Result<(), Fault> {
-        let now = Instant::now();
-        if now < self.next_attempt {
-            return Err(Fault::Disconnected(format!(
-                "{}: {}; next connection attempt in {} ms",
-                self.describe(),
-                self.down_because,
-                (self.next_attempt - now).as_millis()
-            )));
-        }
-        match self.attempt(deadline).await {
-            Ok(()) => {
-                self.reconnects += 1;
-                tracing::info!("{}: connected", self.describe());
-                Ok(())
-            }
-            Err(why) => {
-                self.down_because = format!("cannot connect: {why}");
-                Err(Fault::Disconnected(format!(
-                    "{}: {}; next attempt in {} ms",
-                    self.describe(),
-                    self.down_because,
-                    (self.next_attempt - Instant::now()).as_millis()
-                )))
-            }
-        }
     }
 
     /// Writes `op_pct` as the set-point and returns the position (and status).
@@ -381,13 +296,17 @@ impl ModbusValve {
             .decode("set-point", &setpoint, self.map.word_order)
             .map_err(|e| Fault::Error(e.to_string()))?;
         let deadline = Instant::now() + self.timeout;
-        if self.ctx.is_none() {
-            self.reconnect(deadline).await?;
+        let mut conn = self.conn.lock().await;
+        if !conn.is_connected() {
+            conn.reconnect(&self.link, deadline).await?;
         }
         let mut replies: Vec<Vec<u16>> = Vec::with_capacity(self.plan.transactions.len());
         for i in 0..self.plan.transactions.len() {
             let t = self.plan.transactions[i];
-            replies.push(self.exchange(t, &setpoint, deadline).await?);
+            replies.push(
+                conn.exchange(&self.link, self.timeout, t, &setpoint, deadline)
+                    .await?,
+            );
             if !matches!(t, Transaction::Read { .. }) {
                 self.sent_pct = Some(sent);
             }
@@ -407,15 +326,17 @@ impl ModbusValve {
         count: u16,
     ) -> Result<Vec<u16>, Fault> {
         let deadline = Instant::now() + self.timeout;
-        if self.ctx.is_none() {
-            self.reconnect(deadline).await?;
+        let mut conn = self.conn.lock().await;
+        if !conn.is_connected() {
+            conn.reconnect(&self.link, deadline).await?;
         }
         let t = Transaction::Read {
             table,
             address,
             count,
         };
-        self.exchange(t, &[], deadline).await
+        conn.exchange(&self.link, self.timeout, t, &[], deadline)
+            .await
     }
 
     /// Writes `pct` into the set-point register once (`valve-bridge probe --write-test`) and
@@ -426,102 +347,20 @@ impl ModbusValve {
             .encode_setpoint(pct)
             .map_err(|e| Fault::Error(e.to_string()))?;
         let deadline = Instant::now() + self.timeout;
-        if self.ctx.is_none() {
-            self.reconnect(deadline).await?;
+        let mut conn = self.conn.lock().await;
+        if !conn.is_connected() {
+            conn.reconnect(&self.link, deadline).await?;
         }
         let t = Transaction::Write {
             address: self.map.setpoint.address,
             count: words.len() as u16,
         };
-        self.exchange(t, &words, deadline).await?;
+        conn.exchange(&self.link, self.timeout, t, &words, deadline)
+            .await?;
         self.map
             .setpoint
             .decode("set-point", &words, self.map.word_order)
             .map_err(|e| Fault::Error(e.to_string()))
-    }
-
-    /// Runs one transaction until `deadline`; decides from its outcome whether the link stays.
-    async fn exchange(
-        &mut self,
-        t: Transaction,
-        setpoint: &[u16],
-        deadline: Instant,
-    ) -> Result<Vec<u16>, Fault> {
-        let Some(ctx) = self.ctx.as_mut() else {
-            return Err(Fault::Disconnected(format!(
-                "{}: {}",
-                self.describe(),
-                self.down_because
-            )));
-        };
-        let fc = t.function_code();
-        match tokio::time::timeout_at(deadline, call(ctx, t, setpoint)).await {
-            Ok(Ok(Ok(words))) => {
-                self.heard();
-                Ok(words)
-            }
-            Ok(Ok(Err(code))) => {
-                self.heard();
-                Err(Fault::Error(format!(
-                    "device answered FC {fc} with {}",
-                    exception::explain(code)
-                )))
-            }
-            Err(_) => {
-                let mut fault = self.classify_silence(t);
-                // Late replies show the device is there, only slow: no reason to reopen.
-                // Once seen, every timeout says so (the summary quotes the last one, which
-                // may fall between two late replies).
-                let late = self.wire.stale_replies();
-                if late > self.late_seen {
-                    self.late_seen = late;
-                    self.last_answer = Instant::now();
-                }
-                if late > 0 {
-                    if let Fault::Timeout(m) = &mut fault {
-                        m.push_str(&format!(
-                            " (the device does answer, later: {late} replies came after their \
-                             deadline; a longer timeout_ms may fit the loop period)"
-                        ));
-                    }
-                }
-                let silent = Instant::now() - self.last_answer;
-                if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
-                    let why = format!(
-                        "no answer for {:.1} s on an open connection, reopening it",
-                        silent.as_secs_f64()
-                    );
-                    tracing::warn!("{}: {why}", self.describe());
-                    self.drop_link(why);
-                }
-                Err(fault)
-            }
-            Ok(Err(tokio_modbus::Error::Transport(e))) => {
-                let (fault, broken) = self.classify_transport(t, e);
-                if broken {
-                    let why = match &fault {
-                        Fault::Disconnected(m) | Fault::Error(m) | Fault::Timeout(m) => m.clone(),
-                    };
-                    self.drop_link(why);
-                }
-                Err(fault)
-            }
-            Ok(Err(tokio_modbus::Error::Protocol(e))) => {
-                // With the wire's transaction filter a mismatch means the stream is out of
-                // step: on TCP it is reopened. RTU has nothing to resynchronise.
-                if matches!(self.link, Link::Tcp(_)) {
-                    self.drop_link(format!("FC {fc}: {e}"));
-                }
-                Err(Fault::Error(format!("FC {fc}: {e}")))
-            }
-        }
-    }
-
-    /// The device answered: the connection is proven and the backoff starts afresh.
-    fn heard(&mut self) {
-        self.answered = true;
-        self.last_answer = Instant::now();
-        self.backoff = FIRST_BACKOFF;
     }
 
     fn decode(&self, replies: &[Vec<u16>], op_pct: f64, sent: f64) -> Result<Reading, Fault> {
@@ -563,91 +402,6 @@ impl ModbusValve {
             status,
             sent_pct: sent,
         })
-    }
-
-    /// What a missed deadline means: silence, a partial reply, or a reply with a bad CRC.
-    fn classify_silence(&self, t: Transaction) -> Fault {
-        let ms = self.timeout.as_millis();
-        let fc = t.function_code();
-        if !matches!(self.link, Link::Rtu(_)) {
-            return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
-        }
-        let rx = self.wire.received();
-        if rx.is_empty() {
-            return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
-        }
-        match rtu_frame_fault(&rx, &t) {
-            Some(message) => Fault::Error(message),
-            None => Fault::Timeout(format!(
-                "reply to FC {fc} incomplete within {ms} ms: {} of {} bytes",
-                rx.len(),
-                t.rtu_response_bytes()
-            )),
-        }
-    }
-
-    /// The fault of a transport error, and whether it broke the link. A bad RTU frame leaves
-    /// the line usable (the input is emptied before the next request); anything else on RTU,
-    /// and any transport error on TCP, breaks it.
-    fn classify_transport(&self, t: Transaction, e: io::Error) -> (Fault, bool) {
-        let fc = t.function_code();
-        let rtu = matches!(self.link, Link::Rtu(_));
-        if e.kind() == io::ErrorKind::InvalidData {
-            if rtu {
-                if let Some(message) = rtu_frame_fault(&self.wire.received(), &t) {
-                    return (Fault::Error(message), false);
-                }
-            }
-            return (Fault::Error(format!("FC {fc}: unusable reply: {e}")), !rtu);
-        }
-        // tokio-modbus reports a stream that ended with the thread's last errno, which says
-        // nothing about it (`Operation now in progress`): the wire knows what happened.
-        let what = if self.wire.closed() {
-            "the device closed the connection".to_string()
-        } else {
-            match e.kind() {
-                io::ErrorKind::ConnectionReset => format!("the device reset the connection ({e})"),
-                io::ErrorKind::BrokenPipe => format!("the connection is broken ({e})"),
-                _ => e.to_string(),
-            }
-        };
-        (
-            Fault::Disconnected(format!("{}: FC {fc}: {what}", self.describe())),
-            true,
-        )
-    }
-}
-
-/// Runs one transaction; a write returns no words.
-async fn call(
-    ctx: &mut Context,
-    t: Transaction,
-    setpoint: &[u16],
-) -> tokio_modbus::Result<Vec<u16>> {
-    match t {
-        Transaction::Write { address, .. } => Ok(ctx
-            .write_multiple_registers(address, setpoint)
-            .await?
-            .map(|()| Vec::new())),
-        Transaction::Read {
-            table: Table::Holding,
-            address,
-            count,
-        } => ctx.read_holding_registers(address, count).await,
-        Transaction::Read {
-            table: Table::Input,
-            address,
-            count,
-        } => ctx.read_input_registers(address, count).await,
-        Transaction::ReadWrite {
-            read_address,
-            read_count,
-            write_address,
-            ..
-        } => {
-            ctx.read_write_multiple_registers(read_address, read_count, write_address, setpoint)
-                .await
-        }
     }
 }
 

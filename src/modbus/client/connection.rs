@@ -1,0 +1,338 @@
+//! One open Modbus link, a TCP connection or a serial port, and its health: the tokio-modbus
+//! context, (re)connection with backoff, and what each exchange's outcome means for the link.
+//!
+//! A [`Connection`] serves one valve on TCP, or every valve of one serial bus: each exchange
+//! addresses the unit of the valve it is for (its link's slave or unit id) and names that valve
+//! in its faults, so a unit that does not answer costs its own transactions only (one that
+//! answers after its deadline puts its reply on the wire during the next valve's transaction,
+//! which it can spoil, as on any RTU bus: its deadline must cover its answers). The rules
+//! for keeping, dropping and reopening the link are in [`super`]'s documentation. Not here:
+//! the cycle's plan, deadlines and decoding ([`super::ModbusValve`]).
+
+use std::io;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::time::Instant;
+use tokio_modbus::client::{rtu, tcp, Context, Reader, Writer};
+use tokio_modbus::slave::SlaveContext;
+use tokio_modbus::Slave;
+
+use super::{Fault, Link, FIRST_BACKOFF, MAX_BACKOFF, SILENT_LINK};
+use crate::modbus::exception;
+use crate::modbus::map::Table;
+use crate::modbus::plan::Transaction;
+use crate::modbus::wire::{rtu_frame_fault, RtuWire, TcpWire, WireState};
+
+/// An open (or reopening) link and what it went through.
+pub(super) struct Connection {
+    /// Where it goes (on a bus, the first valve's link: the port's settings).
+    link: Link,
+    tcp_addr: Option<SocketAddr>,
+    ctx: Option<Context>,
+    wire: Arc<WireState>,
+    /// The current connection has answered at least once.
+    answered: bool,
+    /// When the device last answered (or the connection opened).
+    last_answer: Instant,
+    /// Why the link is down, for the cycles that find it so.
+    down_because: String,
+    /// Late replies (TCP) counted so far on this connection.
+    late_seen: u64,
+    next_attempt: Instant,
+    backoff: Duration,
+    pub(super) reconnects: u64,
+    pub(super) attempts: u64,
+}
+
+impl Connection {
+    /// A link to `link` (resolved to `tcp_addr` on TCP), not connected yet.
+    pub(super) fn new(link: Link, tcp_addr: Option<SocketAddr>) -> Connection {
+        Connection {
+            link,
+            tcp_addr,
+            ctx: None,
+            wire: Arc::default(),
+            answered: false,
+            last_answer: Instant::now(),
+            down_because: "not connected yet".into(),
+            late_seen: 0,
+            next_attempt: Instant::now(),
+            backoff: FIRST_BACKOFF,
+            reconnects: 0,
+            attempts: 0,
+        }
+    }
+
+    /// True while a context is open.
+    pub(super) fn is_connected(&self) -> bool {
+        self.ctx.is_some()
+    }
+
+    /// One connection attempt within `deadline`; on failure, the reason, and the next attempt
+    /// waits the backoff (which doubles).
+    pub(super) async fn attempt(&mut self, deadline: Instant) -> Result<(), String> {
+        self.ctx = None;
+        self.attempts += 1;
+        let allowed = deadline.saturating_duration_since(Instant::now());
+        let wire = Arc::new(WireState::default());
+        let connecting = async {
+            match &self.link {
+                Link::Tcp(l) => {
+                    let addr = self
+                        .tcp_addr
+                        .ok_or_else(|| io::Error::other("no resolved address"))?;
+                    let stream = tokio::net::TcpStream::connect(addr).await?;
+                    // One small request per cycle: latency matters more than throughput.
+                    stream.set_nodelay(true)?;
+                    let wire = TcpWire::new(stream, Arc::clone(&wire));
+                    Ok::<_, io::Error>(tcp::attach_slave(wire, Slave(l.unit_id)))
+                }
+                Link::Rtu(l) => {
+                    let port = crate::modbus::serial::open(l).map_err(io::Error::from)?;
+                    let wire = RtuWire::new(port, Arc::clone(&wire));
+                    Ok(rtu::attach_slave(wire, Slave(l.slave_id)))
+                }
+            }
+        };
+        match tokio::time::timeout_at(deadline, connecting).await {
+            Ok(Ok(ctx)) => {
+                self.ctx = Some(ctx);
+                self.wire = wire;
+                self.late_seen = 0;
+                self.answered = false;
+                self.last_answer = Instant::now();
+                Ok(())
+            }
+            failed => {
+                self.next_attempt = Instant::now() + self.backoff;
+                self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
+                Err(match failed {
+                    Ok(Err(e)) => e.to_string(),
+                    _ => format!("no connection within {} ms", allowed.as_millis()),
+                })
+            }
+        }
+    }
+
+    /// Drops the link because `why`. It is reopened at once if it had answered (a device that
+    /// restarted), otherwise after the backoff (a device that takes connections but never
+    /// answers on them).
+    fn drop_link(&mut self, why: String) {
+        self.ctx = None;
+        if self.answered {
+            self.next_attempt = Instant::now();
+            self.backoff = FIRST_BACKOFF;
+        } else {
+            self.next_attempt = Instant::now() + self.backoff;
+            self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
+        }
+        self.down_because = why;
+    }
+
+    /// Reopens the link if the backoff allows, within `deadline`, for the valve `who` (its
+    /// link names it in the faults).
+    pub(super) async fn reconnect(&mut self, who: &Link, deadline: Instant) -> Result<(), Fault> {
+        let now = Instant::now();
+        if now < self.next_attempt {
+            return Err(Fault::Disconnected(format!(
+                "{}: {}; next connection attempt in {} ms",
+                who.describe(),
+                self.down_because,
+                (self.next_attempt - now).as_millis()
+            )));
+        }
+        match self.attempt(deadline).await {
+            Ok(()) => {
+                self.reconnects += 1;
+                tracing::info!("{}: connected", who.describe());
+                Ok(())
+            }
+            Err(why) => {
+                self.down_because = format!("cannot connect: {why}");
+                Err(Fault::Disconnected(format!(
+                    "{}: {}; next attempt in {} ms",
+                    who.describe(),
+                    self.down_because,
+                    (self.next_attempt - Instant::now()).as_millis()
+                )))
+            }
+        }
+    }
+
+    /// Runs one transaction until `deadline`; decides from its outcome whether the link stays.
+    /// `who` is the valve's link: its unit is addressed, its name is in the faults, and
+    /// `timeout` is its deadline in them.
+    pub(super) async fn exchange(
+        &mut self,
+        who: &Link,
+        timeout: Duration,
+        t: Transaction,
+        setpoint: &[u16],
+        deadline: Instant,
+    ) -> Result<Vec<u16>, Fault> {
+        let Some(ctx) = self.ctx.as_mut() else {
+            return Err(Fault::Disconnected(format!(
+                "{}: {}",
+                who.describe(),
+                self.down_because
+            )));
+        };
+        // On a shared bus each valve addresses its own unit.
+        ctx.set_slave(Slave(who.unit_id()));
+        let fc = t.function_code();
+        match tokio::time::timeout_at(deadline, call(ctx, t, setpoint)).await {
+            Ok(Ok(Ok(words))) => {
+                self.heard();
+                Ok(words)
+            }
+            Ok(Ok(Err(code))) => {
+                self.heard();
+                Err(Fault::Error(format!(
+                    "device answered FC {fc} with {}",
+                    exception::explain(code)
+                )))
+            }
+            Err(_) => {
+                let mut fault = self.classify_silence(timeout, t);
+                // Late replies show the device is there, only slow: no reason to reopen.
+                // Once seen, every timeout says so (the summary quotes the last one, which
+                // may fall between two late replies).
+                let late = self.wire.stale_replies();
+                if late > self.late_seen {
+                    self.late_seen = late;
+                    self.last_answer = Instant::now();
+                }
+                if late > 0 {
+                    if let Fault::Timeout(m) = &mut fault {
+                        m.push_str(&format!(
+                            " (the device does answer, later: {late} replies came after their \
+                             deadline; a longer timeout_ms may fit the loop period)"
+                        ));
+                    }
+                }
+                let silent = Instant::now() - self.last_answer;
+                if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
+                    let why = format!(
+                        "no answer for {:.1} s on an open connection, reopening it",
+                        silent.as_secs_f64()
+                    );
+                    tracing::warn!("{}: {why}", who.describe());
+                    self.drop_link(why);
+                }
+                Err(fault)
+            }
+            Ok(Err(tokio_modbus::Error::Transport(e))) => {
+                let (fault, broken) = self.classify_transport(who, t, e);
+                if broken {
+                    let why = match &fault {
+                        Fault::Disconnected(m) | Fault::Error(m) | Fault::Timeout(m) => m.clone(),
+                    };
+                    self.drop_link(why);
+                }
+                Err(fault)
+            }
+            Ok(Err(tokio_modbus::Error::Protocol(e))) => {
+                // With the wire's transaction filter a mismatch means the stream is out of
+                // step: on TCP it is reopened. RTU has nothing to resynchronise.
+                if matches!(self.link, Link::Tcp(_)) {
+                    self.drop_link(format!("FC {fc}: {e}"));
+                }
+                Err(Fault::Error(format!("FC {fc}: {e}")))
+            }
+        }
+    }
+
+    /// The device answered: the connection is proven and the backoff starts afresh.
+    fn heard(&mut self) {
+        self.answered = true;
+        self.last_answer = Instant::now();
+        self.backoff = FIRST_BACKOFF;
+    }
+
+    /// What a missed deadline means: silence, a partial reply, or a reply with a bad CRC.
+    fn classify_silence(&self, timeout: Duration, t: Transaction) -> Fault {
+        let ms = timeout.as_millis();
+        let fc = t.function_code();
+        if !matches!(self.link, Link::Rtu(_)) {
+            return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
+        }
+        let rx = self.wire.received();
+        if rx.is_empty() {
+            return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
+        }
+        match rtu_frame_fault(&rx, &t) {
+            Some(message) => Fault::Error(message),
+            None => Fault::Timeout(format!(
+                "reply to FC {fc} incomplete within {ms} ms: {} of {} bytes",
+                rx.len(),
+                t.rtu_response_bytes()
+            )),
+        }
+    }
+
+    /// The fault of a transport error, and whether it broke the link. A bad RTU frame leaves
+    /// the line usable (the input is emptied before the next request); anything else on RTU,
+    /// and any transport error on TCP, breaks it.
+    fn classify_transport(&self, who: &Link, t: Transaction, e: io::Error) -> (Fault, bool) {
+        let fc = t.function_code();
+        let rtu = matches!(self.link, Link::Rtu(_));
+        if e.kind() == io::ErrorKind::InvalidData {
+            if rtu {
+                if let Some(message) = rtu_frame_fault(&self.wire.received(), &t) {
+                    return (Fault::Error(message), false);
+                }
+            }
+            return (Fault::Error(format!("FC {fc}: unusable reply: {e}")), !rtu);
+        }
+        // tokio-modbus reports a stream that ended with the thread's last errno, which says
+        // nothing about it (`Operation now in progress`): the wire knows what happened.
+        let what = if self.wire.closed() {
+            "the device closed the connection".to_string()
+        } else {
+            match e.kind() {
+                io::ErrorKind::ConnectionReset => format!("the device reset the connection ({e})"),
+                io::ErrorKind::BrokenPipe => format!("the connection is broken ({e})"),
+                _ => e.to_string(),
+            }
+        };
+        (
+            Fault::Disconnected(format!("{}: FC {fc}: {what}", who.describe())),
+            true,
+        )
+    }
+}
+
+/// Runs one transaction; a write returns no words.
+async fn call(
+    ctx: &mut Context,
+    t: Transaction,
+    setpoint: &[u16],
+) -> tokio_modbus::Result<Vec<u16>> {
+    match t {
+        Transaction::Write { address, .. } => Ok(ctx
+            .write_multiple_registers(address, setpoint)
+            .await?
+            .map(|()| Vec::new())),
+        Transaction::Read {
+            table: Table::Holding,
+            address,
+            count,
+        } => ctx.read_holding_registers(address, count).await,
+        Transaction::Read {
+            table: Table::Input,
+            address,
+            count,
+        } => ctx.read_input_registers(address, count).await,
+        Transaction::ReadWrite {
+            read_address,
+            read_count,
+            write_address,
+            ..
+        } => {
+            ctx.read_write_multiple_registers(read_address, read_count, write_address, setpoint)
+                .await
+        }
+    }
+}
