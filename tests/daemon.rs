@@ -402,3 +402,23 @@ fn a_missing_config_file_names_each_cause_once() {
     );
     assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
 }
+
+#[test]
+fn a_closed_stdout_loses_only_the_printed_summary() {
+    // Whoever reads stdout goes away before the summary comes: the run still ends cleanly
+    // (exit 0, no panic) and puts the summary in its log on stderr instead.
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(BIN)
+        .args(["run", "--as-fast-as-possible", "--duration", "2", "--log-dir"])
+        .arg(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("summary not printed on stdout"), "{stderr}");
+}

@@ -1,5 +1,6 @@
 //! `valve-bridge run`: the valve loop (see `valve_bridge::daemon`), with a summary at the end.
 
+use std::io::Write;
 use std::path::PathBuf;
 
 use valve_bridge::daemon::{self, Config, RunOptions};
@@ -41,7 +42,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             require_device: args.require_device,
         },
     )?;
-    println!("{summary}");
+    // The loop has stopped, the safe action is applied and the log is flushed: a closed stdout
+    // (a pager quit early) must not turn that into a panic; the summary goes to the log instead.
+    if let Err(e) = writeln!(std::io::stdout(), "{summary}") {
+        tracing::warn!("summary not printed on stdout ({e}):\n{summary}");
+    }
     // A run in which no cycle read a V_P did not do its job: exit 1 and say why.
     summary.check()?;
     Ok(())
