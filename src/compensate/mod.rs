@@ -39,6 +39,7 @@
 
 pub mod guard;
 mod kick;
+pub mod trial;
 
 use std::path::PathBuf;
 
@@ -203,6 +204,9 @@ pub struct Compensator {
     /// Mean |change of the controller's O_P| per sample, %, over `seen` samples.
     noise: f64,
     seen: u64,
+    /// Samples in a row the controller has asked for a move beyond the gate, and which way.
+    asked_run: u32,
+    asked_dir: f64,
 }
 
 /// The settings a compensator keeps.
@@ -223,6 +227,8 @@ const MAX_GAP_SAMPLES: u64 = 1000;
 const NOISE_TAU_S: f64 = 10.0;
 /// A move counts as the controller's when larger than this many mean sample-to-sample changes.
 const NOISE_FACTOR: f64 = 3.0;
+/// ... and asked for this many samples in a row (white noise seldom is, twice over).
+const PERSIST: u32 = 2;
 
 impl Compensator {
     /// The compensator of `cfg` for `model`, at a sample period of `dt` s, sending set-points
@@ -265,6 +271,8 @@ impl Compensator {
             excursion: 0.0,
             noise: 0.0,
             seen: 0,
+            asked_run: 0,
+            asked_dir: 0.0,
         })
     }
 
@@ -316,13 +324,6 @@ impl Compensator {
     /// through with the set-point held, as a valve holds it.
     pub fn setpoint(&mut self, op: f64, t_s: f64) -> f64 {
         self.catch_up(op, t_s);
-        // The mean |change| a sample, a plain mean over the first NOISE_TAU_S, then
-        // exponential; a change of more than four times the mean (a step) counts as four.
-        self.seen += 1;
-        let du = (op - self.last_op).abs();
-        let clip = (4.0 * self.noise).max(self.parts.min_move);
-        let weight = (self.dt / NOISE_TAU_S).max(1.0 / self.seen as f64);
-        self.noise += weight * (du.min(clip) - self.noise);
         let wanted = if self.active { self.shape(op) } else { op };
         let excursion = (wanted - op).clamp(
             self.excursion - self.parts.rate,
@@ -370,8 +371,8 @@ impl Compensator {
     }
 
     /// The set-point the enabled parts want for the controller's O_P `op`.
-    fn shape(&self, op: f64) -> f64 {
-        let id = &self.identified;
+    fn shape(&mut self, op: f64) -> f64 {
+        let id = self.identified;
         // The input the valve's core should get: `op` itself when the calibration is inverted
         // (the valve then settles at `op`), else what the valve makes of `op` anyway.
         let base = if self.parts.calibration {
@@ -379,45 +380,59 @@ impl Compensator {
         } else {
             self.calibrated(op)
         };
-        let gate = self.parts.min_move.max(NOISE_FACTOR * self.noise);
-        let wish = base + self.kick(base, gate);
-        let before_deadband = if self.parts.deadband {
-            let target = self.inverse.input_target();
-            let gap = wish - target;
-            if gap.abs() > gate {
-                wish + gap.signum() * id.deadband_pct / 2.0
-            } else {
-                wish
-            }
+        // Kick and deadband step only while the controller asks for a move.
+        let cart = (self.inverse.pin_reach(1.0)).map_or(base, |r| r.cart_pct);
+        let moving = self.moving(op, base - cart);
+        let wish = if moving {
+            base + self.kick(base - cart)
+        } else {
+            base
+        };
+        let before_deadband = if self.parts.deadband && moving {
+            let gap = wish - self.inverse.input_target();
+            wish + gap.signum() * id.deadband_pct / 2.0
         } else {
             wish
         };
         (before_deadband - id.calibration_offset_pct) / id.calibration_gain
     }
 
-    /// The kick for a core input `base`, signed, % at the core.
-    fn kick(&self, base: f64, gate: f64) -> f64 {
-        if !self.parts.backlash {
-            return 0.0;
-        }
-        let Some(cart) = self.inverse.pin_reach(1.0).map(|r| r.cart_pct) else {
-            return 0.0;
+    /// Whether the controller asks the valve to move: `asked` (the wanted core input minus
+    /// the cart) beyond the gate, the same way, for [`PERSIST`] samples in a row. The gate is
+    /// `min_move_pct`, or [`NOISE_FACTOR`] times the mean |change| of `op` a sample (a plain
+    /// mean over the first [`NOISE_TAU_S`], then exponential; a change of more than four times
+    /// the mean, a step, counts as four).
+    fn moving(&mut self, op: f64, asked: f64) -> bool {
+        self.seen += 1;
+        let du = (op - self.last_op).abs();
+        let clip = (4.0 * self.noise).max(self.parts.min_move);
+        let weight = (self.dt / NOISE_TAU_S).max(1.0 / self.seen as f64);
+        self.noise += weight * (du.min(clip) - self.noise);
+        let gate = self.parts.min_move.max(NOISE_FACTOR * self.noise);
+        self.asked_run = if asked.abs() <= gate {
+            0
+        } else if asked.signum() == self.asked_dir {
+            self.asked_run.saturating_add(1)
+        } else {
+            self.asked_dir = asked.signum();
+            1
         };
-        let e = base - cart;
-        if e.abs() <= gate {
-            return 0.0;
-        }
+        self.asked_run >= PERSIST
+    }
+
+    /// The kick for an error `e` of the core input to the cart, signed, % at the core.
+    fn kick(&self, e: f64) -> f64 {
         let dir = e.signum();
-        let Some(reach) = self.inverse.pin_reach(dir) else {
-            return 0.0;
+        let reach = match self.inverse.pin_reach(dir) {
+            Some(r) if self.parts.backlash => r,
+            _ => return 0.0,
         };
-        let core_rate = self.parts.rate * self.identified.calibration_gain;
         let plan = Plan {
             error_pct: e.abs(),
             room_pct: reach.to_side_pct - (1.0 - self.parts.share) * reach.band_pct,
             speed: |x: f64| self.inverse.pin_speed(dir * x).unwrap_or(0.0),
             dt: self.dt,
-            step_pct: core_rate,
+            step_pct: self.parts.rate * self.identified.calibration_gain,
             max_pct: self.parts.kick_max * self.identified.calibration_gain,
         };
         dir * plan.kick()
