@@ -7,13 +7,14 @@
 //! - a compensator whose model is far from the valve is switched off by its guard, with a
 //!   warning, and the controller's O_P is sent unchanged from then on.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::path::{Path, PathBuf};
 
 use valve_bridge::model::{ModelSpec, Valve};
 use valve_bridge::recording::{self, ReadOptions};
 
-const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
+mod common;
+
+use common::sim::{read_log, run_cmd, stdout};
 
 /// A valve whose stem crosses a 1.5 % friction band on reversals, pushed at 8 % per s and % of
 /// error up to 60 %/s, 0.05 s of dead time: the form `diagnose` writes.
@@ -31,32 +32,26 @@ struct Row {
     t_s: f64,
 }
 
-/// Runs the daemon on `config` (written into `dir`) for `secs` of loop time; returns its
-/// output and the rows of its one log.
-fn run(dir: &Path, config: &str, secs: &str) -> (Output, Vec<Row>, std::path::PathBuf) {
+/// Runs the daemon on `config` (written into `dir`) for `secs` of loop time on the virtual
+/// clock; returns its stdout, its stderr, the rows of its one log and that log's path.
+fn run(dir: &Path, config: &str, secs: f64) -> (String, String, Vec<Row>, PathBuf) {
     let logs = dir.join(format!("logs-{}", std::fs::read_dir(dir).unwrap().count()));
-    std::fs::write(dir.join("run.toml"), config).unwrap();
-    let out = Command::new(BIN)
-        .args(["run", "--config", "run.toml", "--as-fast-as-possible"])
-        .args(["--duration", secs, "--log-dir"])
-        .arg(&logs)
+    let cfg = dir.join("run.toml");
+    std::fs::write(&cfg, config).unwrap();
+    let out = run_cmd(&cfg, &logs, secs)
+        .arg("--as-fast-as-possible")
         .current_dir(dir)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = stdout(&out);
     let log = std::fs::read_dir(&logs)
         .unwrap()
         .next()
         .unwrap()
         .unwrap()
         .path();
-    let mut r = csv::Reader::from_path(&log).unwrap();
-    let rows: Vec<Row> = r.deserialize().map(|row| row.unwrap()).collect();
-    (out, rows, log)
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    (text, stderr, read_log(&logs), log)
 }
 
 fn rms(rows: &[Row]) -> f64 {
@@ -74,9 +69,8 @@ fn the_log_holds_both_set_points_and_identification_reads_what_the_valve_got() {
     std::fs::write(dir.path().join("model.toml"), BAND_MODEL).unwrap();
     let valve = "[valve.emulated]\nmodel_file = \"model.toml\"\n";
     let comp = "[valve.compensation]\nmodel_file = \"model.toml\"\nguard_window_s = 5.0\n";
-    let (_, plain, _) = run(dir.path(), &format!("{valve}{STEPS}"), "30");
-    let (out, rows, log) = run(dir.path(), &format!("{valve}{comp}{STEPS}"), "30");
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let (_, _, plain, _) = run(dir.path(), &format!("{valve}{STEPS}"), 30.0);
+    let (stdout, _, rows, log) = run(dir.path(), &format!("{valve}{comp}{STEPS}"), 30.0);
     assert!(
         stdout.contains("compensation: on, 6 windows judged"),
         "{stdout}"
@@ -116,10 +110,8 @@ fn a_model_far_from_the_valve_is_switched_off_by_the_guard() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("model.toml"), BAND_MODEL).unwrap();
     let config = format!("[valve.emulated]\nmodel = \"pincart2\"\n[valve.compensation]\nmodel_file = \"model.toml\"\nguard_window_s = 5.0\n{STEPS}");
-    let (out, rows, _) = run(dir.path(), &config, "20");
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (stdout, stderr, rows, _) = run(dir.path(), &config, 20.0);
     assert!(stderr.contains("compensation switched off"), "{stderr}");
-    let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         stdout.contains("compensation: switched off by its guard at 5.0 s"),
         "{stdout}"

@@ -14,10 +14,11 @@
 //!   the set-point goes half the band beyond where the valve should stop, as a minimum step.
 //! - **calibration**: the inverse of the fitted gain and offset (`V_P = a O_P + b` at rest).
 //!
-//! Both the kick and the deadband act only where the model says the valve would not move, and
-//! only on moves of the controller larger than its own noise (three times its mean
-//! sample-to-sample change, and at least `min_move_pct`): a noisy controller output is not a
-//! sequence of reversals worth kicking (that would make the valve follow the noise).
+//! The kick acts only while the model says the stem cannot move yet (the pressure inside the
+//! band); the deadband step on every move the controller asks for, so the valve does not stop
+//! short. Both act only on moves of the controller larger than its own noise (three times its mean sample-to-sample change, at least
+//! `min_move_pct`, two samples in a row): a noisy controller output is not a sequence of
+//! reversals worth kicking (that would make the valve follow the noise).
 //!
 //! The model the compensator steps is the identified one in its friction-band form (the form
 //! `diagnose` finds for a stem with Coulomb friction, `[effects] friction_band_pct`): the band
@@ -287,7 +288,7 @@ impl Compensator {
         let mut parts = Vec::new();
         if self.parts.backlash {
             parts.push(format!(
-                "backlash (friction band {:.2} %, crossed at up to {:.1} % per s and % of error{})",
+                "backlash (friction band {:.2} %, positioner gain {:.1} /s{})",
                 id.band_pct,
                 id.gain_per_s,
                 if id.open_slowdown > 0.0 {

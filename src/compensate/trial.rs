@@ -182,3 +182,38 @@ pub fn nominal(valve: &ModelSpec) -> ModelSpec {
     e.quantization_pct = 0.0;
     twin
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::Effect;
+    use crate::model::bundled;
+
+    #[test]
+    fn the_twin_keeps_the_valve_and_loses_what_compensation_answers() {
+        let worn = physical::with_effect(Effect::Backlash, 2.0);
+        let mut want = physical::healthy();
+        if let Some(p) = want.physical.as_mut() {
+            p.sensor_noise_pct = 0.0;
+        }
+        assert_eq!(nominal(&worn), want);
+        let pc2 = nominal(&bundled(ModelKind::Pincart2));
+        let p = pc2.pincart2.unwrap();
+        assert_eq!((p.a_p, p.b_p, p.c_p), (0.0, 0.0, 0.0));
+        assert_eq!(p.p_gain_per_s, 3.0);
+    }
+
+    #[test]
+    fn figures_of_a_run() {
+        let valve = bundled(ModelKind::Pincart2);
+        let run = run(&valve, None, Scenario::LevelLoop, 60.0, 0.01, 1).unwrap();
+        assert_eq!(run.op.len(), 6000);
+        assert_eq!(run.op, run.sent);
+        let f = figures(&run, &valve, 0.01).unwrap();
+        // Against itself, a noise-free model tracks with no error at all.
+        assert_eq!(f.tracking_pct, 0.0);
+        assert!(f.pv_iae.unwrap() > 0.0 && f.raw_pct > 0.0 && f.travel.travel_pct > 0.0);
+        let steps = super::run(&valve, None, Scenario::RandomSteps, 60.0, 0.01, 1).unwrap();
+        assert_eq!(steps.pv_iae, None);
+    }
+}
