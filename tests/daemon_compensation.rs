@@ -5,7 +5,9 @@
 //!   through the emulated valve to its V_P, so it is what the valve received; compensation
 //!   lowers the tracking error of a valve with a friction band on small reversing steps;
 //! - a compensator whose model is far from the valve is switched off by its guard, with a
-//!   warning, and the controller's O_P is sent unchanged from then on.
+//!   warning, and the controller's O_P is sent unchanged from then on;
+//! - README's walk-through: `config/models/physical-band-diagnosed.toml` is the model
+//!   `diagnose` finds in the log of `config/physical-band.toml`.
 
 use std::path::{Path, PathBuf};
 
@@ -124,4 +126,32 @@ fn a_model_far_from_the_valve_is_switched_off_by_the_guard() {
         .iter()
         .filter(|r| r.t_s >= 5.0)
         .all(|r| r.op_pct == r.op_controller_pct));
+}
+
+#[test]
+fn the_shipped_diagnosed_model_is_what_diagnose_finds_in_the_worn_valve_s_log() {
+    // README's walk-through: the worn valve's own log, diagnosed, is the model
+    // config/compensated.toml compensates with.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("band-log");
+    let out = run_cmd(&root.join("config/physical-band.toml"), &logs, 900.0)
+        .arg("--as-fast-as-possible")
+        .current_dir(root)
+        .output()
+        .unwrap();
+    stdout(&out);
+    let diag = dir.path().join("band-diag");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_valve-bridge"))
+        .arg("diagnose")
+        .arg(&logs)
+        .arg("--out")
+        .arg(&diag)
+        .output()
+        .unwrap();
+    stdout(&out);
+    let found = ModelSpec::load(&diag.join("model.toml")).unwrap();
+    let shipped =
+        ModelSpec::load(&root.join("config/models/physical-band-diagnosed.toml")).unwrap();
+    assert_eq!(found, shipped);
 }
