@@ -16,9 +16,10 @@
 //!
 //! The kick acts only while the model says the stem cannot move yet (the pressure inside the
 //! band); the deadband step on every move the controller asks for, so the valve does not stop
-//! short. Both act only on moves of the controller larger than its own noise (three times its mean sample-to-sample change, at least
-//! `min_move_pct`, two samples in a row): a noisy controller output is not a sequence of
-//! reversals worth kicking (that would make the valve follow the noise).
+//! short. Both act only on moves of the controller larger than its own noise (three times its
+//! mean sample-to-sample change, at least `min_move_pct`, two samples in a row): a noisy
+//! controller output is not a sequence of reversals worth kicking (that would make the valve
+//! follow the noise).
 //!
 //! The model the compensator steps is the identified one in its friction-band form (the form
 //! `diagnose` finds for a stem with Coulomb friction, `[effects] friction_band_pct`): the band
