@@ -7,6 +7,8 @@
 //!
 //! - [`model`]: every valve model, one `step` each, with TOML parameter files.
 //! - [`recording`]: the CSV recording format (read with helpful errors, write, column mapping).
+//! - [`compensate`]: the identified valve's backlash, deadband and calibration answered in the
+//!   set-point it is sent (the daemon's `[valve.compensation]`, the compensation bench).
 //! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
 //! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
 //! - [`net`]: TCP servers that stay up (accept errors retried, connections capped).
@@ -19,6 +21,7 @@
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
+pub mod compensate;
 pub mod daemon;
 pub mod diagnose;
 pub mod fit;

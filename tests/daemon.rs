@@ -35,6 +35,7 @@ struct Row {
     latency_us: Option<f64>,
     op_sent_pct: Option<f64>,
     utc: String,
+    op_controller_pct: Option<f64>,
 }
 
 fn read_log(path: &Path) -> Vec<Row> {
@@ -50,7 +51,8 @@ fn read_log(path: &Path) -> Vec<Row> {
             "lateness_us",
             "latency_us",
             "op_sent_pct",
-            "utc"
+            "utc",
+            "op_controller_pct"
         ]
     );
     r.deserialize().map(|row| row.unwrap()).collect()
@@ -178,9 +180,11 @@ fn replayed_recording_matches_offline_simulation_exactly() {
     assert_on_grid(&rows);
     assert!(rows[..rec_op.len()].iter().all(|r| r.status == "ok"));
     assert_eq!(rows.last().unwrap().status, "safe-hold");
-    // The emulated valve gets O_P itself; every row has its UTC time, 10 ms apart.
+    // The emulated valve gets O_P itself (no compensation: the controller's O_P); every row
+    // has its UTC time, 10 ms apart.
     for r in &rows {
         assert_eq!(r.op_sent_pct, r.op_pct);
+        assert_eq!(r.op_controller_pct, r.op_pct);
     }
     let ms = |r: &Row| -> i64 {
         let t = time::PrimitiveDateTime::parse(

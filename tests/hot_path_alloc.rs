@@ -1,7 +1,8 @@
 //! What the loop calls every cycle for the `modbus-server` source and the Prometheus metrics
 //! allocates nothing: reading the controller's set-point, publishing V_P and status, and
 //! updating the metric handles. Nor does stepping a model (the physical valve, with its internal
-//! steps and seeded sensor noise), nor a drifting one. A counting global allocator (this test binary only) counts the
+//! steps and seeded sensor noise), nor a drifting one, nor compensating a set-point and judging
+//! its guard windows. A counting global allocator (this test binary only) counts the
 //! allocations made on the calling thread around those calls.
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -10,6 +11,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use tokio_modbus::Request;
+use valve_bridge::compensate::{CompensationConfig, Compensator};
 use valve_bridge::daemon::config::Config;
 use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::logger::{Sample, Status};
@@ -84,6 +86,7 @@ fn per_cycle_calls_do_not_allocate() {
                 lateness_us: None,
                 latency_us: None,
                 op_sent_pct: op,
+                op_controller_pct: op,
                 utc: std::time::SystemTime::UNIX_EPOCH,
             };
             source.feedback(&row);
@@ -139,4 +142,39 @@ fn stepping_a_drifting_valve_does_not_allocate() {
     });
     assert_eq!(counted, 0, "allocations in 2000 steps");
     assert!(last > 29.0, "{last}");
+}
+
+#[test]
+fn compensating_a_set_point_does_not_allocate() {
+    // A pin-cart II valve with a crossing time, a deadband and a calibration error: every part
+    // acts, and the guard judges its windows (two a second here).
+    let mut model = bundled(ModelKind::Pincart2);
+    model.effects.deadband_pct = 0.4;
+    model.effects.calibration_gain = 0.95;
+    let cfg = CompensationConfig {
+        model_file: Some("model.toml".into()),
+        guard_window_s: 0.5,
+        ..CompensationConfig::default()
+    };
+    let mut comp = Compensator::new(&cfg, &model, 0.01, (0.0, 100.0)).unwrap();
+    let mut valve = Valve::new(&model, 0.01).unwrap();
+    valve.reset(30.0, 30.0);
+    let (mut windows, mut kicked) = (0, 0);
+    let counted = allocations(|| {
+        for k in 0..3000 {
+            // Steps of 1 % that reverse every 3 s, and a missed slot now and then.
+            if k % 97 == 0 {
+                continue;
+            }
+            let op = 30.0 + f64::from((k / 300) % 2);
+            let sent = comp.setpoint(op, f64::from(k) * 0.01);
+            kicked += usize::from((sent - op).abs() > 0.5);
+            windows += usize::from(comp.observe(Some(valve.step(sent))).is_some());
+        }
+    });
+    assert_eq!(counted, 0, "allocations in 3000 cycles");
+    assert!(
+        windows >= 50 && kicked > 0,
+        "{windows} windows, {kicked} kicks"
+    );
 }

@@ -1,6 +1,8 @@
 //! The loop thread (`vb-loop`): each slot of the schedule, for every valve in the order of the
-//! config, O_P from its source, one valve transaction, a row to its logger; on stop, the safe
-//! action. A valve whose transaction fails logs its own row as failed; the others run on.
+//! config, O_P from its source, its compensation ([`super::compensation`], with
+//! `[valve.compensation]`), one valve transaction, a row to its logger; on stop, the safe
+//! action (never compensated). A valve whose transaction fails logs its own row as failed; the
+//! others run on.
 //!
 //! [`spawn`] starts the thread and opens the valves on it (inside the runtime that drives the
 //! valve's I/O); [`Spawned::run`] hands it the rest of the loop. Not here: starting the other
@@ -12,6 +14,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
+use super::compensation::{Compensation, CompensationReport};
 use super::config::{ClockKind, OnStop, ValveConfig};
 use super::exporter::{LoopMetrics, ValveMetrics};
 use super::logger::{round_pct, Sample, Status};
@@ -35,6 +38,7 @@ pub(super) struct LaneEnd {
     pub(super) safe: Option<Sample>,
     pub(super) reconnects: Option<u64>,
     pub(super) attempts: Option<u64>,
+    pub(super) compensation: Option<CompensationReport>,
 }
 
 /// Everything the loop thread owns.
@@ -59,22 +63,26 @@ pub(super) struct Lane {
     /// The valve's name, in the log's messages.
     pub(super) name: String,
     pub(super) source: Source,
+    /// The compensation of its O_P, with `[valve.compensation]`.
+    pub(super) compensation: Option<Compensation>,
     pub(super) backend: Backend,
     pub(super) metrics: Option<ValveMetrics>,
     pub(super) tx: Sender<Sample>,
     pub(super) stats: Stats,
-    /// The O_P this cycle sends (taken from the source before any valve transacts).
+    /// The O_P this cycle's source asked for (taken before any valve transacts).
     pub(super) op: f64,
+    /// The last O_P sent (compensated), and the last the source asked for.
     pub(super) last_op: Option<f64>,
+    pub(super) last_op_controller: Option<f64>,
     pub(super) last_status: Status,
     pub(super) last_skipped_k: Option<u64>,
 }
 
 impl Lane {
-    /// A lane for `backend`, fed by `source`, logging to `tx`.
+    /// A lane for `backend`, fed by `source` through `compensation`, logging to `tx`.
     pub(super) fn new(
         name: String,
-        source: Source,
+        (source, compensation): (Source, Option<Compensation>),
         backend: Backend,
         metrics: Option<ValveMetrics>,
         tx: Sender<Sample>,
@@ -82,12 +90,14 @@ impl Lane {
         Lane {
             name,
             source,
+            compensation,
             backend,
             metrics,
             tx,
             stats: Stats::new(),
             op: 0.0,
             last_op: None,
+            last_op_controller: None,
             last_status: Status::Ok,
             last_skipped_k: None,
         }
@@ -221,8 +231,16 @@ impl Loop {
             }
             for i in 0..self.lanes.len() {
                 let lane = &mut self.lanes[i];
-                let mut row =
-                    lane.transact(&rt, lane.op, (k, t_s, schedule.wall(k)), lateness, None);
+                let sent = match &mut lane.compensation {
+                    Some(c) => c.setpoint(lane.op, t_s),
+                    None => lane.op,
+                };
+                let mut row = lane.transact(&rt, sent, (k, t_s, schedule.wall(k)), lateness, None);
+                row.op_controller_pct = Some(lane.op);
+                lane.last_op_controller = Some(lane.op);
+                if let Some(c) = &mut lane.compensation {
+                    c.observe(&row);
+                }
                 // A failed transaction keeps its failure status; the O_P column shows the safe O_P.
                 if row.status == Status::Ok && lane.source.watchdog_tripped() {
                     row.status = Status::Watchdog;
@@ -249,6 +267,7 @@ impl Loop {
                 .map(|(lane, safe)| LaneEnd {
                     reconnects: lane.backend.reconnects(),
                     attempts: lane.backend.connection_attempts(),
+                    compensation: lane.compensation.map(Compensation::report),
                     stats: lane.stats,
                     safe,
                 })
@@ -269,6 +288,7 @@ impl Loop {
                 latency_us: None,
                 op_sent_pct: None,
                 utc,
+                op_controller_pct: lane.last_op_controller,
             };
             // One warning per run of consecutive missed slots, not one per slot.
             if i == 0 && lane.last_skipped_k.is_none_or(|last| last + 1 != k) {
@@ -387,6 +407,7 @@ impl Lane {
             latency_us: Some(micros(latency)),
             op_sent_pct: self.backend.sent_pct(),
             utc,
+            op_controller_pct: Some(op),
         }
     }
 }

@@ -15,6 +15,10 @@
 //!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
 //!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
 //!   `..._tracking_error_ratio` and `valve_bridge_health_alarm` (1 in alarm);
+//! - with `[valve.compensation]`, per compensated valve: `valve_bridge_compensation_active` (1,
+//!   0 once the guard has switched it off) and, each guard window,
+//!   `valve_bridge_compensation_tracking_error_ratio{case="with"|"without"}` (RMS of O_P - V_P
+//!   measured with compensation, and the model's without it);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
 //!   `valve_bridge_server_connections_accepted_total`, `..._refused_total` (closed at the
@@ -41,6 +45,7 @@ use tokio::net::{TcpListener, TcpStream};
 
 use super::health::Figures;
 use super::logger::{Sample, Status};
+use crate::compensate::Window;
 use crate::net::{self, Health, Limits};
 
 /// Upper bounds of the timing-error buckets, s.
@@ -72,7 +77,29 @@ pub struct LoopMetrics {
     valves: Vec<ValveMetrics>,
     /// Each valve's health gauges, when `[health]` is on.
     health: Vec<HealthMetrics>,
+    /// The compensation gauges (children only for compensated valves).
+    compensation_active: GaugeVec,
+    compensation_tracking: GaugeVec,
     servers: ServerMetrics,
+}
+
+/// One compensated valve's gauges (label `valve`), set when the guard judges a window.
+#[derive(Debug, Clone)]
+pub struct CompensationMetrics {
+    active: Gauge,
+    with: Gauge,
+    without: Gauge,
+}
+
+impl CompensationMetrics {
+    /// Publishes a judged window (if any) and whether compensation still acts.
+    pub fn publish(&self, window: Option<&Window>, active: bool) {
+        self.active.set(f64::from(u8::from(active)));
+        if let Some(w) = window {
+            self.with.set(w.with_pct / 100.0);
+            self.without.set(w.without_pct / 100.0);
+        }
+    }
 }
 
 /// One valve's health gauges (label `valve`), set by the health thread once per window.
@@ -213,6 +240,19 @@ impl LoopMetrics {
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
+        let compensation_active = gauge(
+            "valve_bridge_compensation_active",
+            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
+        )?;
+        let compensation_tracking = GaugeVec::new(
+            Opts::new(
+                "valve_bridge_compensation_tracking_error_ratio",
+                "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
+            ),
+            &["valve", "case"],
+        )?;
+        registry.register(Box::new(compensation_active.clone()))?;
+        registry.register(Box::new(compensation_tracking.clone()))?;
         let valves_names = valves;
         let valves = (valves.iter())
             .map(|&v| {
@@ -247,6 +287,8 @@ impl LoopMetrics {
             timing_s,
             valves,
             health,
+            compensation_active,
+            compensation_tracking,
             servers,
         })
     }
@@ -264,6 +306,21 @@ impl LoopMetrics {
     /// The health gauges of the `i`-th valve (None without `[health]`).
     pub fn health(&self, i: usize) -> Option<HealthMetrics> {
         self.health.get(i).cloned()
+    }
+
+    /// The compensation gauges of the valve named `valve` (they appear once asked for).
+    pub fn compensation(&self, valve: &str) -> Result<CompensationMetrics, prometheus::Error> {
+        let tracking = |case| {
+            self.compensation_tracking
+                .get_metric_with_label_values(&[valve, case])
+        };
+        Ok(CompensationMetrics {
+            active: self
+                .compensation_active
+                .get_metric_with_label_values(&[valve])?,
+            with: tracking("with")?,
+            without: tracking("without")?,
+        })
     }
 
     /// Observes the timing error of a cycle that ran.
@@ -476,6 +533,7 @@ mod tests {
             lateness_us: None,
             latency_us: None,
             op_sent_pct: None,
+            op_controller_pct: None,
             utc: std::time::SystemTime::UNIX_EPOCH,
         }
     }
@@ -552,6 +610,34 @@ mod tests {
         }
         let plain = LoopMetrics::new(&["a"], false).unwrap();
         assert!(plain.health(0).is_none());
+    }
+
+    #[test]
+    fn compensation_gauges_appear_for_compensated_valves_only() {
+        let m = LoopMetrics::new(&["a", "b"], false).unwrap();
+        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        assert!(
+            !text.contains("valve_bridge_compensation_active{"),
+            "{text}"
+        );
+        let b = m.compensation("b").unwrap();
+        b.publish(None, true);
+        let w = Window {
+            with_pct: 0.5,
+            without_pct: 0.25,
+            rows: 100,
+            worse: true,
+        };
+        b.publish(Some(&w), false);
+        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        for line in [
+            "valve_bridge_compensation_active{valve=\"b\"} 0",
+            "valve_bridge_compensation_tracking_error_ratio{case=\"with\",valve=\"b\"} 0.005",
+            "valve_bridge_compensation_tracking_error_ratio{case=\"without\",valve=\"b\"} 0.0025",
+        ] {
+            assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
+        }
+        assert!(!text.contains("valve_bridge_compensation_active{valve=\"a\"}"));
     }
 
     #[test]

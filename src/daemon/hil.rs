@@ -216,6 +216,7 @@ mod tests {
             lateness_us: None,
             latency_us: None,
             op_sent_pct: None,
+            op_controller_pct: None,
             utc: std::time::SystemTime::UNIX_EPOCH,
         }
     }

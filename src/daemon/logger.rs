@@ -8,11 +8,13 @@
 //! valve has its own logger. A crash loses at most the last flush
 //! interval, and a file cut mid-line still loads with the recording reader.
 //!
-//! Columns: `t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc` (the first six
-//! as they always were, so readers of older logs read these; the recording reader ignores
-//! columns it is not asked for).
+//! Columns: `t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc,op_controller_pct`
+//! (the first six as they always were, then each later one added at the end, so readers of
+//! older logs read these; the recording reader ignores columns it is not asked for).
 //! - `t_s`: the slot's scheduled time, s from the first slot (the grid, k / rate).
-//! - `op_pct`: the O_P sent in this slot; in a `skipped` row, the O_P the valve was holding.
+//! - `op_pct`: the O_P sent in this slot (with `[valve.compensation]`, the compensated
+//!   set-point: what the valve received, which identification must see); in a `skipped` row,
+//!   the O_P the valve was holding.
 //! - `vp_pct`: the V_P read back; empty when none was read (never repeated or invented).
 //! - `status`: see [`Status`].
 //! - `lateness_us`: actual start of the cycle minus `t_s`, µs (empty for `skipped`).
@@ -22,6 +24,8 @@
 //!   write was not acknowledged.
 //! - `utc`: the slot's scheduled time as UTC wall-clock time, ms (`2026-11-23T19:27:09.045Z`):
 //!   the wall clock read when the loop started plus `t_s`, so it never jumps with the clock.
+//! - `op_controller_pct`: the O_P the source (the process controller) asked for, before
+//!   compensation; equal to `op_pct` without `[valve.compensation]` and in stop-action rows.
 //!
 //! Numbers are written with a fixed precision, trailing zeros dropped: times to 1 µs (`t_s`),
 //! percentages to 0.0001 % ([`PCT_DECIMALS`]; the loop rounds O_P to it before sending, so the
@@ -46,7 +50,7 @@ use super::config::LogConfig;
 use super::DaemonError;
 
 /// The header of every log file.
-pub const HEADER: [&str; 8] = [
+pub const HEADER: [&str; 9] = [
     "t_s",
     "op_pct",
     "vp_pct",
@@ -55,6 +59,7 @@ pub const HEADER: [&str; 8] = [
     "latency_us",
     "op_sent_pct",
     "utc",
+    "op_controller_pct",
 ];
 
 /// Decimals of the percentages in the log (0.0001 %).
@@ -135,6 +140,8 @@ pub struct Sample {
     pub op_sent_pct: Option<f64>,
     /// The scheduled time as wall-clock time.
     pub utc: SystemTime,
+    /// The O_P the source asked for, before compensation, %.
+    pub op_controller_pct: Option<f64>,
 }
 
 impl Sample {
@@ -150,6 +157,7 @@ impl Sample {
             opt(self.latency_us, 3),
             opt(self.op_sent_pct, PCT_DECIMALS),
             utc_stamp(self.utc),
+            opt(self.op_controller_pct, PCT_DECIMALS),
         ]
     }
 }
@@ -449,6 +457,7 @@ mod tests {
             utc: SystemTime::UNIX_EPOCH
                 + Duration::from_secs(1_800_000_000)
                 + Duration::from_micros((t_s * 1e6).round() as u64),
+            op_controller_pct: Some(49.5),
         }
     }
 
@@ -485,16 +494,16 @@ mod tests {
         let lines: Vec<&str> = first.lines().collect();
         assert_eq!(
             lines[0],
-            "t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc"
+            "t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc,op_controller_pct"
         );
         assert_eq!(lines.len(), 101);
         assert_eq!(
             lines[8],
-            "0.07,50.0,,timeout,12.5,3.0,,2027-01-15T08:00:00.070Z"
+            "0.07,50.0,,timeout,12.5,3.0,,2027-01-15T08:00:00.070Z,49.5"
         );
         assert_eq!(
             lines[9],
-            "0.08,50.0,0.8,ok,12.5,3.0,50.0,2027-01-15T08:00:00.080Z"
+            "0.08,50.0,0.8,ok,12.5,3.0,50.0,2027-01-15T08:00:00.080Z,49.5"
         );
         let name = report.files[0]
             .file_name()

@@ -23,11 +23,12 @@
 //! the log's 0.0001 % before sending), V_P to the log's precision.
 //!
 //! Files: [`running`] starts the threads ([`start`], [`Running`]), [`control`] is the loop
-//! thread's body, [`net`] the network thread; this file holds the errors, the options and [`run`]
+//! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread; this file holds the errors, the options and [`run`]
 //! (signals and progress display).
 //!
 //! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis.
 
+mod compensation;
 pub mod config;
 mod control;
 pub mod exporter;
@@ -49,6 +50,7 @@ use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+pub use compensation::CompensationReport;
 pub use config::Config;
 pub use running::{start, Running};
 pub use stats::{Summary, ValveSummary};
@@ -65,6 +67,9 @@ pub enum DaemonError {
     /// The valve backend cannot start (model, Modbus settings, bus budget, connection).
     #[error(transparent)]
     Valve(#[from] BackendError),
+    /// A valve's compensation cannot start (its model file).
+    #[error("[valve.compensation]: {0}")]
+    Compensation(#[from] crate::compensate::CompensateError),
     /// `--duration` is not a positive number.
     #[error("--duration {0}: must be a positive number of seconds")]
     Duration(f64),

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use super::compensation::Compensation;
 use super::config::{ClockKind, Config};
 use super::control::{self, Lane, Loop, LoopEnd};
 use super::exporter::LoopMetrics;
@@ -98,7 +99,23 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         loggers.push((valve.label().to_string(), logger.handle));
         let source = sources.remove(0);
         let m = metrics.as_ref().and_then(|m| m.valve(i));
-        lanes.push((valve.label().to_string(), source, m, logger.tx));
+        let source_cfg = config.source_of(valve);
+        let comp_metrics = match (&metrics, &valve.compensation) {
+            (Some(m), Some(_)) => Some(m.compensation(valve.label())?),
+            _ => None,
+        };
+        let compensation = Compensation::new(
+            valve,
+            period.as_secs_f64(),
+            (source_cfg.op_min_pct, source_cfg.op_max_pct),
+            comp_metrics,
+        )?;
+        lanes.push((
+            valve.label().to_string(),
+            (source, compensation),
+            m,
+            logger.tx,
+        ));
     }
     tracing::info!(valves = lanes.len(), rate_hz, clock = ?clock, "starting the loop");
     let (loop_stop, loop_live) = (stop.clone(), live.clone());
@@ -256,6 +273,7 @@ impl Running {
                     connection_attempts: lane.attempts,
                     log,
                     health: health.next(),
+                    compensation: lane.compensation,
                 })
                 .collect(),
             reason: end.reason,

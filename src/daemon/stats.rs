@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use hdrhistogram::Histogram;
 
+use super::compensation::CompensationReport;
 use super::health::HealthReport;
 use super::logger::{LogReport, Sample, Status};
 use super::valve::Fault;
@@ -214,6 +215,8 @@ pub struct ValveSummary {
     pub log: LogReport,
     /// What the live health check did, with `[health]`.
     pub health: Option<HealthReport>,
+    /// What compensation did, with `[valve.compensation]`.
+    pub compensation: Option<CompensationReport>,
 }
 
 /// A run in which a valve never gave a V_P: it did not do its job, whatever stopped it.
@@ -337,6 +340,9 @@ impl ValveSummary {
                 h.file.display()
             )?;
         }
+        if let Some(c) = &self.compensation {
+            write_compensation(f, indent, c)?;
+        }
         let files: Vec<String> = self
             .log
             .files
@@ -350,6 +356,29 @@ impl ValveSummary {
             files.join(", ")
         )
     }
+}
+
+/// The summary's compensation line.
+fn write_compensation(
+    f: &mut fmt::Formatter<'_>,
+    indent: &str,
+    c: &CompensationReport,
+) -> fmt::Result {
+    let state = match c.switched_off_s {
+        Some(t) => format!("switched off by its guard at {t:.1} s"),
+        None => "on".into(),
+    };
+    let last = c.last.map_or(String::new(), |w| {
+        format!(
+            "; last window: O_P - V_P {:.3} % RMS with it, {:.3} % the model's without",
+            w.with_pct, w.without_pct
+        )
+    });
+    writeln!(
+        f,
+        "{indent}compensation: {state}, {} windows judged{last} ({})",
+        c.windows, c.described
+    )
 }
 
 impl fmt::Display for Summary {

@@ -7,6 +7,7 @@
 //! - [`filtfilt_butter_lowpass`]: the zero-phase Butterworth filter of "MAE filtered".
 //! - [`aic`], [`bic`]: Gaussian-likelihood information criteria from an SSE.
 //! - [`stats`]: quantiles, mean and spread, robust noise and a residual's correlation length.
+//! - [`travel`]: a valve's travel and reversals through a deadband (wear figures).
 //!
 //! Units: MAE in the units of the data (percent of travel for V_P); SSE in those units squared
 //! (%²). The paper's SSE column is on fractions of full travel: its modelless row (MAE 1.106 %,
@@ -17,8 +18,10 @@
 
 mod filter;
 pub mod stats;
+mod travel;
 
 pub use filter::{filtfilt_butter_lowpass, PAPER_FILTER_CUTOFF_HZ, PAPER_FILTER_ORDER};
+pub use travel::{travel, Travel};
 
 /// One row of Table 1.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -153,6 +153,11 @@ impl EffectState {
         }
     }
 
+    /// The deadband's target, % (moves only while calibration, deadband or stiction is on).
+    pub(crate) fn target(&self) -> f64 {
+        self.target
+    }
+
     /// Calibration, deadband and stiction: the input the core is driven with.
     #[inline]
     pub(crate) fn input(&mut self, u: f64) -> f64 {

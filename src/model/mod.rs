@@ -34,7 +34,7 @@ pub use drift::{Drift, DriftSpec};
 pub use effects::Effects;
 pub use fopdt::FopdtParams;
 pub use physical::PhysicalParams;
-pub use pincart::{PinCart1Params, PinCart2Params};
+pub use pincart::{PinCart1Params, PinCart2Params, PinReach};
 pub use stiction::StictionParams;
 
 use crate::toml_file::{self, TomlError};
@@ -446,6 +446,31 @@ impl Valve {
         if let Core::PinCart(c) = &mut self.core {
             c.widen(extra_pct);
         }
+    }
+
+    /// For a pin-cart core: where the cart is and how far the pin is from pushing it towards
+    /// `dir` (+1 opening, -1 closing); None for the other cores. A compensator reads it to know
+    /// whether a reversal still has a band to cross.
+    pub fn pin_reach(&self, dir: f64) -> Option<PinReach> {
+        match &self.core {
+            Core::PinCart(c) => Some(c.reach(dir)),
+            _ => None,
+        }
+    }
+
+    /// The pin's speed for an error `e` at the core (pin-cart II with a friction band), %/s,
+    /// pushing or crossing the band; None where no error changes it.
+    pub fn pin_speed(&self, e: f64) -> Option<f64> {
+        match &self.core {
+            Core::PinCart(c) => c.pin_speed(e),
+            _ => None,
+        }
+    }
+
+    /// The deadband's target: the input the core is driven with once calibration and deadband
+    /// have acted, % (kept only while the model has either).
+    pub fn input_target(&self) -> f64 {
+        self.effects.target()
     }
 
     /// Runs the whole O_P sequence from rest at (`op[0]`, `vp0`), writing V_P into `out`.

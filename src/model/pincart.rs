@@ -87,6 +87,17 @@ enum PinLaw {
     },
 }
 
+/// Where a pin-cart's cart is and how far its pin is from pushing it one way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PinReach {
+    /// The cart's (valve's) position, %.
+    pub cart_pct: f64,
+    /// How far the pin must still travel before it pushes the cart that way, % (0: it pushes).
+    pub to_side_pct: f64,
+    /// The cart's width, %: the whole way a reversal must cross.
+    pub band_pct: f64,
+}
+
 /// Running state of a pin-cart core.
 #[derive(Debug, Clone)]
 pub(crate) struct PinCart {
@@ -238,28 +249,15 @@ impl PinCart {
         // crosses the cart.
         let unload = -along(rel) - self.half;
         if pushing || unload > 1e-12 || band {
-            // A chamber that grows with opening fills and vents more slowly: the response and
-            // the stroke speed fall alike (dy_min, the positioner's creep, does not).
-            let max = if opening {
-                p.dy_max_pct_per_s
-            } else {
-                close_max
-            };
-            let (gain, max) = if slowdown == 0.0 {
-                (p.p_gain_per_s, max)
-            } else {
-                let slow = 1.0 / (1.0 + slowdown * self.v / 100.0);
-                (slow * p.p_gain_per_s, slow * max)
-            };
-            let speed = (gain * e.abs()).max(p.dy_min_pct_per_s); // eq. (4)
-            let step = (speed.min(max) * self.dt).min(e.abs()); // eq. (5)
+            let speed = self.push_speed(p, close_max, slowdown, e);
+            let step = (speed * self.dt).min(e.abs()); // eq. (5)
             along(if pushing {
                 step
             } else if unload > 1e-12 {
                 step.min(unload)
             } else {
                 // Crossing the friction band at the pushing speed, up to its far side.
-                (speed.min(max) * self.dt).min(self.half - along(rel))
+                (speed * self.dt).min(self.half - along(rel))
             })
         } else {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
@@ -281,6 +279,53 @@ impl PinCart {
             self.y = self.v + half.copysign(rel);
         }
         self.half = half;
+    }
+
+    /// Pin-cart II's pushing speed for the error `e` (non-zero) at the cart's opening, %/s:
+    /// eq. (4) saturated by eq. (5). A chamber that grows with opening fills and vents more
+    /// slowly: the response and the stroke speed fall alike (dy_min, the positioner's creep,
+    /// does not).
+    #[inline]
+    fn push_speed(&self, p: &PinCart2Params, close_max: f64, slowdown: f64, e: f64) -> f64 {
+        let max = if e > 0.0 {
+            p.dy_max_pct_per_s
+        } else {
+            close_max
+        };
+        let (gain, max) = if slowdown == 0.0 {
+            (p.p_gain_per_s, max)
+        } else {
+            let slow = 1.0 / (1.0 + slowdown * self.v / 100.0);
+            (slow * p.p_gain_per_s, slow * max)
+        };
+        (gain * e.abs()).max(p.dy_min_pct_per_s).min(max) // eq. (4)-(5)
+    }
+
+    /// Where the cart is and how far the pin still has to go before it pushes the cart
+    /// towards `dir` (+1 opening, -1 closing), for a compensator: 0 while it pushes that side.
+    pub(crate) fn reach(&self, dir: f64) -> PinReach {
+        let rel = self.y - self.v;
+        PinReach {
+            cart_pct: self.v,
+            to_side_pct: (self.half - dir * rel).max(0.0),
+            band_pct: 2.0 * self.half,
+        }
+    }
+
+    /// The speed at which the pin moves for an error `e` at the cart while it pushes or crosses
+    /// a friction band (pin-cart II), %/s; None for pin-cart I, and for pin-cart II's eq. (7)
+    /// crossing, whose speed no error changes.
+    pub(crate) fn pin_speed(&self, e: f64) -> Option<f64> {
+        match &self.law {
+            PinLaw::StateDependent {
+                p,
+                close_max,
+                slowdown,
+                band: true,
+                ..
+            } if e != 0.0 => Some(self.push_speed(p, *close_max, *slowdown, e)),
+            _ => None,
+        }
     }
 
     /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart,

@@ -3,14 +3,14 @@
 //! demos, tests and benchmarks that need a recording whose physics is known (an effect hidden
 //! on purpose, or none at all); [`physical`] builds physical valves with one named effect.
 //!
-//! The closed loop is an outlet valve holding a tank level: a PI controller sets O_P from the
-//! measured level, the inflow wanders (a slow random walk plus a sine), and the level sensor is
-//! noisy, so O_P moves gently and reverses often, the way a valve sees normal operation. The
+//! The closed loop is an outlet valve holding a tank level under a PI controller ([`level`]),
+//! so O_P moves gently and reverses often, the way a valve sees normal operation. The
 //! open-loop excitations live in [`excite`]. A physical valve (`model = "physical"`) has its
 //! own sensor with its own noise (`[physical] sensor_noise_pct`, seeded by its `noise_seed`),
 //! so no noise is added to it here. Nothing here reads or writes files.
 
 pub mod excite;
+pub mod level;
 pub mod physical;
 
 use rand::SeedableRng;
@@ -20,6 +20,7 @@ use rand_distr::{Distribution, Normal};
 use crate::model::{ModelError, ModelKind, ModelSpec, Valve};
 use crate::recording::{Recording, RecordingError};
 use excite::{OpenLoop, Ramps, SmallSteps};
+pub use level::LevelLoop;
 
 /// A synthetic recording that could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -83,7 +84,7 @@ pub fn generate(
     let mut rec = Columns::with_capacity(n);
     let mut open = match excitation {
         Excitation::ClosedLoop { level_pct } => {
-            closed_loop(&mut valve, level_pct, n, dt, &noise, &mut rng, &mut rec)?;
+            closed_loop(&mut valve, level_pct, n, dt, &noise, &mut rng, &mut rec);
             return Ok(Recording::from_vectors(rec.t, rec.op, rec.vp)?);
         }
         Excitation::RandomSteps => OpenLoop::random_steps(seed),
@@ -124,8 +125,7 @@ impl Columns {
     }
 }
 
-/// The PI level loop: tank `A dh/dt = q_in - c V_P` (level and flows in %), outlet valve
-/// around 40 %.
+/// The PI level loop ([`LevelLoop`]) through `valve`, V_P recorded with `noise`.
 fn closed_loop(
     valve: &mut Valve,
     level_pct: f64,
@@ -134,27 +134,16 @@ fn closed_loop(
     noise: &Normal<f64>,
     rng: &mut ChaCha8Rng,
     rec: &mut Columns,
-) -> Result<(), SynthError> {
-    let (area, c) = (60.0, 1.0);
-    let (kp, ti) = (3.0, 40.0);
-    let walk = Normal::new(0.0, 0.02).map_err(|_| SynthError::Noise(0.02))?;
-    let level_noise = Normal::new(0.0, 0.15).map_err(|_| SynthError::Noise(0.15))?;
-    let (mut level, mut integral, mut drift) = (level_pct, 0.0, 0.0);
-    let mut v = 40.0;
-    valve.reset(v, v);
+) {
+    let mut plant = LevelLoop::new(level_pct);
+    valve.reset(level::NOMINAL_OPENING_PCT, level::NOMINAL_OPENING_PCT);
     for k in 0..n {
         let tk = k as f64 * dt;
-        drift = (drift + walk.sample(rng) * dt.sqrt()).clamp(-8.0, 8.0);
-        let inflow = 40.0 + drift + 4.0 * (tk * std::f64::consts::TAU / 120.0).sin();
-        let measured = level + level_noise.sample(rng);
-        let e = measured - level_pct;
-        integral += e * dt / ti;
-        let u = (40.0 + kp * (e + integral)).clamp(0.0, 100.0);
-        v = valve.step(u);
-        level += (inflow - c * v) / area * dt;
+        let u = plant.controller(tk, dt, rng);
+        let v = valve.step(u);
+        plant.tank(v, dt);
         rec.push(tk, u, v + noise.sample(rng));
     }
-    Ok(())
 }
 
 #[cfg(test)]

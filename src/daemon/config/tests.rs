@@ -360,3 +360,46 @@ fn valves_on_one_serial_port_share_its_line_and_its_period() {
         "{e}"
     );
 }
+
+#[test]
+fn compensation_is_per_valve_and_checked_at_its_lines() {
+    let pc2 = concat!(env!("CARGO_MANIFEST_DIR"), "/config/models/pincart2.toml");
+    let phys = concat!(env!("CARGO_MANIFEST_DIR"), "/config/models/physical.toml");
+    let c = Config::from_toml(
+        &format!("[[valve]]\nname = \"a\"\n[valve.compensation]\nmodel_file = \"{pc2}\"\ndeadband = false\n[[valve]]\nname = \"b\"\n"),
+        Path::new("c.toml"),
+    )
+    .unwrap();
+    let comp = c.valves[0].compensation.as_ref().unwrap();
+    assert!(comp.backlash && !comp.deadband && comp.calibration);
+    assert!(c.valves[1].compensation.is_none());
+    let e = err("[valve.compensation]\nbacklash = true\n");
+    assert!(
+        e.starts_with("c.toml:1: valve.compensation.model_file: is missing"),
+        "{e}"
+    );
+    let e = err(&format!(
+        "[valve.compensation]\nmodel_file = \"{pc2}\"\nkick_share = 2.0\n"
+    ));
+    assert!(
+        e.starts_with("c.toml:3: valve.compensation.kick_share: 2 is out of range"),
+        "{e}"
+    );
+    let e = err(&format!("[valve.compensation]\nmodel_file = \"{phys}\"\n"));
+    assert!(
+        e.starts_with("c.toml:2: valve.compensation.model_file: cannot use model file")
+            && e.contains("is a simulator, not an identified model"),
+        "{e}"
+    );
+    let e = err("[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n[valve.compensation]\nmodel_file = \"no/such.toml\"\n");
+    assert!(
+        e.starts_with(
+            "c.toml:6: valve.compensation.model_file: cannot use model file `no/such.toml`"
+        ),
+        "{e}"
+    );
+    let e = err(&format!(
+        "[valve.compensation]\nmodel_file = \"{pc2}\"\nkick = 1\n"
+    ));
+    assert!(e.contains("kick"), "{e}");
+}

@@ -1,7 +1,7 @@
 //! `[valve]`: which backend drives the valve and the settings of each kind (`[valve.emulated]`,
 //! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]`), with their checks; several
 //! valves are `[[valve]]` tables, each named, each with these sub-tables and optionally a
-//! `[valve.source]` of its own.
+//! `[valve.source]` and a `[valve.compensation]` of its own.
 //!
 //! Checking only: opening the backend is [`crate::daemon::valve`]'s job, and the link settings
 //! themselves are [`crate::modbus::link`]'s types.
@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use serde::Deserialize;
 
 use super::{Check, LoopConfig, SourceConfig};
+use crate::compensate::{CompensateError, CompensationConfig, Compensator};
 use crate::modbus::link::{RtuLink, TcpLink};
 use crate::modbus::map::RegisterMap;
 use crate::model::{bundled, DriftSpec, ModelError, ModelKind, ModelSpec};
@@ -48,6 +49,9 @@ pub struct ValveConfig {
     /// first window with enough steps).
     #[serde(default)]
     pub health_baseline_model: Option<PathBuf>,
+    /// `[valve.compensation]`: the O_P compensated for the identified valve before it is sent.
+    #[serde(default)]
+    pub compensation: Option<CompensationConfig>,
 }
 
 /// Valve backends.
@@ -257,6 +261,9 @@ impl ValveConfig {
                 ));
             }
         }
+        if let Some(comp) = &self.compensation {
+            check_compensation(comp, c, timing)?;
+        }
         self.registers
             .check_in(c.text, c.path, "valve.registers")
             .map_err(|e| c.shift(e))?;
@@ -304,6 +311,30 @@ impl ValveConfig {
             )),
             _ => Ok(()),
         }
+    }
+}
+
+/// The checks of `[valve.compensation]`: its settings, and a model a compensator can use.
+fn check_compensation(
+    comp: &CompensationConfig,
+    c: &Check<'_>,
+    timing: &LoopConfig,
+) -> Result<(), TomlError> {
+    let t = "valve.compensation";
+    if let Some((key, message)) = comp.violation() {
+        return Err(c.bad(t, key, message));
+    }
+    let file = comp.model_file.clone().unwrap_or_default();
+    let built = ModelSpec::load(&file)
+        .map_err(CompensateError::from)
+        .and_then(|m| Compensator::new(comp, &m, timing.period_s(), (0.0, 100.0)));
+    match built {
+        Ok(_) => Ok(()),
+        Err(err) => Err(c.bad(
+            t,
+            "model_file",
+            format!("cannot use model file `{}`: {err}", file.display()),
+        )),
     }
 }
 

@@ -1,0 +1,315 @@
+//! The compensation bench: does compensation built from an identified model help the valve it
+//! was identified from, and an independent physical valve, in closed and open loop?
+//!
+//! Each valve first records 15 minutes of its own log and a model is identified from it, as a
+//! user would: the pin-cart II valve (`config/models/pincart2.toml`) by `identify` (pin-cart II
+//! on the paper's random steps), the physical valves (`model = "physical"`: healthy, with a
+//! Coulomb friction band of 1, 1.5 and 3 %, and with a 0.6 % positioner deadband) by
+//! `diagnose` on the mixed excitation (random steps, ramps, small steps); the 1.5 % valve once
+//! more by `identify` on its random steps. Then every scenario runs 10 minutes with and without the
+//! compensator of that model (default `[valve.compensation]` settings), for several seeds:
+//! the paper's level loop, the paper's random steps, and small steps. Figures per run:
+//! `valve_bridge::compensate::trial::Figures`.
+//!
+//! Run: `cargo bench --bench compensation -- [--seeds N] [--plot PATH]` (default 3 seeds);
+//! `--plot PATH.svg` writes the SVG of a reversal of the 1.5 % valve with and without
+//! compensation, and `PATH-kick.svg` the set-point sent.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use valve_bridge::compensate::trial::{self, Figures, Run, Scenario};
+use valve_bridge::compensate::{CompensationConfig, Compensator};
+use valve_bridge::diagnose::{self, Effect};
+use valve_bridge::fit::{self, Options};
+use valve_bridge::model::{bundled, ModelKind, ModelSpec};
+use valve_bridge::report::plot::{self, Series};
+use valve_bridge::synth::{self, physical, Excitation};
+
+type Error = Box<dyn std::error::Error>;
+
+const DT: f64 = 0.01;
+/// Length of the identification log and of each scenario run, s.
+const LOG_S: f64 = 900.0;
+const RUN_S: f64 = 600.0;
+/// Seed of the identification logs (the runs use 1..=seeds).
+const LOG_SEED: u64 = 1000;
+
+/// A valve of the bench and the compensator of the model identified from its own log.
+struct Bench {
+    name: String,
+    valve: ModelSpec,
+    compensator: Compensator,
+}
+
+fn options() -> Result<(u64, Option<PathBuf>), Error> {
+    let (mut seeds, mut plot) = (3, None);
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--seeds" => {
+                seeds = args.next().ok_or("--seeds needs a number")?.parse()?;
+            }
+            "--plot" => plot = Some(PathBuf::from(args.next().ok_or("--plot needs a path")?)),
+            "--bench" => {}
+            other => return Err(format!("unknown argument `{other}`").into()),
+        }
+    }
+    Ok((seeds.max(1), plot))
+}
+
+/// Pin-cart II identified by `identify` from its random-step log.
+fn identified(valve: &ModelSpec) -> Result<ModelSpec, Error> {
+    let rec = synth::generate(valve, Excitation::RandomSteps, LOG_S, DT, 0.0, LOG_SEED)?;
+    // A physical valve's log is its own sensor's; pin-cart II's is noise-free.
+    let id = fit::identify(
+        &rec.view(),
+        &Options::for_models(&[ModelKind::Pincart2]),
+        &|_, _| {},
+    )?;
+    let row = (id.rows.into_iter())
+        .find(|r| r.kind == ModelKind::Pincart2)
+        .ok_or("identify gave no pin-cart II row")?;
+    Ok(row.spec)
+}
+
+/// The model `diagnose` ends with on the valve's mixed log.
+fn diagnosed(valve: &ModelSpec) -> Result<ModelSpec, Error> {
+    let ex = Excitation::Mixed { low_pct: 40.0 };
+    let rec = synth::generate(valve, ex, LOG_S, DT, 0.0, LOG_SEED)?;
+    Ok(diagnose::diagnose(&rec.view(), None, &|_, _| {})?
+        .final_model
+        .spec)
+}
+
+fn benches() -> Result<Vec<Bench>, Error> {
+    let cfg = CompensationConfig {
+        model_file: Some("model.toml".into()),
+        ..CompensationConfig::default()
+    };
+    let mut valves = vec![("pin-cart II".to_string(), bundled(ModelKind::Pincart2))];
+    valves.push(("physical, healthy".into(), physical::healthy()));
+    for band in [1.0, 1.5, 3.0] {
+        valves.push((
+            format!("physical, {band} % band"),
+            physical::with_effect(Effect::Backlash, band),
+        ));
+    }
+    valves.push((
+        "physical, 0.6 % deadband".into(),
+        physical::with_effect(Effect::Deadband, 0.6),
+    ));
+    // The 1.5 % valve once more, with the model `identify` fits (pin-cart II's crossing time).
+    let by_identify = "physical, 1.5 % band, identify's pin-cart II";
+    valves.push((
+        by_identify.into(),
+        physical::with_effect(Effect::Backlash, 1.5),
+    ));
+    let mut out = Vec::new();
+    for (name, valve) in valves {
+        let started = Instant::now();
+        let model = if valve.model == ModelKind::Physical && name != by_identify {
+            diagnosed(&valve)?
+        } else {
+            identified(&valve)?
+        };
+        let compensator = Compensator::new(&cfg, &model, DT, (0.0, 100.0))?;
+        eprintln!(
+            "{name}: model in {:.1} s; compensates {}",
+            started.elapsed().as_secs_f64(),
+            compensator.describe()
+        );
+        out.push(Bench {
+            name,
+            valve,
+            compensator,
+        });
+    }
+    Ok(out)
+}
+
+/// Without and with compensation, per seed.
+fn trials(
+    b: &Bench,
+    scenario: Scenario,
+    seeds: u64,
+) -> Result<Vec<(Figures, Figures, Run)>, Error> {
+    let nominal = trial::nominal(&b.valve);
+    (1..=seeds)
+        .map(|seed| {
+            let plain = trial::run(&b.valve, None, scenario, RUN_S, DT, seed)?;
+            let comped = trial::run(
+                &b.valve,
+                Some(b.compensator.clone()),
+                scenario,
+                RUN_S,
+                DT,
+                seed,
+            )?;
+            Ok((
+                trial::figures(&plain, &nominal, DT)?,
+                trial::figures(&comped, &nominal, DT)?,
+                comped,
+            ))
+        })
+        .collect()
+}
+
+fn mean(x: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = x.fold((0.0, 0), |(s, n), v| (s + v, n + 1));
+    s / f64::from(n.max(1))
+}
+
+/// `a → b (±c %)`, the change as the mean of the per-seed changes and their range.
+fn change(pairs: &[(f64, f64)], decimals: usize) -> String {
+    let a = mean(pairs.iter().map(|p| p.0));
+    let b = mean(pairs.iter().map(|p| p.1));
+    let ch: Vec<f64> = pairs
+        .iter()
+        .map(|(x, y)| if *x > 0.0 { 100.0 * (y / x - 1.0) } else { 0.0 })
+        .collect();
+    let lo = ch.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = ch.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    format!(
+        "{a:.decimals$} → {b:.decimals$} ({:+.0} %, {lo:+.0}..{hi:+.0})",
+        mean(ch.iter().copied())
+    )
+}
+
+fn row(b: &Bench, scenario: Scenario, results: &[(Figures, Figures, Run)]) -> String {
+    let pick = |f: &dyn Fn(&Figures) -> f64| -> Vec<(f64, f64)> {
+        results.iter().map(|(a, c, _)| (f(a), f(c))).collect()
+    };
+    let iae = if scenario == Scenario::LevelLoop {
+        change(&pick(&|f| f.pv_iae.unwrap_or(0.0)), 0)
+    } else {
+        "—".into()
+    };
+    let offs = results
+        .iter()
+        .filter_map(|r| r.2.switched_off_s)
+        .map(|t| format!("{t:.0} s"))
+        .collect::<Vec<_>>();
+    let added = mean(results.iter().map(|r| {
+        let run = &r.2;
+        let sq: f64 = run
+            .sent
+            .iter()
+            .zip(&run.op)
+            .map(|(s, o)| (s - o).powi(2))
+            .sum();
+        (sq / run.op.len().max(1) as f64).sqrt()
+    }));
+    format!(
+        "| {} | {} | {iae} | {} | {} | {} | {} | {added:.3} | {} |",
+        b.name,
+        scenario.name(),
+        change(&pick(&|f| f.tracking_pct), 3),
+        change(&pick(&|f| f.raw_pct), 3),
+        change(&pick(&|f| f.travel.travel_pct), 0),
+        change(&pick(&|f| f.travel.reversals as f64), 0),
+        if offs.is_empty() {
+            "on".into()
+        } else {
+            format!("off at {}", offs.join(", "))
+        },
+    )
+}
+
+/// The SVG of the first reversal of the small steps after a minute, with and without.
+fn reversal_plot(b: &Bench, path: &PathBuf) -> Result<(), Error> {
+    let plain = trial::run(&b.valve, None, Scenario::SmallSteps, RUN_S, DT, 1)?;
+    let comped = trial::run(
+        &b.valve,
+        Some(b.compensator.clone()),
+        Scenario::SmallSteps,
+        RUN_S,
+        DT,
+        1,
+    )?;
+    let nominal = valve_bridge::model::Valve::new(&trial::nominal(&b.valve), DT)?
+        .simulate(&comped.op, comped.op[0]);
+    // The first reversal after a minute whose step is at most 0.6 %: small reversals are
+    // where the band costs most time.
+    let op = &comped.op;
+    let mut last_dir = 0.0;
+    let mut at = None;
+    for k in 6000..op.len() - 400 {
+        let d = op[k] - op[k - 1];
+        if d != 0.0 {
+            if last_dir != 0.0 && d.signum() != last_dir && d.abs() <= 0.6 {
+                at = Some(k);
+                break;
+            }
+            last_dir = d.signum();
+        }
+    }
+    let k = at.ok_or("no reversal in the small steps")?;
+    let t: Vec<f64> = (0..op.len()).map(|i| i as f64 * DT).collect();
+    let window = k - 30..k + 120;
+    let series = |name, y, color| Series { name, y, color };
+    let positions = plot::lines(
+        &format!(
+            "{}: a reversal of the controller's O_P, with and without compensation",
+            b.name
+        ),
+        "%",
+        "t, s",
+        &t,
+        &[
+            series("O_P (controller)", op, plot::MEASURED),
+            series("V_P without compensation", &plain.vp, plot::BEFORE),
+            series("V_P with compensation", &comped.vp, plot::AFTER),
+            series("V_P of the healthy twin", &nominal, plot::EXTRA),
+        ],
+        window.clone(),
+    );
+    let kick = plot::lines(
+        "the set-point sent: the controller's O_P and the kick",
+        "%",
+        "t, s",
+        &t,
+        &[
+            series("O_P (controller)", op, plot::MEASURED),
+            series("set-point sent (compensated)", &comped.sent, plot::AFTER),
+        ],
+        window,
+    );
+    std::fs::write(path, positions)?;
+    let kick_path = path.with_file_name(format!(
+        "{}-kick.svg",
+        path.file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("reversal")
+    ));
+    std::fs::write(&kick_path, kick)?;
+    eprintln!("wrote {}", kick_path.display());
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+fn main() -> Result<(), Error> {
+    let (seeds, plot_path) = options()?;
+    let benches = benches()?;
+    println!("Models identified from each valve's own 15-minute log, and what they compensate:");
+    for b in &benches {
+        println!("- {}: {}", b.name, b.compensator.describe());
+    }
+    println!();
+    println!("| valve | scenario | level IAE, %·s | tracking error, % RMS | O_P - V_P, % RMS | travel, % | reversals | added, % RMS | compensation |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for b in &benches {
+        for scenario in Scenario::ALL {
+            let results = trials(b, scenario, seeds)?;
+            println!("{}", row(b, scenario, &results));
+        }
+    }
+    if let Some(path) = plot_path {
+        let b = benches
+            .iter()
+            .find(|b| b.name.contains("1.5 %"))
+            .ok_or("no 1.5 % valve")?;
+        reversal_plot(b, &path)?;
+    }
+    Ok(())
+}
