@@ -413,7 +413,13 @@ fn a_closed_stdout_loses_only_the_printed_summary() {
     // (exit 0, no panic) and puts the summary in its log on stderr instead.
     let dir = tempfile::tempdir().unwrap();
     let mut child = Command::new(BIN)
-        .args(["run", "--as-fast-as-possible", "--duration", "2", "--log-dir"])
+        .args([
+            "run",
+            "--as-fast-as-possible",
+            "--duration",
+            "2",
+            "--log-dir",
+        ])
         .arg(dir.path())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -18,7 +18,9 @@ const MINUTES_10: f64 = 600.0;
 /// The healthy physical valve read by a sensor of `noise_pct`, with `change` applied.
 fn valve(noise_pct: f64, change: impl Fn(&mut ModelSpec, &mut PhysicalParams)) -> ModelSpec {
     let mut spec = physical::healthy();
-    let mut p = spec.physical.expect("the bundled physical valve has [physical]");
+    let mut p = spec
+        .physical
+        .expect("the bundled physical valve has [physical]");
     p.sensor_noise_pct = noise_pct;
     change(&mut spec, &mut p);
     spec.physical = Some(p);
@@ -69,16 +71,25 @@ fn a_coarse_lattice_on_a_quiet_sensor_is_quantization() {
     assert_eq!(names(&d), ["quantization"], "{:?}", d.findings);
     assert!((param(&d, "quantization_pct") - 0.4).abs() < 1e-6);
     // The noise floor is at least the rounding's, not 0.
-    assert!(d.noise_floor_pct >= 0.4 / 12f64.sqrt() - 1e-9, "{}", d.noise_floor_pct);
+    assert!(
+        d.noise_floor_pct >= 0.4 / 12f64.sqrt() - 1e-9,
+        "{}",
+        d.noise_floor_pct
+    );
 }
 
 #[test]
 fn a_valve_that_hunts_at_some_holds_only_is_stiction() {
-    // Static friction 1 % above the Coulomb band with a quiet sensor: after some of the random
-    // steps the stem sticks, slips past the target and hunts; after most it settles.
-    let spec = valve(0.02, |_, p| p.static_band_pct = p.coulomb_band_pct + 1.0);
-    let d = diagnose(&spec, Excitation::RandomSteps, 6);
-    assert_eq!(names(&d).first(), Some(&"stiction"), "{:?}", d.findings);
+    // Static friction 1 % above the Coulomb band with a quiet sensor: after a few of the
+    // random steps the stem sticks, slips past the target and hunts (25 slips of 0.3 % or
+    // more in 10 minutes); after most it settles. Where they fall between the fit and the
+    // held-out blocks is chance.
+    let spec = valve(0.02, |_, p| {
+        (p.positioner_gain_per_s, p.deadband_pct) = (7.5, 0.036);
+        (p.coulomb_band_pct, p.static_band_pct) = (0.13, 1.2);
+    });
+    let d = diagnose(&spec, Excitation::RandomSteps, 3);
+    assert_eq!(names(&d), ["stiction"], "{:?}", d.findings);
 }
 
 #[test]
@@ -106,7 +117,8 @@ fn a_dead_time_behind_a_travel_stop_is_found_beside_it() {
         "{:?}",
         d.findings
     );
-    let td = param(&d, "dead_time_s");
+    // The joint refits after the stop's wind-up recover the whole dead time.
+    let td = d.final_model.spec.dead_time_s;
     assert!((td - 0.7).abs() < 0.1, "dead time {td} s");
 }
 

@@ -119,7 +119,8 @@ pub fn size_range(effect: Effect, noise_pct: f64, excitation: &str) -> (f64, f64
         Effect::Asymmetry => [(1.7, 6.0), (5.0, 30.0), (40.0, 150.0)][gentle],
         Effect::MinSpeed => (0.5, 2.0),
         Effect::Deadband => (0.4, 3.0),
-        // Drawn as the quantile of O_P the stop sits at; the size is 100 - stop.
+        // Drawn as the quantile of O_P the stop sits at (1 - it for a stop above closed); the
+        // size is how far the stop lies from its end of travel.
         Effect::Saturation => (0.6, 0.97),
         Effect::Quantization => (1.2 * QUANTIZATION_PCT.max(noise_pct), 1.5),
         Effect::Calibration => (0.6, 4.0),
@@ -252,11 +253,20 @@ fn draw_case(
     let mut sizes = Vec::new();
     for &effect in &plan.effects {
         let size = if effect == Effect::Saturation {
-            saturation_size(&spec, excitation, duration_s, op_seed, rng)?
+            // A stop short of open or, as often, above closed.
+            let low = rng.gen_bool(0.5);
+            let size = saturation_size(&spec, excitation, duration_s, op_seed, low, rng)?;
+            if low {
+                spec.travel.min_pct = size;
+            } else {
+                physical::apply(&mut spec, effect, size);
+            }
+            size
         } else {
-            log_uniform(rng, size_range(effect, noise, plan.excitation))
+            let size = log_uniform(rng, size_range(effect, noise, plan.excitation));
+            build_effect(&mut spec, effect, size, rng);
+            size
         };
-        build_effect(&mut spec, effect, size, rng);
         sizes.push((effect, size));
     }
     let rec = synth::generate(&spec, excitation, duration_s, DT, 0.0, op_seed)?;
@@ -363,19 +373,25 @@ fn build_effect(spec: &mut ModelSpec, effect: Effect, size: f64, rng: &mut ChaCh
     }
 }
 
-/// 100 - the stop, for a stop at quantile `q` of the O_P the healthy valve gets.
+/// How far a stop lies from its end of travel: 100 - the stop for a stop short of open at
+/// quantile `q` of the O_P the healthy valve gets, or the stop itself for one above closed
+/// (`low`) at quantile 1 - `q`.
 fn saturation_size(
     spec: &ModelSpec,
     excitation: Excitation,
     duration_s: f64,
     seed: u64,
+    low: bool,
     rng: &mut ChaCha8Rng,
 ) -> Result<f64, SynthError> {
     let (lo, hi) = size_range(Effect::Saturation, 0.0, "");
     let q = rng.gen_range(lo..=hi);
     let rec = synth::generate(spec, excitation, duration_s, DT, 0.0, seed)?;
-    let stop = (quantile(&rec.op, q) - SATURATION_MARGIN_PCT).clamp(5.0, 99.0);
-    Ok(100.0 - stop)
+    Ok(if low {
+        (quantile(&rec.op, 1.0 - q) + SATURATION_MARGIN_PCT).clamp(1.0, 95.0)
+    } else {
+        100.0 - (quantile(&rec.op, q) - SATURATION_MARGIN_PCT).clamp(5.0, 99.0)
+    })
 }
 
 fn quantile(x: &[f64], q: f64) -> f64 {

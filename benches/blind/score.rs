@@ -230,7 +230,7 @@ fn unit(e: Effect) -> &'static str {
         Effect::SlewRate => "%/s",
         Effect::MinSpeed => "q_min/K, %",
         Effect::Asymmetry => "ratio",
-        Effect::Saturation => "100 - stop, %",
+        Effect::Saturation => "stop from its end, %",
         _ => "%",
     }
 }

@@ -194,9 +194,7 @@ pub(crate) fn variants(
         // A band either on the input (the target moves only once O_P leaves it; the valve
         // then closes in on it ever more slowly) or in the positioner (no action inside it,
         // full action outside: the valve arrives still moving and stops at once).
-        Effect::Deadband
-            if get(Knob::Deadband) == 0.0 && get(Knob::PositionerDeadband) == 0.0 =>
-        {
+        Effect::Deadband if get(Knob::Deadband) == 0.0 && get(Knob::PositionerDeadband) == 0.0 => {
             vec![
                 vec![f(Knob::Deadband, 0.02, 10.0, 0.5)],
                 vec![f(Knob::PositionerDeadband, 0.02, 10.0, 0.5)],

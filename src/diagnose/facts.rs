@@ -82,8 +82,8 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         lattice_pct,
         noise_pct: sigma,
         slip_scale,
-        stop_high_pct: stop(op, vp, dt, true),
-        stop_low_pct: stop(op, vp, dt, false),
+        stop_high_pct: stop(op, vp, dt, (sigma, lattice_pct), true),
+        stop_low_pct: stop(op, vp, dt, (sigma, lattice_pct), false),
         approach: approach(op, vp, dt),
         op_span_pct: {
             let mut sorted = op.to_vec();
@@ -152,23 +152,27 @@ const STOP_ASKED_S: f64 = 5.0;
 
 /// The level V_P stops at while O_P asks to go beyond it: V_P's 99.9th percentile (the 0.1th
 /// for the lower stop), when O_P, averaged over half a second (a controller's noise averages
-/// out), stands at least [`STOP_MARGIN_PCT`] beyond it for [`STOP_ASKED_S`] in total, and the
-/// level is short of the end of travel (99.5 %, or 0.5 % for the lower stop).
-fn stop(op: &[f64], vp: &[f64], dt: f64, high: bool) -> Option<f64> {
+/// out), stands at least [`STOP_MARGIN_PCT`] beyond it while V_P sits at the level (within
+/// what six noise sigmas and a sensor step spread a held reading over), for [`STOP_ASKED_S`] in
+/// total, and the level is short of the end of travel (99.5 %, or 0.5 % for the lower stop).
+/// A slow valve still on its way to where O_P asks is not held by a stop.
+fn stop(op: &[f64], vp: &[f64], dt: f64, sensor: (f64, f64), high: bool) -> Option<f64> {
     let mut sorted = vp.to_vec();
     let level = quantile(&mut sorted, if high { 0.999 } else { 0.001 });
     if (high && level >= 99.5) || (!high && level <= 0.5) {
         return None;
     }
+    let (sigma, lattice) = sensor;
+    let held = 6.0 * sigma + lattice + 0.05;
     let h = ((0.25 / dt).round() as usize).max(1);
     let s = running_sums(op);
     let beyond = (h..op.len().saturating_sub(h))
         .filter(|&k| {
             let mean = (s[k + h] - s[k - h]) / (2 * h) as f64;
             if high {
-                mean >= level + STOP_MARGIN_PCT
+                mean >= level + STOP_MARGIN_PCT && vp[k] >= level - held
             } else {
-                mean <= level - STOP_MARGIN_PCT
+                mean <= level - STOP_MARGIN_PCT && vp[k] <= level + held
             }
         })
         .count();

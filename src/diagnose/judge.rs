@@ -259,9 +259,7 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
             (g(Knob::Stickband) >= least && g(Knob::Stickband) * g(Knob::JumpFraction) >= least)
                 || g(Knob::Breakaway) >= least
         }
-        Effect::Deadband => {
-            g(Knob::Deadband).max(g(Knob::PositionerDeadband)) >= MIN_DEADBAND_PCT
-        }
+        Effect::Deadband => g(Knob::Deadband).max(g(Knob::PositionerDeadband)) >= MIN_DEADBAND_PCT,
         Effect::Saturation => spec.travel.max_pct < 99.5 || spec.travel.min_pct > 0.5,
         Effect::Quantization => g(Knob::Quantum) >= MIN_LATTICE_PCT,
         // The error of the reading where the valve is operated, not far outside it.

@@ -40,8 +40,14 @@ const RETRY_SHARE: f64 = 0.005;
 /// A winner that leaves less than this share of the held-out error dominated its round (see
 /// [`Search::run`]).
 const DOMINANT_LEFT: f64 = 0.5;
+/// Share of the fit error the refit of the model's own knobs before a round must remove to be
+/// kept (less is rounding, and would only blur what the round's candidates are judged against).
+const REST_GAIN: f64 = 1e-3;
 /// Where the stop's wind-up restarts, as shares of its range (see [`Search::wind_up`]).
 const WINDUP_STARTS: [f64; 5] = [0.05, 0.2, 0.4, 0.7, 0.95];
+/// Share of the best candidate's held-out gain another must reach to win the round by the
+/// support of more held-out blocks.
+const TIE_SHARE: f64 = 0.95;
 /// Share of the winner's held-out gain a look-alike must reach to be named beside it.
 const LOOK_ALIKE_SHARE: f64 = 0.8;
 
@@ -125,7 +131,7 @@ impl<'a> Search<'a> {
                     "candidate"
                 );
             }
-            let Some(winner) = best.iter().find(|t| t.passes()) else {
+            let Some(winner) = self.winner(&best) else {
                 self.stick_slip();
                 break;
             };
@@ -135,8 +141,7 @@ impl<'a> Search<'a> {
             worth = best
                 .iter()
                 .filter(|t| {
-                    dominant
-                        || self.cur.held - t.errors.held >= RETRY_SHARE * winner.errors.held
+                    dominant || self.cur.held - t.errors.held >= RETRY_SHARE * winner.errors.held
                 })
                 .map(|t| t.effect)
                 .collect();
@@ -224,6 +229,21 @@ impl<'a> Search<'a> {
                 judge.judge(job.effect, spec, errors, job.starts[0].clone(), job.own)
             })
             .collect()
+    }
+
+    /// The round's winner among the candidates that pass (`best` is sorted by held-out error):
+    /// the one that removes the most held-out error, unless another removes nearly as much
+    /// ([`TIE_SHARE`]) with the support of more held-out blocks: an effect that explains the
+    /// error across the recording is better supported than one that helps a few blocks a lot.
+    fn winner<'t>(&self, best: &[&'t Trial]) -> Option<&'t Trial> {
+        let first = *best.iter().find(|t| t.passes())?;
+        let gain = |t: &Trial| self.cur.held - t.errors.held;
+        best.iter()
+            .filter(|t| t.passes() && gain(t) >= TIE_SHARE * gain(first))
+            .max_by(|a, b| {
+                (a.t_stat.total_cmp(&b.t_stat)).then(b.errors.held.total_cmp(&a.errors.held))
+            })
+            .copied()
     }
 
     /// The look-alikes of the winner that pass too and remove nearly as much held-out error,
@@ -329,12 +349,8 @@ impl<'a> Search<'a> {
     /// fit of what the model already had. Kept only if neither error rises.
     fn refit_rest(&mut self) {
         let td = composed::get(&self.current, Knob::DeadTime);
-        let rest = candidates::rest_of_model(
-            &self.current,
-            self.data.rec.dt,
-            self.td_max.max(td),
-            &[],
-        );
+        let rest =
+            candidates::rest_of_model(&self.current, self.data.rec.dt, self.td_max.max(td), &[]);
         let facts = self.data.facts;
         let seen = facts.open_speed.max(facts.close_speed);
         let moved = |i: usize, to: f64| {
@@ -357,7 +373,7 @@ impl<'a> Search<'a> {
             held_after = errors.held,
             "model refitted before the round"
         );
-        if errors.fit < self.cur.fit && errors.held <= self.cur.held {
+        if errors.fit < (1.0 - REST_GAIN) * self.cur.fit && errors.held <= self.cur.held {
             self.current = refitted;
             self.cur = errors;
         }

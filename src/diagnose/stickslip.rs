@@ -290,9 +290,11 @@ impl Rest {
     fn evident(&self, slips: &[Slip], y: &[f64], least: f64) -> usize {
         let h = self.span;
         let still = |a: usize, b: usize, size: f64| {
-            let (lo, hi) = y[a..b].iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &v| {
-                (l.min(v), u.max(v))
-            });
+            let (lo, hi) = y[a..b]
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &v| {
+                    (l.min(v), u.max(v))
+                });
             hi - lo <= 0.25 * size + 5.0 * self.sigma
         };
         slips
@@ -397,8 +399,8 @@ pub(crate) fn fit(
         rest.evident(&measured_slips, scorer.vp, least),
         rest.evident(&slips_before, &sensor.read(&reference), least),
     );
-    let by_evidence = evident >= EVIDENT_SLIPS
-        && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
+    let by_evidence =
+        evident >= EVIDENT_SLIPS && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
     tracing::debug!(evident, evident_model, least, by_evidence, "evident slips");
     let both_halves = missed.0 >= MIN_MISSED && missed.1 >= MIN_MISSED;
     if !both_halves && !by_evidence {

@@ -38,19 +38,28 @@ fn a_positioner_deadband_stops_the_valve_at_its_edge_without_a_slow_approach() {
     // The positioner's band stops the valve at once: it is there within 0.6 s (9 % at 4 e %/s
     // takes ln 9 / 4 = 0.55 s), and the last 0.1 % before it still moves at about 4 %/s.
     let arrived = inside.iter().position(|y| *y >= 49.0 - 1e-9).unwrap();
-    assert!((50..=60).contains(&arrived), "arrived after {arrived} samples");
+    assert!(
+        (50..=60).contains(&arrived),
+        "arrived after {arrived} samples"
+    );
     let speed = (inside[arrived - 1] - inside[arrived - 3]) / (2.0 * DT);
     assert!(speed > 3.5, "{speed} %/s just before the edge");
     // On the input, the last 0.1 % before the target takes over half a second.
     let near = input.iter().position(|y| *y >= 48.9).unwrap();
     let there = input.iter().position(|y| *y >= 49.0 - 1e-3).unwrap();
-    assert!(there - near > 50, "{} samples for the last 0.1 %", there - near);
+    assert!(
+        there - near > 50,
+        "{} samples for the last 0.1 %",
+        there - near
+    );
     // Inside the band nothing moves: a command 0.8 % away leaves the valve where it is.
     let mut s = spec.clone();
     s.effects.positioner_deadband_pct = 2.0;
     let mut v = Valve::new(&s, DT).unwrap();
     v.reset(40.0, 40.0);
-    assert!(run(&mut v, 40.8, 300).iter().all(|y| (*y - 40.0).abs() < 1e-12));
+    assert!(run(&mut v, 40.8, 300)
+        .iter()
+        .all(|y| (*y - 40.0).abs() < 1e-12));
 }
 
 #[test]
