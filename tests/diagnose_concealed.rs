@@ -10,6 +10,9 @@ use valve_bridge::diagnose::{self, composed, composed::Knob, Diagnosis, Outcome}
 use valve_bridge::model::{bundled, ModelKind, ModelSpec};
 use valve_bridge::synth::{self, Excitation};
 
+mod common;
+use common::diagnosis::{names, param};
+
 const DT: f64 = 0.01;
 
 fn healthy() -> ModelSpec {
@@ -22,18 +25,6 @@ fn healthy() -> ModelSpec {
 fn run(spec: &ModelSpec, excitation: Excitation, noise: f64, seed: u64) -> Diagnosis {
     let rec = synth::generate(spec, excitation, 900.0, DT, noise, seed).unwrap();
     diagnose::diagnose(&rec.view(), None, &|_, _| {}).unwrap()
-}
-
-fn names(d: &Diagnosis) -> Vec<&'static str> {
-    d.findings.iter().map(|f| f.effect.name()).collect()
-}
-
-fn param(d: &Diagnosis, name: &str) -> f64 {
-    d.findings
-        .iter()
-        .find_map(|f| f.params.get(name))
-        .and_then(|v| v.as_f64())
-        .unwrap_or(f64::NAN)
 }
 
 const LOOP: Excitation = Excitation::ClosedLoop { level_pct: 50.0 };

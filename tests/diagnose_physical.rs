@@ -12,6 +12,9 @@ use valve_bridge::diagnose::{self, Diagnosis};
 use valve_bridge::model::{ModelSpec, PhysicalParams};
 use valve_bridge::synth::{self, physical, Excitation};
 
+mod common;
+use common::diagnosis::{names, param};
+
 const DT: f64 = 0.01;
 const MINUTES_10: f64 = 600.0;
 
@@ -30,18 +33,6 @@ fn valve(noise_pct: f64, change: impl Fn(&mut ModelSpec, &mut PhysicalParams)) -
 fn diagnose(spec: &ModelSpec, excitation: Excitation, seed: u64) -> Diagnosis {
     let rec = synth::generate(spec, excitation, MINUTES_10, DT, 0.0, seed).unwrap();
     diagnose::diagnose(&rec.view(), None, &|_, _| {}).unwrap()
-}
-
-fn names(d: &Diagnosis) -> Vec<&'static str> {
-    d.findings.iter().map(|f| f.effect.name()).collect()
-}
-
-fn param(d: &Diagnosis, name: &str) -> f64 {
-    d.findings
-        .iter()
-        .find_map(|f| f.params.get(name))
-        .and_then(|v| v.as_f64())
-        .unwrap_or(f64::NAN)
 }
 
 #[test]

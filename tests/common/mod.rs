@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests of `valve-bridge` (each test file uses a part).
 #![allow(dead_code)]
 
+pub mod diagnosis;
 pub mod sim;
 pub mod tools;
 
