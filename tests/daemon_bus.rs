@@ -12,28 +12,17 @@ mod common;
 
 use std::path::Path;
 
-use common::logs;
 use common::sim::{config, real_time_turn, run_cmd, SimDevice, RTU_CONFIG};
+use common::{log_rows, logs, LogRow};
 
 const SHIPPED: &str = "config/two-valves-rtu.toml";
 const PORT: &str = "/tmp/vb-sim-bus";
 
-/// (op, vp, status, latency_us) of every row of the log of valve `name` in `dir`.
-fn rows(dir: &Path, name: &str) -> Vec<(f64, Option<f64>, String, Option<f64>)> {
+/// Every row of the log of valve `name` in `dir`.
+fn rows(dir: &Path, name: &str) -> Vec<LogRow> {
     let files = logs(dir, &format!("vb-{name}-"));
     assert_eq!(files.len(), 1, "{files:?}");
-    let mut r = csv::Reader::from_path(&files[0]).unwrap();
-    r.records()
-        .map(|rec| {
-            let rec = rec.unwrap();
-            (
-                rec[1].parse().unwrap(),
-                rec[2].parse().ok(),
-                rec[3].to_string(),
-                rec[5].parse().ok(),
-            )
-        })
-        .collect()
+    log_rows(&files[0])
 }
 
 #[test]
@@ -69,15 +58,15 @@ fn two_units_on_one_pty_are_driven_through_one_port() {
     // 150 cycles at 50 Hz and the stop action, each.
     assert_eq!((level.len(), cyclone.len()), (151, 151));
     for (name, r) in [("level", &level), ("cyclone", &cyclone)] {
-        let ok = r.iter().filter(|x| x.2 == "ok").count();
+        let ok = r.iter().filter(|x| x.status == "ok").count();
         assert!(ok >= 140, "{name}: {ok} of {} ok\n{stdout}", r.len());
     }
     // Unit 2 is modelless and answers O_P (per mille) at once; unit 1's pin-cart II lags its
     // random steps by its dead time, so it does not.
-    let echoes = |r: &[(f64, Option<f64>, String, Option<f64>)]| {
+    let echoes = |r: &[LogRow]| {
         (r.iter())
-            .filter(|x| x.2 == "ok")
-            .all(|x| x.1.is_some_and(|vp| (vp - x.0).abs() < 0.051))
+            .filter(|x| x.status == "ok")
+            .all(|x| x.vp.is_some_and(|vp| (vp - x.op).abs() < 0.051))
     };
     assert!(echoes(&cyclone[1..]));
     assert!(!echoes(&level));
@@ -102,24 +91,24 @@ fn an_absent_unit_costs_its_own_rows_and_its_own_share_of_the_period() {
     let cyclone = rows(dir.path(), "cyclone");
     // Every cycle that ran read the level valve (the first may find the new port slow); a
     // loaded machine may skip a slot for both.
-    let ran = level.iter().filter(|x| x.2 != "skipped").count();
+    let ran = level.iter().filter(|x| x.status != "skipped").count();
     assert!(ran >= 140, "{ran} cycles ran\n{stdout}");
     assert!(
-        (level[1..].iter()).all(|x| x.2 == "skipped" || x.1.is_some()),
+        (level[1..].iter()).all(|x| x.status == "skipped" || x.vp.is_some()),
         "{level:?}"
     );
     // The absent unit times out at its deadline, 8 ms of the 20 ms period (tokio's timer
     // fires up to a millisecond after it; a loaded machine may add more now and then).
     let timeouts: Vec<f64> = (cyclone.iter())
-        .filter(|x| x.2 == "timeout")
-        .filter_map(|x| x.3)
+        .filter(|x| x.status == "timeout")
+        .filter_map(|x| x.latency_us)
         .collect();
     assert!(timeouts.len() >= 140, "{cyclone:?}");
     let on_time = (timeouts.iter())
         .filter(|&&us| (8000.0..10_500.0).contains(&us))
         .count();
     assert!(on_time * 10 >= timeouts.len() * 9, "{timeouts:?}");
-    assert!(cyclone.iter().all(|x| x.1.is_none()));
+    assert!(cyclone.iter().all(|x| x.vp.is_none()));
     assert!(
         stdout.contains("valve level:\n  samples: ")
             && stdout.contains(" error, 0 disconnected)\n"),

@@ -6,10 +6,9 @@
 
 mod common;
 
-use std::path::Path;
 use std::process::{Command, Output};
 
-use common::logs;
+use common::{log_rows, logs, LogRow};
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 const TWO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/two-valves.toml");
@@ -20,21 +19,6 @@ fn run(args: &[&str]) -> Output {
         .env("RUST_LOG", "info")
         .output()
         .unwrap()
-}
-
-/// (op, vp, status) of every row of `path`.
-fn rows(path: &Path) -> Vec<(f64, Option<f64>, String)> {
-    let mut r = csv::Reader::from_path(path).unwrap();
-    r.records()
-        .map(|rec| {
-            let rec = rec.unwrap();
-            (
-                rec[1].parse().unwrap(),
-                rec[2].parse().ok(),
-                rec[3].to_string(),
-            )
-        })
-        .collect()
 }
 
 #[test]
@@ -66,14 +50,14 @@ fn two_emulated_valves_run_in_the_same_cycles_with_their_own_logs() {
     let level = logs(dir.path(), "vb-level-");
     let cyclone = logs(dir.path(), "vb-cyclone-");
     assert_eq!((level.len(), cyclone.len()), (1, 1), "{stdout}");
-    let (a, b) = (rows(&level[0]), rows(&cyclone[0]));
+    let (a, b) = (log_rows(&level[0]), log_rows(&cyclone[0]));
     // 12000 cycles and the stop action, each.
     assert_eq!((a.len(), b.len()), (12001, 12001));
     // Each valve follows its own source: the level valve's random steps span 20-97 %, the
     // cyclone valve's stay within its 30-70 % clamp.
-    let span = |r: &[(f64, Option<f64>, String)]| {
+    let span = |r: &[LogRow]| {
         r.iter().fold((f64::MAX, f64::MIN), |(lo, hi), x| {
-            (lo.min(x.0), hi.max(x.0))
+            (lo.min(x.op), hi.max(x.op))
         })
     };
     let (lo, hi) = span(&b);
@@ -83,7 +67,7 @@ fn two_emulated_valves_run_in_the_same_cycles_with_their_own_logs() {
     assert!(a
         .iter()
         .chain(&b)
-        .all(|r| r.2 == "ok" || r.2 == "safe-hold"));
+        .all(|r| r.status == "ok" || r.status == "safe-hold"));
 }
 
 #[test]
@@ -126,14 +110,14 @@ fn a_valve_without_its_device_never_stalls_the_other() {
         "{stdout}"
     );
     // Every cycle that ran read the emulated valve; only the absent one's rows are failures.
-    let ok = rows(&logs(dir.path(), "vb-emulated-")[0]);
+    let ok = log_rows(&logs(dir.path(), "vb-emulated-")[0]);
     assert!(ok
         .iter()
-        .all(|r| r.2 == "skipped" || (r.1.is_some() && r.2 != "disconnected")));
-    assert!(ok.iter().filter(|r| r.2 == "ok").count() >= 100);
-    let absent = rows(&logs(dir.path(), "vb-absent-")[0]);
+        .all(|r| r.status == "skipped" || (r.vp.is_some() && r.status != "disconnected")));
+    assert!(ok.iter().filter(|r| r.status == "ok").count() >= 100);
+    let absent = log_rows(&logs(dir.path(), "vb-absent-")[0]);
     assert!(absent[..200]
         .iter()
-        .all(|r| (r.2 == "disconnected" || r.2 == "skipped") && r.1.is_none()));
+        .all(|r| (r.status == "disconnected" || r.status == "skipped") && r.vp.is_none()));
     drop(held);
 }

@@ -21,6 +21,31 @@ pub fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
     files
 }
 
+/// One row of a daemon log as the tests read it (the columns they check).
+#[derive(Debug)]
+pub struct LogRow {
+    pub op: f64,
+    pub vp: Option<f64>,
+    pub status: String,
+    pub latency_us: Option<f64>,
+}
+
+/// Every row of the daemon log at `path`.
+pub fn log_rows(path: &Path) -> Vec<LogRow> {
+    let mut r = csv::Reader::from_path(path).unwrap();
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            LogRow {
+                op: rec[1].parse().unwrap(),
+                vp: rec[2].parse().ok(),
+                status: rec[3].to_string(),
+                latency_us: rec[5].parse().ok(),
+            }
+        })
+        .collect()
+}
+
 /// Panics if `text`, meant for people, holds a number with a float artefact: seven or more
 /// decimals (`0.09999999999999999`, `49.400000000000006`).
 pub fn assert_for_people(text: &str) {
