@@ -489,3 +489,36 @@ fn params(spec: &ModelSpec, knobs: impl Iterator<Item = Knob>) -> Map<String, Va
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, ModelKind};
+
+    fn trial(effect: Effect, held: f64, material: bool) -> Trial {
+        Trial {
+            effect,
+            spec: bundled(ModelKind::Pincart2),
+            errors: Errors { fit: held, held },
+            free: vec![],
+            t_stat: 10.0,
+            excess_share: 0.9,
+            delta_bic: -100.0,
+            material,
+        }
+    }
+
+    #[test]
+    fn the_best_form_that_can_be_kept_stands_for_its_effect() {
+        // A crossing time pinned at its edge (73.5) beside a friction band (77.7): the band.
+        let trials = [
+            trial(Effect::Backlash, 73.5, false),
+            trial(Effect::Backlash, 77.7, true),
+            trial(Effect::Deadband, 700.0, false),
+            trial(Effect::Deadband, 710.0, false),
+        ];
+        let best = best_per_effect(&trials);
+        let got: Vec<(Effect, f64)> = best.iter().map(|t| (t.effect, t.errors.held)).collect();
+        assert_eq!(got, [(Effect::Backlash, 77.7), (Effect::Deadband, 700.0)]);
+    }
+}
