@@ -2,8 +2,9 @@
 //! share (it fits a composed pin-cart II valve): the classes of failure seen on recordings from
 //! other simulators, each built from the physics that causes it in a real valve. A travel stop
 //! above closed or below open, a coarse sensor lattice on a quiet sensor, a valve that hunts at
-//! some holds only, a deadband in the positioner, a dead time hidden behind a travel stop, and
-//! a healthy valve in closed loop read by a quiet sensor (nothing to find).
+//! some holds only, a deadband in the positioner, a dead time hidden behind a travel stop, a
+//! healthy valve in closed loop read by a quiet sensor, and a healthy valve whose stem dynamics
+//! a slowdown of the open valve could take up (nothing to find in either).
 //!
 //! The blind benchmark (`cargo bench --bench diagnose_blind`) scores the same method over
 //! hundreds of randomised valves; these are the cases that must never regress.
@@ -14,6 +15,9 @@ use valve_bridge::synth::{self, physical, Excitation};
 
 mod common;
 use common::diagnosis::{names, param};
+
+#[path = "../benches/blind/cases.rs"]
+mod cases;
 
 const DT: f64 = 0.01;
 const MINUTES_10: f64 = 600.0;
@@ -125,4 +129,21 @@ fn a_healthy_valve_in_closed_loop_read_by_a_quiet_sensor_has_nothing_missing() {
         let d = diagnose(&spec, Excitation::ClosedLoop { level_pct: 45.0 }, seed);
         assert!(d.findings.is_empty(), "seed {seed}: {:?}", d.findings);
     }
+}
+
+#[test]
+fn a_healthy_valve_is_not_called_slower_when_open_than_it_shows() {
+    // A healthy valve of the blind benchmark (seed 424242, case 104): a chamber only 1.14 times
+    // slower fully open, fill and vent 95 and 86 %/s, a 12 Hz stem, the noisiest sensor, the
+    // mixed excitation. A slowdown of 1.65 times fully open took up a quarter of its held-out
+    // error (stem dynamics, the small asymmetry); the recording shows the upper third of its
+    // travel answering only 1.10 times slower than the model without it does.
+    let plan = cases::plans(424242, 220)
+        .into_iter()
+        .find(|p| p.index == 104)
+        .unwrap();
+    let case = cases::build(&plan, MINUTES_10).unwrap();
+    assert!(case.labels.is_empty(), "{:?}", case.labels);
+    let d = diagnose::diagnose(&case.rec.view(), None, &|_, _| {}).unwrap();
+    assert!(d.findings.is_empty(), "{:?}", names(&d));
 }

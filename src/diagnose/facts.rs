@@ -63,6 +63,11 @@ pub struct Facts {
     pub approach: Vec<(f64, f64)>,
     /// The openings O_P asks for: its 5th and 95th percentiles, %.
     pub op_span_pct: (f64, f64),
+    /// The openings V_P visits: its 5th and 95th percentiles, %.
+    pub vp_span_pct: (f64, f64),
+    /// How many times faster V_P answers O_P low in [`Facts::vp_span_pct`] than high in it
+    /// (see [`speed_ratio`]), when the recording shows it.
+    pub speed_ratio: Option<f64>,
 }
 
 /// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
@@ -72,6 +77,10 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (open_speed, close_speed) = speeds(vp, dt, sigma, &[0.1, 0.3, 1.0, 3.0]);
     let (open_held, close_held) = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
+    let vp_span_pct = {
+        let mut seen: Vec<f64> = vp.iter().copied().filter(|v| v.is_finite()).collect();
+        (quantile(&mut seen, 0.05), quantile(&mut seen, 0.95))
+    };
     Facts {
         reversals: count_reversals(op),
         steps: step_responses(rec),
@@ -89,6 +98,8 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
             let mut sorted = op.to_vec();
             (quantile(&mut sorted, 0.05), quantile(&mut sorted, 0.95))
         },
+        vp_span_pct,
+        speed_ratio: speed_ratio(op, vp, dt, sigma, vp_span_pct),
     }
 }
 
@@ -273,6 +284,44 @@ fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
         best.1 = best.1.max(quantile(&mut down, 0.999) - noise);
     }
     best
+}
+
+/// Fewest windows in each third of the openings for [`speed_ratio`] to say anything.
+const MIN_WINDOWS_PER_THIRD: usize = 50;
+
+/// How many times faster V_P answers O_P in the lowest third of `span` (openings, %) than in
+/// its highest third: in each third, the median over 0.1 s windows (one starting at every
+/// sample) that start with V_P at least 1 % (and five noise sigmas) away from O_P of the speed
+/// toward O_P over that distance (a proportional positioner's gain, or its flow limit over the
+/// distance), the window's starting position deciding its third. `None` when either third
+/// has fewer than [`MIN_WINDOWS_PER_THIRD`] such windows. A chamber that fills more slowly
+/// when open shows here as a ratio above 1; how far above depends on the excitation too (how
+/// far from O_P V_P starts in each third), so it is read against the same statistic on a
+/// simulation driven by the same O_P.
+pub fn speed_ratio(op: &[f64], vp: &[f64], dt: f64, sigma: f64, span: (f64, f64)) -> Option<f64> {
+    let h = ((0.1 / dt).round() as usize).max(1);
+    let w = h as f64 * dt;
+    let least = (5.0 * sigma).max(1.0);
+    let third = (span.1 - span.0) / 3.0;
+    let (mut low, mut high): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    for k in h..vp.len() {
+        let (a, b) = (vp[k - h], vp[k]);
+        let e = op[k - h] - a;
+        if !(a.is_finite() && b.is_finite()) || e.abs() < least {
+            continue;
+        }
+        let rate = (b - a) * e.signum() / w / e.abs();
+        if a < span.0 + third {
+            low.push(rate);
+        } else if a > span.1 - third {
+            high.push(rate);
+        }
+    }
+    if third <= 0.0 || low.len().min(high.len()) < MIN_WINDOWS_PER_THIRD {
+        return None;
+    }
+    let (fast_low, fast_high) = (median(&low)?, median(&high)?);
+    (fast_high > 0.0).then(|| fast_low / fast_high)
 }
 
 /// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
@@ -539,6 +588,40 @@ mod tests {
         assert_eq!(f.reversals, 1);
         assert_eq!(f.holds.len(), 2);
         assert_eq!(f.holds[1].approach, -1.0);
+    }
+
+    #[test]
+    fn answer_rate_by_opening_shows_a_valve_slower_when_open() {
+        // Steps between 10 and 90 % every 5 s; V_P moves at 8 |e| %/s at most 60 %/s, divided
+        // by 1 + g V / 100 (a chamber that grows with travel), read with 0.1 % of noise.
+        let (dt, n) = (0.01, 20000);
+        let op: Vec<f64> = (0..n)
+            .map(|k| [10.0, 90.0, 30.0, 70.0][(k / 500) % 4])
+            .collect();
+        let e = noise(n, 0.1);
+        let run = |g: f64| {
+            let mut x = op[0];
+            let vp: Vec<f64> = (0..n)
+                .map(|k| {
+                    let err = op[k] - x;
+                    x += err.signum() * (8.0 * err.abs()).min(60.0) / (1.0 + g * x / 100.0) * dt;
+                    x + e[k]
+                })
+                .collect();
+            speed_ratio(&op, &vp, dt, 0.1, (10.0, 90.0))
+        };
+        // The statistic depends on the excitation (how far from O_P V_P starts in each third),
+        // so it is read against the same valve without the slowdown, driven alike.
+        let healthy = run(0.0).unwrap();
+        assert!((0.8..1.25).contains(&healthy), "{healthy}");
+        // Twice as slow fully open: the upper third answers clearly slower than without.
+        let slow = run(1.0).unwrap() / healthy;
+        assert!((1.15..2.0).contains(&slow), "{slow}");
+        // Within 14 % fully open (a healthy chamber): close to the valve without it.
+        let barely = run(0.14).unwrap() / healthy;
+        assert!((1.0..1.1).contains(&barely), "{barely}");
+        // A valve that never leaves the lower third says nothing of the upper one.
+        assert!(speed_ratio(&op, &vec![20.0; n], dt, 0.1, (10.0, 90.0)).is_none());
     }
 
     #[test]

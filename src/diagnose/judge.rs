@@ -19,7 +19,7 @@
 //! ([`super::evidence`]).
 
 use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
-use super::facts::Facts;
+use super::facts::{self, Facts};
 use super::refit::{Free, NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
 use super::scorer::{Errors, Scorer};
 use crate::model::ModelSpec;
@@ -33,6 +33,11 @@ const MIN_EXCESS_SHARE: f64 = 0.1;
 /// Largest BIC change (it must fall by more than this).
 const MAX_DELTA_BIC: f64 = -10.0;
 
+/// Smallest crossing time at half travel worth naming as lost motion, s: a healthy positioner
+/// swings its pressure across a healthy stem's tenth of a percent of band in a few
+/// hundredths of a second, even at a low gain; a crossing that short is more often a slow
+/// stroke or stem dynamics taken up at the reversals than a worn valve.
+const MIN_CROSSING_S: f64 = 0.1;
 /// Smallest friction band worth naming, %: a healthy stem's is a tenth of a percent.
 pub(crate) const MIN_FRICTION_BAND_PCT: f64 = 0.3;
 /// The errors below which a minimum speed takes over from proportional action, for it to be
@@ -58,6 +63,10 @@ pub(crate) const MIN_SLIP_PCT: f64 = 0.2;
 const MIN_DEADBAND_PCT: f64 = 0.2;
 /// Smallest opening-dependent slowdown worth naming: fully open 60 % slower than closed.
 const MIN_SLOWDOWN: f64 = 0.6;
+/// How many times faster than the current model makes it the recording must show the valve
+/// answering low in its travel than high in it for a slowdown to be named (see
+/// [`Judge::slowdown_seen`]): the upper third of the openings visited 15 % slower.
+const SLOWDOWN_SEEN: f64 = 1.15;
 /// Coarsest sensor lattice that is still not worth naming, %: a 10-bit position reading steps
 /// by 0.1 %; a lattice of 0.15 % or more is as coarse as the moves a controller makes.
 pub(crate) const MIN_LATTICE_PCT: f64 = 0.15;
@@ -113,7 +122,11 @@ impl Judge<'_> {
         free: Vec<Free>,
         own: usize,
     ) -> Trial {
-        let blocks = self.scorer.paired(self.current, &spec);
+        let (ya, yb) = (
+            self.scorer.simulate(self.current),
+            self.scorer.simulate(&spec),
+        );
+        let blocks = self.scorer.paired(&ya, &yb);
         let t_stat = blocks_helped(&blocks, self.sigma);
         let excess = (self.cur.held - self.held_noise).max(1e-12);
         let excess_share = (self.cur.held - errors.held) / excess.max(0.05 * self.cur.held);
@@ -130,7 +143,9 @@ impl Judge<'_> {
             self.scorer.n_scored(),
             self.corr_len,
         );
-        let material = !pinned(own, &spec) && material(effect, &spec, self.facts);
+        let material = !pinned(own, &spec)
+            && material(effect, &spec, self.facts)
+            && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, &ya));
         Trial {
             effect,
             spec,
@@ -140,6 +155,32 @@ impl Judge<'_> {
             excess_share,
             delta_bic,
             material,
+        }
+    }
+
+    /// Whether the recording shows a slowdown of the open valve worth naming, beyond what the
+    /// current model (simulated as `ya`) already makes of the openings visited: the rate at
+    /// which V_P answers O_P low in its travel over the rate high in it
+    /// ([`facts::speed_ratio`]) must be at least [`SLOWDOWN_SEEN`] times what the same
+    /// statistic is on the current model. A slowdown fitted to take up an error of something
+    /// else (stem dynamics, a small asymmetry, a slowdown too small to matter) is stretched
+    /// well beyond what the valve shows there. Where either ratio cannot be measured (too few
+    /// moves in a third of the travel) it says nothing against; nor when the candidate names a
+    /// crossing time that grows with opening rather than a slowdown.
+    fn slowdown_seen(&self, spec: &ModelSpec, ya: &[f64]) -> bool {
+        if composed::get(spec, Knob::Slowdown) < MIN_SLOWDOWN {
+            return true;
+        }
+        let (dt, span) = (self.scorer.dt, self.facts.vp_span_pct);
+        let current = facts::speed_ratio(self.scorer.op, ya, dt, 0.0, span);
+        tracing::debug!(
+            recording = ?self.facts.speed_ratio,
+            ?current,
+            "answer rate low over high in travel"
+        );
+        match (self.facts.speed_ratio, current) {
+            (Some(seen), Some(cur)) => seen >= SLOWDOWN_SEEN * cur,
+            _ => true,
         }
     }
 }
@@ -209,7 +250,7 @@ pub(crate) fn material(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool 
     match effect {
         Effect::DeadTime => g(Knob::DeadTime) > NOMINAL_DEAD_TIME_S + 0.02,
         Effect::Backlash => {
-            g(Knob::Crossing) * composed::half_open(spec) >= 0.03
+            g(Knob::Crossing) * composed::half_open(spec) >= MIN_CROSSING_S
                 || g(Knob::FrictionBand) >= MIN_FRICTION_BAND_PCT
         }
         Effect::StateDependentDelay => {
@@ -346,6 +387,8 @@ mod tests {
             stop_low_pct: None,
             approach: vec![],
             op_span_pct: (20.0, 80.0),
+            vp_span_pct: (20.0, 80.0),
+            speed_ratio: None,
         };
         let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
         let with = |knob, v| {
@@ -380,6 +423,21 @@ mod tests {
         composed::set(&mut asym, Knob::ClosingSlew, 20.0);
         assert!(material(Effect::Asymmetry, &asym, &facts(50.0, 20.0)));
         assert!(!material(Effect::Asymmetry, &asym, &facts(20.0, 50.0)));
+        // Lost motion: a crossing of 0.15 s at half travel is a worn valve's, one of 0.05 s a
+        // healthy positioner's (or a slow stroke's taken up at the reversals); a friction band
+        // of 0.3 % or more.
+        assert!(material(Effect::Backlash, &with(Knob::Crossing, 0.15), &f));
+        assert!(!material(Effect::Backlash, &with(Knob::Crossing, 0.05), &f));
+        assert!(material(
+            Effect::Backlash,
+            &with(Knob::FrictionBand, 0.4),
+            &f
+        ));
+        assert!(!material(
+            Effect::Backlash,
+            &with(Knob::FrictionBand, 0.2),
+            &f
+        ));
         // A stickband without a jump is not stick-slip.
         let mut band = with(Knob::Stickband, 1.0);
         composed::set(&mut band, Knob::JumpFraction, 0.0);

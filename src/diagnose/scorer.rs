@@ -119,10 +119,10 @@ impl<'a> Scorer<'a> {
         }
     }
 
-    /// Per held-out block: the drop in squared error from `a` to `b`, and the sum of squared
-    /// differences between the two simulations (what sets the noise of that drop).
-    pub fn paired(&self, a: &ModelSpec, b: &ModelSpec) -> Vec<(f64, f64)> {
-        let (ya, yb) = (self.simulate(a), self.simulate(b));
+    /// Per held-out block: the drop in squared error from simulation `ya` to `yb` (each from
+    /// [`Scorer::simulate`]), and the sum of squared differences between the two (what sets
+    /// the noise of that drop).
+    pub fn paired(&self, ya: &[f64], yb: &[f64]) -> Vec<(f64, f64)> {
         let mut out = vec![(0.0, 0.0); self.n_blocks.div_ceil(2)];
         for (k, &m) in self.vp.iter().enumerate() {
             if self.held_mask[k] {
@@ -205,7 +205,7 @@ mod tests {
         let other = bundled(ModelKind::Delayed);
         let e = s.errors(&other);
         assert!(e.fit > 0.0 && e.held > 0.0);
-        let blocks = s.paired(&other, &truth);
+        let blocks = s.paired(&s.simulate(&other), &s.simulate(&truth));
         assert_eq!(blocks.len(), 10);
         let total: f64 = blocks.iter().map(|b| b.0).sum();
         assert!((total - e.held).abs() < 1e-6 * e.held);
