@@ -77,10 +77,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (open_speed, close_speed) = speeds(vp, dt, sigma, &[0.1, 0.3, 1.0, 3.0]);
     let (open_held, close_held) = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
-    let vp_span_pct = {
-        let mut seen: Vec<f64> = vp.iter().copied().filter(|v| v.is_finite()).collect();
-        (quantile(&mut seen, 0.05), quantile(&mut seen, 0.95))
-    };
+    let vp_span_pct = span(vp);
     Facts {
         reversals: count_reversals(op),
         steps: step_responses(rec),
@@ -94,10 +91,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         stop_high_pct: stop(op, vp, dt, (sigma, lattice_pct), true),
         stop_low_pct: stop(op, vp, dt, (sigma, lattice_pct), false),
         approach: approach(op, vp, dt),
-        op_span_pct: {
-            let mut sorted = op.to_vec();
-            (quantile(&mut sorted, 0.05), quantile(&mut sorted, 0.95))
-        },
+        op_span_pct: span(op),
         vp_span_pct,
         speed_ratio: speed_ratio(op, vp, dt, sigma, vp_span_pct),
     }
@@ -284,6 +278,12 @@ fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
         best.1 = best.1.max(quantile(&mut down, 0.999) - noise);
     }
     best
+}
+
+/// The 5th and 95th percentiles of the measured values of `x`, %.
+fn span(x: &[f64]) -> (f64, f64) {
+    let mut seen: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    (quantile(&mut seen, 0.05), quantile(&mut seen, 0.95))
 }
 
 /// Fewest windows in each third of the openings for [`speed_ratio`] to say anything.

@@ -104,8 +104,9 @@ pub(crate) struct Judge<'a> {
     pub sigma: f64,
     /// What noise alone leaves on the held-out blocks, %².
     pub held_noise: f64,
-    /// The model so far and its errors.
-    pub current: &'a ModelSpec,
+    /// The model so far, simulated over the whole recording ([`Scorer::simulate`]), and its
+    /// errors.
+    pub current_sim: &'a [f64],
     pub cur: Errors,
     /// Correlation length of the current residual, samples.
     pub corr_len: f64,
@@ -122,11 +123,9 @@ impl Judge<'_> {
         free: Vec<Free>,
         own: usize,
     ) -> Trial {
-        let (ya, yb) = (
-            self.scorer.simulate(self.current),
-            self.scorer.simulate(&spec),
-        );
-        let blocks = self.scorer.paired(&ya, &yb);
+        let ya = self.current_sim;
+        let yb = self.scorer.simulate(&spec);
+        let blocks = self.scorer.paired(ya, &yb);
         let t_stat = blocks_helped(&blocks, self.sigma);
         let excess = (self.cur.held - self.held_noise).max(1e-12);
         let excess_share = (self.cur.held - errors.held) / excess.max(0.05 * self.cur.held);
@@ -145,7 +144,7 @@ impl Judge<'_> {
         );
         let material = !pinned(own, &spec)
             && material(effect, &spec, self.facts)
-            && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, &ya));
+            && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya));
         Trial {
             effect,
             spec,

@@ -214,12 +214,13 @@ impl<'a> Search<'a> {
             starts = jobs.iter().map(|j| j.starts.len()).sum::<usize>(),
             "trying effects"
         );
+        let current_sim = self.data.scorer.simulate(&self.current);
         let judge = Judge {
             scorer: self.data.scorer,
             facts: self.data.facts,
             sigma: self.data.sigma,
             held_noise: self.held_noise,
-            current: &self.current,
+            current_sim: &current_sim,
             cur: self.cur,
             corr_len: self.corr_len,
         };
