@@ -11,8 +11,9 @@
 //! the paper's level loop, the paper's random steps, and small steps. Figures per run:
 //! `valve_bridge::compensate::trial::Figures`.
 //!
-//! Run: `cargo bench --bench compensation -- [--seeds N] [--plot PATH]` (default 3 seeds);
-//! `--plot PATH.svg` writes the SVG of a reversal of the 1.5 % valve with and without
+//! Run: `cargo bench --bench compensation -- [--seeds N] [--kick-share S] [--plot PATH]`
+//! (default 3 seeds and the default `kick_share`; shares above the config's limit of 1 are
+//! taken, to show why there is one); `--plot PATH.svg` writes the SVG of a reversal of the 1.5 % valve with and without
 //! compensation, and `PATH-kick.svg` the set-point sent.
 
 use std::path::PathBuf;
@@ -42,20 +43,35 @@ struct Bench {
     compensator: Compensator,
 }
 
-fn options() -> Result<(u64, Option<PathBuf>), Error> {
-    let (mut seeds, mut plot) = (3, None);
+/// What the command line asks for.
+struct Args {
+    seeds: u64,
+    kick_share: f64,
+    plot: Option<PathBuf>,
+}
+
+fn options() -> Result<Args, Error> {
+    let mut out = Args {
+        seeds: 3,
+        kick_share: CompensationConfig::default().kick_share,
+        plot: None,
+    };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--seeds" => {
-                seeds = args.next().ok_or("--seeds needs a number")?.parse()?;
+                let n: u64 = args.next().ok_or("--seeds needs a number")?.parse()?;
+                out.seeds = n.max(1);
             }
-            "--plot" => plot = Some(PathBuf::from(args.next().ok_or("--plot needs a path")?)),
+            "--kick-share" => {
+                out.kick_share = args.next().ok_or("--kick-share needs a number")?.parse()?;
+            }
+            "--plot" => out.plot = Some(PathBuf::from(args.next().ok_or("--plot needs a path")?)),
             "--bench" => {}
             other => return Err(format!("unknown argument `{other}`").into()),
         }
     }
-    Ok((seeds.max(1), plot))
+    Ok(out)
 }
 
 /// Pin-cart II identified by `identify` from its random-step log.
@@ -82,11 +98,13 @@ fn diagnosed(valve: &ModelSpec) -> Result<ModelSpec, Error> {
         .spec)
 }
 
-fn benches() -> Result<Vec<Bench>, Error> {
+fn benches(kick_share: f64) -> Result<Vec<Bench>, Error> {
     let cfg = CompensationConfig {
         model_file: Some("model.toml".into()),
+        kick_share,
         ..CompensationConfig::default()
     };
+
     let mut valves = vec![("pin-cart II".to_string(), bundled(ModelKind::Pincart2))];
     valves.push(("physical, healthy".into(), physical::healthy()));
     for band in [1.0, 1.5, 3.0] {
@@ -289,8 +307,12 @@ fn reversal_plot(b: &Bench, path: &PathBuf) -> Result<(), Error> {
 }
 
 fn main() -> Result<(), Error> {
-    let (seeds, plot_path) = options()?;
-    let benches = benches()?;
+    let Args {
+        seeds,
+        kick_share,
+        plot: plot_path,
+    } = options()?;
+    let benches = benches(kick_share)?;
     println!("Models identified from each valve's own 15-minute log, and what they compensate:");
     for b in &benches {
         println!("- {}: {}", b.name, b.compensator.describe());

@@ -7,8 +7,11 @@
 //! O_P, the valve the set-point, and the compensator the V_P read.
 //!
 //! Figures (see [`Figures`]): the integrated absolute error of the process variable (the
-//! level loop only), the tracking error against the valve's nominal healthy twin, the raw RMS
-//! of O_P - V_P, and the valve's travel and reversals (wear).
+//! level loop only), the tracking error of the stem against the valve's nominal healthy twin,
+//! the raw RMS of O_P - V_P, and the stem's travel and reversals (wear). The stem is read by
+//! a noise-free copy of the valve's sensor (same gain and offset) driven by the same
+//! set-points: compensation cannot change a sensor's noise, so the figures that judge it
+//! leave the noise out, while the loop and the compensator see the noisy V_P a valve gives.
 //!
 //! Not here: identifying the model (the bench does, from the valve's own recording).
 
@@ -54,12 +57,14 @@ impl Scenario {
     }
 }
 
-/// One run: the controller's O_P, the set-points sent and the V_P read, per sample.
+/// One run: the controller's O_P, the set-points sent, the V_P read and the stem, per sample.
 #[derive(Debug, Clone)]
 pub struct Run {
     pub op: Vec<f64>,
     pub sent: Vec<f64>,
     pub vp: Vec<f64>,
+    /// The stem: what a noise-free sensor of the same calibration reads, %.
+    pub stem: Vec<f64>,
     /// ∫ |level - set-point| dt, %·s (level loop only).
     pub pv_iae: Option<f64>,
     /// When the guard switched compensation off, s.
@@ -78,6 +83,7 @@ pub fn run(
 ) -> Result<Run, ModelError> {
     let n = (duration_s / dt).round() as usize;
     let mut v = Valve::new(valve, dt)?;
+    let mut stem = Valve::new(&noise_free(valve), dt)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut plant = LevelLoop::new(50.0);
     let mut steps = RandomSteps::new(&RandomStepsParams {
@@ -89,6 +95,7 @@ pub fn run(
         op: Vec::with_capacity(n),
         sent: Vec::with_capacity(n),
         vp: Vec::with_capacity(n),
+        stem: Vec::with_capacity(n),
         pv_iae: (scenario == Scenario::LevelLoop).then_some(0.0),
         switched_off_s: None,
     };
@@ -101,6 +108,7 @@ pub fn run(
         };
         if k == 0 {
             v.reset(op, op);
+            stem.reset(op, op);
         }
         let sent = comp.as_mut().map_or(op, |c| c.setpoint(op, t));
         let vp = v.step(sent);
@@ -117,6 +125,7 @@ pub fn run(
         out.op.push(op);
         out.sent.push(sent);
         out.vp.push(vp);
+        out.stem.push(stem.step(sent));
     }
     Ok(out)
 }
@@ -126,12 +135,12 @@ pub fn run(
 pub struct Figures {
     /// ∫ |level - set-point| dt, %·s (level loop only).
     pub pv_iae: Option<f64>,
-    /// RMS of V_P minus the nominal twin's noise-free V_P for the controller's O_P, %: what the
+    /// RMS of the stem minus the nominal twin's stem for the controller's O_P, %: what the
     /// valve's imperfections (and compensation) change in its answer to the controller.
     pub tracking_pct: f64,
     /// RMS of the controller's O_P minus V_P, %: dead time, speed and noise included.
     pub raw_pct: f64,
-    /// V_P's travel and reversals through [`TRAVEL_DEADBAND_PCT`].
+    /// The stem's travel and reversals through [`TRAVEL_DEADBAND_PCT`].
     pub travel: Travel,
 }
 
@@ -144,10 +153,22 @@ pub fn figures(run: &Run, nominal: &ModelSpec, dt: f64) -> Result<Figures, Model
     };
     Ok(Figures {
         pv_iae: run.pv_iae,
-        tracking_pct: rms(&run.vp, &reference),
+        tracking_pct: rms(&run.stem, &reference),
         raw_pct: rms(&run.op, &run.vp),
-        travel: metrics::travel(&run.vp, TRAVEL_DEADBAND_PCT),
+        travel: metrics::travel(&run.stem, TRAVEL_DEADBAND_PCT),
     })
+}
+
+/// `valve` with a noise-free sensor of the same calibration (a sensor's noise and lattice do
+/// not act back on the valve, so this copy follows the stem exactly).
+fn noise_free(valve: &ModelSpec) -> ModelSpec {
+    let mut clean = valve.clone();
+    if let Some(p) = clean.physical.as_mut() {
+        p.sensor_noise_pct = 0.0;
+        p.sensor_resolution_pct = 0.0;
+    }
+    clean.effects.quantization_pct = 0.0;
+    clean
 }
 
 /// The nominal healthy twin of `valve`: the same valve with what compensation answers put
@@ -156,15 +177,13 @@ pub fn figures(run: &Run, nominal: &ModelSpec, dt: f64) -> Result<Figures, Model
 /// dead time and travel; a pin-cart II valve loses its crossing time; the effects of a
 /// composed valve lose their friction band, deadband, stick-slip and calibration.
 pub fn nominal(valve: &ModelSpec) -> ModelSpec {
-    let mut twin = valve.clone();
+    let mut twin = noise_free(valve);
     if let (Some(p), Some(h)) = (twin.physical.as_mut(), physical::healthy().physical) {
         p.coulomb_band_pct = h.coulomb_band_pct;
         p.static_band_pct = h.static_band_pct;
         p.deadband_pct = h.deadband_pct;
         p.sensor_gain = h.sensor_gain;
         p.sensor_offset_pct = h.sensor_offset_pct;
-        p.sensor_noise_pct = 0.0;
-        p.sensor_resolution_pct = 0.0;
     }
     if twin.model == ModelKind::Pincart2 {
         if let Some(p) = twin.pincart2.as_mut() {
@@ -180,7 +199,6 @@ pub fn nominal(valve: &ModelSpec) -> ModelSpec {
     e.breakaway_pct = 0.0;
     e.calibration_gain = 1.0;
     e.calibration_offset_pct = 0.0;
-    e.quantization_pct = 0.0;
     twin
 }
 
@@ -216,5 +234,21 @@ mod tests {
         assert!(f.pv_iae.unwrap() > 0.0 && f.raw_pct > 0.0 && f.travel.travel_pct > 0.0);
         let steps = super::run(&valve, None, Scenario::RandomSteps, 60.0, 0.01, 1).unwrap();
         assert_eq!(steps.pv_iae, None);
+    }
+
+    #[test]
+    fn the_figures_read_the_stem_not_the_sensor_s_noise() {
+        // A healthy physical valve is its own twin but for its sensor's noise: the V_P read is
+        // noisy, the stem is not, and it tracks the twin exactly.
+        let valve = physical::healthy();
+        let run = run(&valve, None, Scenario::SmallSteps, 60.0, 0.01, 1).unwrap();
+        let f = figures(&run, &nominal(&valve), 0.01).unwrap();
+        assert_eq!(f.tracking_pct, 0.0);
+        assert!(run
+            .vp
+            .iter()
+            .zip(&run.stem)
+            .any(|(v, s)| (v - s).abs() > 0.01));
+        assert!(f.travel.travel_pct > 5.0, "{f:?}");
     }
 }
