@@ -89,8 +89,13 @@ pub(crate) struct Trial {
 impl Trial {
     /// Whether the candidate passes every test.
     pub fn passes(&self) -> bool {
-        self.material
-            && self.t_stat >= MIN_BLOCKS
+        self.material && self.significant()
+    }
+
+    /// Whether the candidate passes every test but [`material`]: it explains the recording
+    /// beyond chance, whether or not it is large enough to name.
+    pub fn significant(&self) -> bool {
+        self.t_stat >= MIN_BLOCKS
             && self.excess_share >= MIN_EXCESS_SHARE
             && self.delta_bic < MAX_DELTA_BIC
     }

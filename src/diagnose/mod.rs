@@ -126,6 +126,14 @@ pub enum Note {
     },
     /// Too few reversals of O_P to test the effects that show at reversals.
     FewReversals { reversals: usize },
+    /// The reading's calibration, too small to name, was put in the model before the effects
+    /// were judged: it explained more of the held-out error than any effect did.
+    SensorCalibration {
+        gain: f64,
+        offset_pct: f64,
+        heldout_sse_before: f64,
+        heldout_sse_after: f64,
+    },
 }
 
 /// The conclusion of a diagnosis (rendered as `verdict` in `--json`).

@@ -337,6 +337,17 @@ pub fn note(n: &Note) -> String {
              valve ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²); to confirm it, run {}",
             experiment(Effect::Stiction, None)
         ),
+        Note::SensorCalibration {
+            gain,
+            offset_pct,
+            heldout_sse_before,
+            heldout_sse_after,
+        } => format!(
+            "the reading's calibration (V_P = {gain:.4} x {offset_pct:+.3} %, within what a healthy sensor reads) \
+             was put in the model before the effects were judged, not named: it explained more of the held-out \
+             error than any effect ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²), and an effect fitted \
+             without it would stand in for it"
+        ),
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
             experiment(Effect::Backlash, None)
