@@ -480,7 +480,7 @@ fn saturation_asked(spec: &ModelSpec, rec: &Recording) -> bool {
 
 /// Whether the flow limits of `spec` shape the recording: the same valve with the healthy
 /// limits `h`, run noise-free on the recorded O_P, moves faster than `EXPOSED_SPEED_RATIO`
-/// times the limit for `EXPOSED_S` in total (both ways for `None`, closing only for
+/// times the limit (over the chamber's volume at the opening) for `EXPOSED_S` in total (both ways for `None`, closing only for
 /// `Some(true)`, opening only for `Some(false)`).
 fn limit_exercised(
     spec: &ModelSpec,
@@ -507,6 +507,9 @@ fn limit_exercised(
     let vp0 = rec.vp.first().copied().unwrap_or(0.0);
     let sim = Valve::new(&free, DT)?.simulate(&rec.op, vp0);
     let w = 10;
+    // The chamber's volume grows with the opening, so the stem's top speed there is the flow
+    // limit over the volume (as in the model's chamber).
+    let top = |x: f64| limit / (1.0 + p.volume_growth * (x / 100.0).clamp(0.0, 1.0));
     let fast = sim
         .windows(w + 1)
         .filter(|s| {
@@ -516,7 +519,7 @@ fn limit_exercised(
                 Some(true) => -speed,
                 Some(false) => speed,
             };
-            along > EXPOSED_SPEED_RATIO * limit
+            along > EXPOSED_SPEED_RATIO * top(s[0])
         })
         .count();
     Ok(fast as f64 * DT >= EXPOSED_S)
