@@ -138,14 +138,21 @@ fn a_healthy_valve_is_not_called_slower_when_open_than_it_shows() {
     // mixed excitation. A slowdown of 1.65 times fully open took up a quarter of its held-out
     // error (stem dynamics, the small asymmetry); the recording shows the upper third of its
     // travel answering only 1.10 times slower than the model without it does.
-    let plan = cases::plans(424242, 220)
+    healthy_blind_case(424242, 104);
+}
+
+/// The diagnosis of a healthy valve of the blind benchmark (seed `seed`, case `index`), which
+/// must have no finding.
+fn healthy_blind_case(seed: u64, index: usize) -> Diagnosis {
+    let plan = cases::plans(seed, 220)
         .into_iter()
-        .find(|p| p.index == 104)
+        .find(|p| p.index == index)
         .unwrap();
     let case = cases::build(&plan, MINUTES_10).unwrap();
     assert!(case.labels.is_empty(), "{:?}", case.labels);
     let d = diagnose::diagnose(&case.rec.view(), None, &|_, _| {}).unwrap();
     assert!(d.findings.is_empty(), "{:?}", names(&d));
+    d
 }
 
 #[test]
@@ -155,14 +162,7 @@ fn a_healthy_valve_read_a_little_off_is_not_called_asymmetric() {
     // on a 0.025 % lattice. Its errors are hundredths of a percent, so the offset is most of
     // them: without it in the model, an asymmetric speed limit (5.8 %/s opening, 1.6 %/s
     // closing) made the model lag one way and removed 58 % of the held-out error.
-    let plan = cases::plans(777001, 220)
-        .into_iter()
-        .find(|p| p.index == 101)
-        .unwrap();
-    let case = cases::build(&plan, MINUTES_10).unwrap();
-    assert!(case.labels.is_empty(), "{:?}", case.labels);
-    let d = diagnose::diagnose(&case.rec.view(), None, &|_, _| {}).unwrap();
-    assert!(d.findings.is_empty(), "{:?}", names(&d));
+    let d = healthy_blind_case(777001, 101);
     let offset = d.notes.iter().find_map(|n| match n {
         Note::SensorCalibration { offset_pct, .. } => Some(*offset_pct),
         _ => None,

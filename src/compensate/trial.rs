@@ -8,8 +8,8 @@
 //!
 //! Figures (see [`Figures`]): the integrated absolute error of the process variable (the
 //! level loop only), the tracking error of the stem against the valve's nominal healthy twin,
-//! the raw RMS of O_P - V_P, and the stem's travel and reversals (wear). The stem is read by
-//! a noise-free copy of the valve's sensor (same gain and offset) driven by the same
+//! the raw RMS of O_P - V_P, and the stem's travel and reversals (wear). The stem is what a
+//! copy of the valve with a noise-free sensor (same gain and offset) reads, driven by the same
 //! set-points: compensation cannot change a sensor's noise, so the figures that judge it
 //! leave the noise out, while the loop and the compensator see the noisy V_P a valve gives.
 //!
