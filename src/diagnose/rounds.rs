@@ -4,7 +4,9 @@
 //! held-out blocks, and keeps the best that passes. After each kept effect everything kept so
 //! far is refitted together, from the fitted values and from spread starts, so a later effect
 //! can take back what an earlier one was stretched to cover; the joint refit is kept only if
-//! neither error rises. An effect that removed next to nothing is not tried again.
+//! neither error rises. An effect that removed next to nothing is not tried again. A sensor
+//! calibration too small to name but explaining more than the round's winner is put in the
+//! model unnamed first, and the round's candidates refitted on top of it.
 //!
 //! When no effect passes, stick-slip may still be there, judged by its slips
 //! ([`super::stickslip`]); a finding there ends the search, since free-run error cannot judge
