@@ -24,9 +24,25 @@ pub fn num(x: f64) -> String {
     }
 }
 
+/// `n` and `noun`, with an `s` unless `n` is 1: `1 alarm`, `2 alarms`, `0 alarms`.
+pub fn count(n: u64, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::num;
+    use super::{count, num};
+
+    #[test]
+    fn counts_take_their_plural() {
+        assert_eq!(count(1, "connection attempt"), "1 connection attempt");
+        assert_eq!(count(0, "alarm"), "0 alarms");
+        assert_eq!(count(12, "hold"), "12 holds");
+    }
     use proptest::prelude::*;
 
     #[test]

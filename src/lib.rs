@@ -44,17 +44,38 @@ const DEFAULT_LOG_FILTER: &str = "info,tokio_modbus=error";
 
 /// Sends `tracing` logs to stderr, coloured only on a terminal; `RUST_LOG` overrides the default
 /// filter (`info`, tokio-modbus at `error`). Used by both binaries (`valve-bridge`, `sim-device`).
+/// A line stderr cannot take (a full disk, a closed pipe) is dropped ([`LossyStderr`]): logging
+/// never stops the daemon.
 pub fn init_tracing() {
     use std::io::IsTerminal;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG_FILTER));
     tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(|| LossyStderr)
         .with_ansi(std::io::stderr().is_terminal())
         .with_target(false)
         .compact()
         .init();
+}
+
+/// Standard error that drops what it cannot write. tracing-subscriber reports a failed write
+/// with `eprintln!`, which panics when stderr itself is the problem (`2>/dev/full`, a closed
+/// pipe): on the loop thread that would skip the valve's stop action.
+#[derive(Debug, Clone, Copy)]
+pub struct LossyStderr;
+
+impl std::io::Write for LossyStderr {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        // Dropped, not retried: a log line is worth less than the loop's next cycle.
+        let _lost = std::io::stderr().write_all(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        let _lost = std::io::stderr().flush();
+        Ok(())
+    }
 }
 
 /// An error and its causes on one line, `what: cause: cause`, for both binaries. A cause whose

@@ -49,7 +49,7 @@ fn two_units_on_one_pty_are_driven_through_one_port() {
     );
     assert!(
         stderr.contains(
-            "level 6.8 ms (FC 23) + cyclone 6.8 ms (FC 23) = 13.6 ms on the wire per cycle"
+            "level 7.0 ms (FC 23) + cyclone 7.0 ms (FC 23) = 14.0 ms on the wire per cycle"
         ),
         "{stderr}"
     );
@@ -131,11 +131,11 @@ fn a_rate_the_bus_cannot_carry_is_refused_at_load() {
     assert!(!out.status.success());
     assert!(
         stderr.contains(
-            "valve.modbus-rtu.port: bus budget: 2 valves on /tmp/vb-sim-bus take level 6.8 ms \
-             (FC 23) + cyclone 6.8 ms (FC 23) = 13.6 ms on the wire per cycle at 115200 baud, \
-             11 bits/char = 136 % of the 10.0 ms loop period; the bus carries at most 73.6 Hz: \
+            "valve.modbus-rtu.port: bus budget: 2 valves on /tmp/vb-sim-bus take level 7.0 ms \
+             (FC 23) + cyclone 7.0 ms (FC 23) = 14.0 ms on the wire per cycle at 115200 baud, \
+             11 bits/char = 140 % of the 10.0 ms loop period; the bus carries at most 71.6 Hz: \
              refusing 100.0 Hz (raise [valve.modbus-rtu] baud of every valve on /tmp/vb-sim-bus, \
-             lower [loop] rate_hz to 73 or less, or put fewer valves on this bus)"
+             lower [loop] rate_hz to 71 or less, or put fewer valves on this bus)"
         ),
         "{stderr}"
     );

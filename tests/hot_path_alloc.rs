@@ -16,6 +16,7 @@ use valve_bridge::daemon::config::Config;
 use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::logger::{Sample, Status};
 use valve_bridge::daemon::source::Source;
+use valve_bridge::modbus::client::LinkStats;
 use valve_bridge::model::{bundled, Drift, DriftSpec, ModelKind, Valve};
 
 struct Counting;
@@ -95,7 +96,12 @@ fn per_cycle_calls_do_not_allocate() {
                 metrics.timing(l);
             }
             valve.record(&row);
-            valve.totals(k / 100, source.watchdog_trips());
+            let link = LinkStats {
+                reconnects: k / 100,
+                attempts: k / 100 + 1,
+                late_replies: k / 10,
+            };
+            valve.totals(link, source.watchdog_trips());
         });
         let op = source.op_at(t_s).unwrap();
         assert!((op - (k / 50) as f64).abs() < 1e-9, "{op} at cycle {k}");

@@ -66,7 +66,7 @@ fn rtu_configs_fit_their_loop_rate() {
         assert_eq!(f.valve.registers.fc23, want_fc23, "{name}");
         let hz = f.loop_.rate_hz.unwrap_or(100.0);
         assert_eq!(hz, rate, "{name}");
-        let plan = Plan::new(&f.valve.registers);
+        let plan = Plan::rtu(&f.valve.registers);
         let b = Budget::rtu(&rtu, &plan, 1.0 / hz);
         assert_eq!(b.verdict(), Verdict::Fits, "{name}: {}", b.describe());
         // The cycle deadline lies between the wire time and the loop period.

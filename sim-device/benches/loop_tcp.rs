@@ -97,7 +97,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         r.count(Status::Error),
         r.count(Status::Disconnected),
         r.summary.missed(),
-        r.summary.reconnects.unwrap_or(0)
+        r.summary.link.unwrap_or_default().reconnects
     );
     println!(
         "  timing error |actual - scheduled|: p50 {:.2} us, p99 {:.2} us, max {:.2} us (target p99 <= 250 us: {})",

@@ -202,7 +202,12 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("sim-device: error: {}", valve_bridge::error_line(&e));
+            // Told if stderr can take it; the exit code says it anyway.
+            let _lost = writeln!(
+                std::io::stderr(),
+                "sim-device: error: {}",
+                valve_bridge::error_line(&e)
+            );
             std::process::ExitCode::FAILURE
         }
     }

@@ -90,7 +90,7 @@ async fn rtu_over_pty_cycles() {
         .expect("opens the pty");
     assert!(v
         .budget()
-        .is_some_and(|b| (b.cycle_s - 0.0066).abs() < 1e-4));
+        .is_some_and(|b| (b.cycle_s - 0.0068).abs() < 1e-4));
     settle(&mut v, 12.3).await;
     settle(&mut v, 99.9).await;
 }
@@ -351,11 +351,12 @@ async fn line_speed_emulation_matches_the_bus_budget() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("17.6 ms") && err.contains("refusing 100.0 Hz"),
+        err.contains("18.8 ms") && err.contains("refusing 100.0 Hz"),
         "{err}"
     );
-    // 50 Hz fits (thin margin). The emulated line needs 22 chars * 11 bits / 19200 + 1 ms = 13.6 ms
-    // per cycle; the budget adds the two 3.5-character silences a pty does not have (17.6 ms).
+    // 50 Hz fits (thin margin). The emulated line needs 24 chars * 11 bits / 19200 + 1 ms = 14.8 ms
+    // per cycle (the reply reads the set-point back); the budget adds the two 3.5-character
+    // silences a pty does not have (18.8 ms).
     let mut v = ModbusValve::open(rtu(&pty, 19200, 100.0), fc23(), 0.02)
         .await
         .expect("opens");
@@ -365,7 +366,7 @@ async fn line_speed_emulation_matches_the_bus_budget() {
         v.transact(50.0 + k as f64).await.expect("cycle");
         let el = t0.elapsed().as_secs_f64();
         assert!(
-            el >= 0.0134 && el < budget + 0.005,
+            el >= 0.0147 && el < budget + 0.005,
             "cycle {k}: {el} s vs budget {budget} s"
         );
     }

@@ -63,35 +63,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.seed,
     )?;
     recording::write(&args.out, &rec).with_context(|| format!("writing {}", args.out.display()))?;
-    println!(
+    outln!(
         "1. Generated 15 min of closed-loop level control through a physical valve (positioner, chamber, stem friction, sensor) with a hidden `{}` ({}; {noise} % sensor noise): {}",
         effect.name(),
         physical::describe(effect, physical::moderate_size(effect)),
         args.out.display()
-    );
+    )?;
     let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})?;
     let base = metrics::scores(&rec.vp, &d.sim_before, &rec.op, dt);
-    println!("2. A fitted FOPDT looks fine by eye (whole recording):");
-    println!("   {}", metrics::table1_header());
-    println!("   {}", metrics::table1_row("FOPDT", &base));
-    println!("3. valve-bridge diagnose {}:", args.out.display());
+    outln!("2. A fitted FOPDT looks fine by eye (whole recording):")?;
+    outln!("   {}", metrics::table1_header())?;
+    outln!("   {}", metrics::table1_row("FOPDT", &base))?;
+    outln!("3. valve-bridge diagnose {}:", args.out.display())?;
     if d.findings.is_empty() {
-        println!("   found nothing: {}", report::verdict(&d.outcome));
+        outln!("   found nothing: {}", report::verdict(&d.outcome))?;
     }
     for f in &d.findings {
-        println!(
+        outln!(
             "   found {}: {}\n   held-out SSE {:.2} -> {:.2} %²",
             f.effect.name(),
             report::evidence(f),
             f.heldout_sse_before,
             f.heldout_sse_after
-        );
+        )?;
     }
     let hit = d.findings.iter().any(|f| f.effect == effect);
-    println!(
+    outln!(
         "4. {} {}",
         if hit { "Right:" } else { "Missed:" },
         report::verdict(&d.outcome)
-    );
+    )?;
     Ok(())
 }

@@ -62,12 +62,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         write_out(dir, &rec, &d)?;
     }
     if args.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&report::diagnose::json(&d))?
-        );
+        )?;
     } else {
-        print!("{}", report::diagnose::text(&d));
+        out!("{}", report::diagnose::text(&d))?;
     }
     Ok(())
 }
@@ -79,6 +79,6 @@ fn write_out(
 ) -> anyhow::Result<()> {
     let paths = report::write_files(dir, &report::diagnose::files(&rec.source, &rec.view(), d))?;
     let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
-    eprintln!("wrote {}", names.join(", "));
+    errln!("wrote {}", names.join(", "));
     Ok(())
 }

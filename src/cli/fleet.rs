@@ -43,23 +43,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let seconds = started.elapsed().as_secs_f64();
     let written = fleet::write(&args.out, &f)?;
-    println!(
+    outln!(
         "fleet: {} valves diagnosed, {} failed, in {seconds:.1} s ({:.1} recordings per minute)",
         f.diagnosed,
         f.failed,
         jobs.len() as f64 * 60.0 / seconds.max(1e-9)
-    );
-    println!(
+    )?;
+    outln!(
         "{:>4}  {:<28} {:>9}  {:>6} {:>8} {:>8} {:>8} {:>8}  findings",
         "rank", "valve", "attention", "T_d s", "rev. s", "band %", "open %/s", "close %/s"
-    );
+    )?;
     let num = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
     for (i, v) in f.valves.iter().enumerate() {
         if let Some(e) = &v.error {
-            println!("{:>4}  {:<28} error: {e}", i + 1, v.valve);
+            outln!("{:>4}  {:<28} error: {e}", i + 1, v.valve)?;
             continue;
         }
-        println!(
+        outln!(
             "{:>4}  {:<28} {:>9.2}  {:>6} {:>8} {:>8} {:>8} {:>8}  {}",
             i + 1,
             v.valve,
@@ -74,10 +74,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             } else {
                 v.findings.join(", ")
             }
-        );
+        )?;
     }
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
-    eprintln!(
+    errln!(
         "wrote {} and {} valve reports",
         names.join(", "),
         f.diagnosed

@@ -66,12 +66,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         write_out(dir, &rec, &id, &doc)?;
     }
     if args.json {
-        println!("{doc}");
+        outln!("{doc}")?;
     } else {
-        print!(
+        out!(
             "{}",
             report::identify::text(&rec.source, rec.duration(), &id)
-        );
+        )?;
     }
     Ok(())
 }
@@ -98,7 +98,7 @@ fn write_out(dir: &Path, rec: &Recording, id: &Identification, doc: &str) -> any
         "report.html",
         report::identify::html(&rec.source, &rec.view(), id),
     )?;
-    eprintln!(
+    errln!(
         "wrote {} model files, identify.json and {} to {}",
         id.rows.len(),
         html.display(),

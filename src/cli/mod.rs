@@ -1,4 +1,26 @@
 //! Command-line glue: one module per subcommand, plus logging set-up and error reporting.
+//!
+//! Output goes through [`outln!`] and [`out!`] (standard output; a failed write is the
+//! command's error, a closed pipe ends it quietly, as Unix tools do) and [`errln!`] (messages on
+//! standard error, dropped if it cannot take them): nothing printed can panic.
+
+/// `println!` that returns the write's error instead of panicking.
+macro_rules! outln {
+    ($($arg:tt)*) => { $crate::cli::write_stdout(format_args!("{}\n", format_args!($($arg)*))) };
+}
+
+/// `print!` that returns the write's error instead of panicking.
+macro_rules! out {
+    ($($arg:tt)*) => { $crate::cli::write_stdout(format_args!($($arg)*)) };
+}
+
+/// `eprintln!` that drops what standard error cannot take.
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _lost = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
 
 pub mod demo;
 pub mod diagnose;
@@ -10,8 +32,18 @@ pub mod run;
 pub mod simulate;
 pub mod steps;
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
+
+/// Standard output could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write to standard output: {0}")]
+pub struct StdoutError(#[source] std::io::Error);
+
+/// Writes `args` to standard output.
+pub fn write_stdout(args: std::fmt::Arguments) -> Result<(), StdoutError> {
+    std::io::stdout().write_fmt(args).map_err(StdoutError)
+}
 
 /// A progress bar of `len` units drawn with `template` (indicatif syntax), only when stderr is
 /// a terminal: piped output and logs stay clean.
@@ -27,12 +59,19 @@ pub fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> 
 }
 
 /// Prints an error and its causes on one line, `valve-bridge: error: ...` (each cause once, see
-/// [`valve_bridge::error_line`]), and picks the exit code.
+/// [`valve_bridge::error_line`]), and picks the exit code. A reader that closed the pipe (`|
+/// head`) ends the command quietly and successfully, as Unix tools do.
 pub fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("valve-bridge: error: {}", valve_bridge::error_line(&e));
+            let closed_pipe = e
+                .downcast_ref::<StdoutError>()
+                .is_some_and(|StdoutError(io)| io.kind() == std::io::ErrorKind::BrokenPipe);
+            if closed_pipe {
+                return ExitCode::SUCCESS;
+            }
+            errln!("valve-bridge: error: {}", valve_bridge::error_line(&e));
             ExitCode::FAILURE
         }
     }

@@ -74,13 +74,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let report = rt.block_on(async {
         let mut valve = ModbusValve::new(link, valve.registers, config.loop_.period_s())?;
         if let Some(b) = valve.budget() {
-            println!("bus budget of the loop: {}", b.describe());
+            outln!("bus budget of the loop: {}", b.describe())?;
         }
         valve.set_timeout(Duration::from_secs_f64(args.timeout_ms / 1000.0));
         valve.connect_now().await?;
         anyhow::Ok(probe::probe(&mut valve, args.write_test).await)
     })?;
-    print!("{report}");
+    out!("{report}")?;
     match report.failures() {
         0 => Ok(()),
         n => bail!("{n} of the probe's requests failed (see the table)"),

@@ -54,10 +54,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let measured: Vec<bool> = (0..rec.len()).map(|k| rec.view().has_vp(k)).collect();
     let s = metrics::scores_masked(&rec.vp, &sim, &rec.op, rec.sample_period, &measured);
     if has_vp && s.n > 0 {
-        println!("{}", metrics::table1_header());
-        println!("{}", metrics::table1_row(spec.model.display_name(), &s));
+        outln!("{}", metrics::table1_header())?;
+        outln!("{}", metrics::table1_row(spec.model.display_name(), &s))?;
     } else {
-        println!("no measured V_P in {}: nothing to score", rec.source);
+        outln!("no measured V_P in {}: nothing to score", rec.source)?;
     }
     Ok(())
 }

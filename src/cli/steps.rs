@@ -43,19 +43,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let a = steps::analyse_recording(&rec.view(), &opts).with_context(|| rec.source.clone())?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&a)?);
+        outln!("{}", serde_json::to_string_pretty(&a)?)?;
         return Ok(());
     }
-    println!(
+    outln!(
         "{}: {} samples at {} s; V_P noise {:.3} % (sd)",
         rec.source,
         rec.len(),
         valve_bridge::human::num(rec.sample_period),
         a.noise_pct
-    );
-    print!("{}", identify::steps_summary(&a));
+    )?;
+    out!("{}", identify::steps_summary(&a))?;
     if args.list {
-        print!("\n{}", identify::steps_list(&a, rec.t[0]));
+        out!("\n{}", identify::steps_list(&a, rec.t[0]))?;
     }
     Ok(())
 }

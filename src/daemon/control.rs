@@ -8,6 +8,7 @@
 //! valve's I/O); [`Spawned::run`] hands it the rest of the loop. Not here: starting the other
 //! threads ([`super::running`]), the valve protocols ([`super::valve`]).
 
+use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::Arc;
@@ -20,9 +21,10 @@ use super::exporter::{LoopMetrics, ValveMetrics};
 use super::logger::{round_pct, Sample, Status};
 use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
-use super::stats::{Live, Stats, StopReason};
+use super::stats::{Live, Stats, StopAction, StopReason};
 use super::valve::{Backend, Fault};
 use super::DaemonError;
+use crate::modbus::client::LinkStats;
 
 /// What the loop thread hands back.
 pub(super) struct LoopEnd {
@@ -35,9 +37,8 @@ pub(super) struct LoopEnd {
 /// What one valve's lane hands back.
 pub(super) struct LaneEnd {
     pub(super) stats: Stats,
-    pub(super) safe: Option<Sample>,
-    pub(super) reconnects: Option<u64>,
-    pub(super) attempts: Option<u64>,
+    pub(super) safe: Option<StopAction>,
+    pub(super) link: Option<LinkStats>,
     pub(super) compensation: Option<CompensationReport>,
 }
 
@@ -171,7 +172,8 @@ impl Spawned {
 }
 
 impl Loop {
-    /// The loop thread's body.
+    /// The loop thread's body: the cycles, then each valve's stop action, also when a cycle
+    /// failed (the logger gone) or panicked.
     fn run(mut self, rt: tokio::runtime::Runtime) -> Result<LoopEnd, DaemonError> {
         schedule::tighten_timer_slack();
         if self.realtime_priority > 0 && self.clock == ClockKind::Real {
@@ -192,7 +194,54 @@ impl Loop {
             ClockKind::Real => Schedule::real(self.period, self.spin),
             ClockKind::Virtual => Schedule::virtual_clock(self.period),
         };
-        let (reason, k_end, lateness_end) = loop {
+        let mut at = (0, Duration::ZERO);
+        // A panic in a cycle must not skip the stop action: it is caught here, the stop action
+        // applied, and the panic reported as the loop's error (its message went to stderr).
+        let cycles = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            self.cycles(&rt, &mut schedule, &mut at)
+        }));
+        let (ended, k_end, lateness_end) = match cycles {
+            Ok(Ok((reason, k, lateness))) => (Ok(reason), k, lateness),
+            Ok(Err(e)) => (Err(e), at.0 + 1, at.1),
+            Err(_) => (Err(DaemonError::Panicked("loop")), at.0 + 1, at.1),
+        };
+        let mut safe = Vec::with_capacity(self.lanes.len());
+        let mut ended = ended;
+        for i in 0..self.lanes.len() {
+            let (action, logged) = self.stop_action(i, &rt, (k_end, &schedule), lateness_end);
+            if let (Err(e), Ok(_)) = (logged, &ended) {
+                ended = Err(e);
+            }
+            safe.push(action);
+        }
+        let reason = ended.inspect_err(|e| {
+            tracing::error!("the loop stopped on an error, after its stop action: {e}")
+        })?;
+        tracing::info!(%reason, slots = k_end, "loop stopped");
+        Ok(LoopEnd {
+            reason,
+            slots: k_end,
+            valves: (self.lanes.into_iter().zip(safe))
+                .map(|(lane, safe)| LaneEnd {
+                    link: lane.backend.link_stats(),
+                    compensation: lane.compensation.map(Compensation::report),
+                    stats: lane.stats,
+                    safe,
+                })
+                .collect(),
+        })
+    }
+
+    /// The cycles until the loop is asked to stop, the duration is reached or a source ends:
+    /// why it ended, at which slot and how late that slot was. `at` follows the last slot run,
+    /// for the stop action after a failure.
+    fn cycles(
+        &mut self,
+        rt: &tokio::runtime::Runtime,
+        schedule: &mut Schedule,
+        at: &mut (u64, Duration),
+    ) -> Result<(StopReason, u64, Duration), DaemonError> {
+        loop {
             let slot = schedule.next_slot();
             let k = slot.k();
             let ending = self.max_slots.is_some_and(|m| k >= m) || self.stop.load(Ordering::SeqCst);
@@ -211,8 +260,9 @@ impl Loop {
                 } else {
                     StopReason::Duration
                 };
-                break (reason, k, lateness);
+                return Ok((reason, k, lateness));
             }
+            *at = (k, lateness);
             let t_s = schedule.t_s(k);
             // Every valve's O_P first: a source that ends stops the loop before any is sent.
             // Rounded to the log's precision: the O_P sent is the O_P logged.
@@ -224,7 +274,7 @@ impl Loop {
                 }
             }
             if ended {
-                break (StopReason::SourceEnded, k, lateness);
+                return Ok((StopReason::SourceEnded, k, lateness));
             }
             if let Some(m) = &self.metrics {
                 m.timing(lateness);
@@ -235,7 +285,8 @@ impl Loop {
                     Some(c) => c.setpoint(lane.op, t_s),
                     None => lane.op,
                 };
-                let mut row = lane.transact(&rt, sent, (k, t_s, schedule.wall(k)), lateness, None);
+                let (mut row, _) =
+                    lane.transact(rt, sent, (k, t_s, schedule.wall(k)), lateness, None);
                 row.op_controller_pct = Some(lane.op);
                 lane.last_op_controller = Some(lane.op);
                 if let Some(c) = &mut lane.compensation {
@@ -253,26 +304,7 @@ impl Loop {
                     self.live.publish_p99(&lane.stats);
                 }
             }
-        };
-        let mut safe = Vec::with_capacity(self.lanes.len());
-        for i in 0..self.lanes.len() {
-            let row = self.stop_action(i, &rt, (k_end, &schedule), lateness_end)?;
-            safe.push(row);
         }
-        tracing::info!(%reason, slots = k_end, "loop stopped");
-        Ok(LoopEnd {
-            reason,
-            slots: k_end,
-            valves: (self.lanes.into_iter().zip(safe))
-                .map(|(lane, safe)| LaneEnd {
-                    reconnects: lane.backend.reconnects(),
-                    attempts: lane.backend.connection_attempts(),
-                    compensation: lane.compensation.map(Compensation::report),
-                    stats: lane.stats,
-                    safe,
-                })
-                .collect(),
-        })
     }
 
     /// Logs slot `k` as missed for every valve (the O_P column shows the O_P it holds).
@@ -300,39 +332,38 @@ impl Loop {
         Ok(())
     }
 
-    /// Applies the safe action to valve `i` in slot `k_end`, logs it and returns its row.
+    /// Applies the stop action to valve `i` in slot `k_end`: the action as it went, and
+    /// whether its row reached the logger.
     fn stop_action(
         &mut self,
         i: usize,
         rt: &tokio::runtime::Runtime,
         (k_end, schedule): (u64, &Schedule),
         lateness_end: Duration,
-    ) -> Result<Option<Sample>, DaemonError> {
+    ) -> (Option<StopAction>, Result<(), DaemonError>) {
         let lane = &mut self.lanes[i];
         let safe_op = match self.safe_action {
             OnStop::Hold => lane.last_op.map(|op| (op, Status::SafeHold)),
             OnStop::GoTo => self.go_to_pct.map(|op| (op, Status::SafeGoTo)),
         };
         let Some((op, status)) = safe_op else {
-            return Ok(None);
+            return (None, Ok(()));
         };
-        let row = lane.transact(
+        let (row, fault) = lane.transact(
             rt,
             op,
             (k_end, schedule.t_s(k_end), schedule.wall(k_end)),
             lateness_end,
             Some(status),
         );
-        tracing::info!(
-            valve = %lane.name,
-            "stop action applied: {}, O_P {op:.2} %, V_P {}",
-            status.as_str(),
-            row.vp_pct
-                .map_or("not read".into(), |v| format!("{v:.2} %"))
-        );
+        let action = StopAction { row, fault };
+        match &action.fault {
+            None => tracing::info!(valve = %lane.name, "stop action applied: {action}"),
+            Some(_) => tracing::error!(valve = %lane.name, "stop action: {action}"),
+        }
         self.lanes[i].source.feedback(&row);
-        self.emit(i, row, Some(lateness_end))?;
-        Ok(Some(row))
+        let logged = self.emit(i, row, Some(lateness_end));
+        (Some(action), logged)
     }
 
     /// Counts, publishes and logs a row of valve `i`.
@@ -350,7 +381,7 @@ impl Loop {
         if let Some(m) = &lane.metrics {
             m.record(&row);
             m.totals(
-                lane.backend.reconnects().unwrap_or(0),
+                lane.backend.link_stats().unwrap_or_default(),
                 lane.source.watchdog_trips(),
             );
         }
@@ -362,7 +393,8 @@ impl Loop {
 }
 
 impl Lane {
-    /// One valve transaction for slot `k` at `t_s`; `safe` marks the stop action's row.
+    /// One valve transaction for slot `k` at `t_s`: its row and, for the stop action's row
+    /// (marked by `safe`), the fault that kept the valve from confirming it.
     fn transact(
         &mut self,
         rt: &tokio::runtime::Runtime,
@@ -370,7 +402,7 @@ impl Lane {
         (k, t_s, utc): (u64, f64, SystemTime),
         lateness: Duration,
         safe: Option<Status>,
-    ) -> Sample {
+    ) -> (Sample, Option<Fault>) {
         let started = Instant::now();
         let result = rt.block_on(self.backend.transact(op, k));
         let latency = started.elapsed();
@@ -395,10 +427,19 @@ impl Lane {
             }
             self.last_status = status;
         }
-        if let Err(fault) = result {
-            self.stats.note_fault(fault);
-        }
-        Sample {
+        // The stop action's caller needs the fault; a cycle's goes to the statistics only.
+        let fault = match result {
+            Err(f) if safe.is_some() => {
+                self.stats.note_fault(f.clone());
+                Some(f)
+            }
+            Err(f) => {
+                self.stats.note_fault(f);
+                None
+            }
+            Ok(_) => None,
+        };
+        let row = Sample {
             t_s,
             op_pct: Some(op),
             vp_pct: vp,
@@ -408,7 +449,8 @@ impl Lane {
             op_sent_pct: self.backend.sent_pct(),
             utc,
             op_controller_pct: Some(op),
-        }
+        };
+        (row, fault)
     }
 }
 

@@ -10,6 +10,7 @@
 //! - `valve_bridge_op_ratio`, `valve_bridge_vp_ratio`: last O_P sent and last V_P read, as a
 //!   fraction of full travel (0.45 = 45 %);
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
+//! - `valve_bridge_late_replies_total`: Modbus replies discarded as answers to earlier requests;
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
 //!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
@@ -46,6 +47,7 @@ use tokio::net::{TcpListener, TcpStream};
 use super::health::Figures;
 use super::logger::{Sample, Status};
 use crate::compensate::Window;
+use crate::modbus::client::LinkStats;
 use crate::net::{self, Health, Limits};
 
 /// Upper bounds of the timing-error buckets, s.
@@ -190,6 +192,7 @@ pub struct ValveMetrics {
     op_ratio: Gauge,
     vp_ratio: Gauge,
     reconnects: IntCounter,
+    late_replies: IntCounter,
     watchdog_trips: IntCounter,
 }
 
@@ -235,6 +238,10 @@ impl LoopMetrics {
             "valve_bridge_reconnects_total",
             "Times the Modbus valve link was reopened after a fault",
         )?;
+        let late_replies = counter(
+            "valve_bridge_late_replies_total",
+            "Modbus replies discarded because they answered an earlier request, after its deadline",
+        )?;
         let watchdog_trips = counter(
             "valve_bridge_watchdog_trips_total",
             "Times the process controller's watchdog fired (modbus-server source)",
@@ -264,13 +271,14 @@ impl LoopMetrics {
                     op_ratio: op_ratio.get_metric_with_label_values(&[v])?,
                     vp_ratio: vp_ratio.get_metric_with_label_values(&[v])?,
                     reconnects: reconnects.get_metric_with_label_values(&[v])?,
+                    late_replies: late_replies.get_metric_with_label_values(&[v])?,
                     watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
                 })
             })
             .collect::<Result<Vec<_>, prometheus::Error>>()?;
         registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
-        for c in [cycles, missed, reconnects, watchdog_trips] {
+        for c in [cycles, missed, reconnects, late_replies, watchdog_trips] {
             registry.register(Box::new(c))?;
         }
         for g in [op_ratio, vp_ratio] {
@@ -357,10 +365,11 @@ impl ValveMetrics {
         }
     }
 
-    /// Brings the reconnect and watchdog counters up to the totals the loop's parts keep.
-    pub fn totals(&self, reconnects: u64, watchdog_trips: u64) {
+    /// Brings the link's and the watchdog's counters up to the totals the loop's parts keep.
+    pub fn totals(&self, link: LinkStats, watchdog_trips: u64) {
         for (c, total) in [
-            (&self.reconnects, reconnects),
+            (&self.reconnects, link.reconnects),
+            (&self.late_replies, link.late_replies),
             (&self.watchdog_trips, watchdog_trips),
         ] {
             c.inc_by(total.saturating_sub(c.get()));
@@ -549,8 +558,13 @@ mod tests {
         m.timing(Duration::from_micros(3));
         a.record(&row(Status::Skipped, None));
         b.record(&row(Status::Ok, Some(40.0)));
-        a.totals(2, 1);
-        a.totals(2, 1);
+        let link = LinkStats {
+            reconnects: 2,
+            attempts: 3,
+            late_replies: 4,
+        };
+        a.totals(link, 1);
+        a.totals(link, 1);
         let health = Arc::new(Health::default());
         health.idle_closed();
         m.observe_servers(&[("modbus-server", Arc::clone(&health))]);
@@ -569,6 +583,7 @@ mod tests {
             "valve_bridge_vp_ratio{valve=\"a\"} 0.415",
             "valve_bridge_vp_ratio{valve=\"b\"} 0.4",
             "valve_bridge_reconnects_total{valve=\"a\"} 2",
+            "valve_bridge_late_replies_total{valve=\"a\"} 4",
             "valve_bridge_watchdog_trips_total{valve=\"a\"} 1",
             "valve_bridge_watchdog_trips_total{valve=\"b\"} 0",
             "valve_bridge_server_up{server=\"modbus-server\"} 1",

@@ -30,9 +30,8 @@ pub struct Running {
     stop: Arc<AtomicBool>,
     live: Arc<Live>,
     rate_hz: f64,
-    control: JoinHandle<Result<LoopEnd, DaemonError>>,
-    /// Each valve's name and logger, in the order of the config.
-    loggers: Vec<(String, JoinHandle<Result<LogReport, DaemonError>>)>,
+    /// The loop and the loggers, stopped and joined however `Running` goes.
+    threads: LoopThreads,
     /// The health thread, with `[health]`.
     health: Option<JoinHandle<Result<Vec<HealthReport>, DaemonError>>>,
     net: Option<Net>,
@@ -137,16 +136,53 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         live: loop_live,
     })?;
     Ok(Running {
+        threads: LoopThreads {
+            stop: stop.clone(),
+            control: Some(control),
+            loggers,
+        },
         stop,
         live,
         rate_hz,
-        control,
-        loggers,
         health: health.map(|h| h.handle),
         net,
         endpoints,
         servers,
     })
+}
+
+/// The loop thread and the loggers. Dropped before [`Running::finish`] took them (the calling
+/// thread panicked, or gave up on the daemon), it stops the loop and waits for it and the
+/// loggers: the stop action is applied and its row written whatever happens to the caller.
+struct LoopThreads {
+    stop: Arc<AtomicBool>,
+    control: Option<JoinHandle<Result<LoopEnd, DaemonError>>>,
+    /// Each valve's name and logger, in the order of the config.
+    loggers: Vec<(String, JoinHandle<Result<LogReport, DaemonError>>)>,
+}
+
+impl LoopThreads {
+    /// Waits for the loop thread (after the stop action) and returns how it ended.
+    fn join_loop(&mut self) -> Result<Result<LoopEnd, DaemonError>, DaemonError> {
+        match self.control.take() {
+            Some(handle) => handle.join().map_err(|_| DaemonError::Panicked("loop")),
+            None => Err(DaemonError::Panicked("loop")),
+        }
+    }
+}
+
+impl Drop for LoopThreads {
+    fn drop(&mut self) {
+        if self.control.is_some() {
+            self.stop.store(true, Ordering::SeqCst);
+            tracing::warn!("stopping the loop: the daemon's caller ended before it");
+        }
+        // Errors were told where they happened; what matters here is that the threads end.
+        let _ended = self.join_loop();
+        for (_, logger) in self.loggers.drain(..) {
+            let _ended = logger.join();
+        }
+    }
 }
 
 /// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, and the
@@ -221,7 +257,7 @@ impl Running {
 
     /// True once the loop thread has ended.
     pub fn is_finished(&self) -> bool {
-        self.control.is_finished()
+        self.threads.control.as_ref().is_none_or(|c| c.is_finished())
     }
 
     /// The loop rate, Hz.
@@ -241,15 +277,14 @@ impl Running {
 
     /// Waits for the loop and the loggers to end and returns the summary.
     pub fn finish(self) -> Result<Summary, DaemonError> {
-        let end = self
-            .control
-            .join()
-            .map_err(|_| DaemonError::Panicked("loop"));
+        let mut threads = self.threads;
+        let end = threads.join_loop();
         // The controller and the scraper are answered until the stop action has been applied.
         let net = self.net.map(Net::stop).transpose();
         // The loop thread has dropped its senders: each logger drains, flushes and closes.
-        let mut logs = Vec::with_capacity(self.loggers.len());
-        for (name, handle) in self.loggers {
+        let loggers = std::mem::take(&mut threads.loggers);
+        let mut logs = Vec::with_capacity(loggers.len());
+        for (name, handle) in loggers {
             let log = handle
                 .join()
                 .map_err(|_| DaemonError::Panicked("logger"))??;
@@ -269,8 +304,7 @@ impl Running {
                     name,
                     stats: lane.stats,
                     safe: lane.safe,
-                    reconnects: lane.reconnects,
-                    connection_attempts: lane.attempts,
+                    link: lane.link,
                     log,
                     health: health.next(),
                     compensation: lane.compensation,

@@ -15,6 +15,8 @@ use super::compensation::CompensationReport;
 use super::health::HealthReport;
 use super::logger::{LogReport, Sample, Status};
 use super::valve::Fault;
+use crate::human;
+use crate::modbus::client::LinkStats;
 use crate::net::HealthView;
 
 /// The failure statuses, in the order of [`Stats::last_faults`].
@@ -183,6 +185,35 @@ impl fmt::Display for StopReason {
     }
 }
 
+/// The stop action as it went: its log row and, when the valve did not confirm it, why.
+#[derive(Debug, Clone)]
+pub struct StopAction {
+    /// The row logged (status `safe-hold` or `safe-go-to`; V_P empty when not confirmed).
+    pub row: Sample,
+    /// Why the valve did not confirm it.
+    pub fault: Option<Fault>,
+}
+
+impl fmt::Display for StopAction {
+    /// `safe-hold, O_P 59.90 %, V_P 59.70 %`, or what became of an action not confirmed:
+    /// `safe-hold, O_P 59.90 %: could not be sent (disconnected: ...)`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let op = self.row.op_pct.map_or("-".into(), |v| format!("{v:.2}"));
+        write!(f, "{}, O_P {op} %", self.row.status.as_str())?;
+        match (&self.fault, self.row.vp_pct) {
+            (None, Some(vp)) => write!(f, ", V_P {vp:.2} %"),
+            (None, None) => write!(f, ", V_P not read"),
+            (Some(fault @ Fault::Disconnected(_)), _) => write!(f, ": could not be sent ({fault})"),
+            (Some(fault @ Fault::Timeout(_)), _) => {
+                write!(f, ": sent, not confirmed by the valve ({fault})")
+            }
+            (Some(fault @ Fault::Error(_)), _) => {
+                write!(f, ": not confirmed by the valve ({fault})")
+            }
+        }
+    }
+}
+
 /// What `valve-bridge run` reports at the end.
 #[derive(Debug, Clone)]
 pub struct Summary {
@@ -205,12 +236,11 @@ pub struct ValveSummary {
     pub name: String,
     /// Loop statistics (cycle rows and the stop-action row).
     pub stats: Stats,
-    /// The stop-action row, if one was sent.
-    pub safe: Option<Sample>,
-    /// Times a Modbus link was reopened after a fault (None: not a Modbus valve).
-    pub reconnects: Option<u64>,
-    /// Connection attempts of a Modbus link, the first one included.
-    pub connection_attempts: Option<u64>,
+    /// The stop action, if one was sent.
+    pub safe: Option<StopAction>,
+    /// What a Modbus link went through: reconnects, attempts, late replies (None: not a
+    /// Modbus valve).
+    pub link: Option<LinkStats>,
     /// What the logger wrote.
     pub log: LogReport,
     /// What the live health check did, with `[health]`.
@@ -311,22 +341,23 @@ impl ValveSummary {
             writeln!(f, "{indent}last {fault}")?;
         }
         writeln!(f, "{indent}missed cycles: {}", self.missed())?;
-        if let Some(n) = self.reconnects {
-            let attempts = self.connection_attempts.unwrap_or(0);
+        if let Some(l) = self.link {
             writeln!(
                 f,
-                "{indent}reconnects: {n} ({attempts} connection attempts)"
+                "{indent}reconnects: {} ({})",
+                l.reconnects,
+                human::count(l.attempts, "connection attempt")
             )?;
+            if l.late_replies > 0 {
+                writeln!(
+                    f,
+                    "{indent}late replies discarded: {} (answers to earlier requests, after their deadline: timeout_ms may be shorter than the device's slowest answer)",
+                    l.late_replies
+                )?;
+            }
         }
         match &self.safe {
-            Some(row) => writeln!(
-                f,
-                "{indent}stop action: {} O_P {} %, V_P {}",
-                row.status.as_str(),
-                row.op_pct.map_or("-".into(), |v| format!("{v:.2}")),
-                row.vp_pct
-                    .map_or("not read".into(), |v| format!("{v:.2} %"))
-            )?,
+            Some(action) => writeln!(f, "{indent}stop action: {action}")?,
             None => writeln!(f, "{indent}stop action: none (no O_P was ever sent)")?,
         }
         if let Some(h) = &self.health {

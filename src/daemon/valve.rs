@@ -38,7 +38,7 @@ use rand_distr::{Distribution, Normal};
 use std::time::Duration;
 
 use super::config::{bus, ValveConfig, ValveKind};
-use crate::modbus::client::{Link, ModbusValve, OpenError, MAX_BACKOFF};
+use crate::modbus::client::{Link, LinkStats, ModbusValve, OpenError, MAX_BACKOFF};
 use crate::model::{Drift, ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
@@ -184,19 +184,12 @@ impl Backend {
         }
     }
 
-    /// How many times a Modbus link was reopened after a fault (None: not a Modbus valve).
-    pub fn reconnects(&self) -> Option<u64> {
+    /// What a Modbus link went through: reconnects, attempts, late replies (None: not a
+    /// Modbus valve).
+    pub fn link_stats(&self) -> Option<LinkStats> {
         match self {
             Backend::Emulated(_) => None,
-            Backend::Modbus(m) => Some(m.reconnects()),
-        }
-    }
-
-    /// How many connection attempts a Modbus link made, the first one included.
-    pub fn connection_attempts(&self) -> Option<u64> {
-        match self {
-            Backend::Emulated(_) => None,
-            Backend::Modbus(m) => Some(m.attempts()),
+            Backend::Modbus(m) => Some(m.link_stats()),
         }
     }
 

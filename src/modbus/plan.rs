@@ -94,25 +94,38 @@ pub struct Plan {
 }
 
 impl Plan {
-    /// The plan for a (validated) map.
+    /// The plan for a (validated) map on Modbus TCP, whose transaction ids tell a late reply
+    /// from the current one: the read block is the position and, when near, the status.
     pub fn new(map: &RegisterMap) -> Plan {
+        Plan::build(map, false)
+    }
+
+    /// The plan on Modbus RTU, whose frames carry no transaction id: the read block also takes
+    /// in the set-point register when it is near (same table, within [`MAX_JOINED_SPAN`]), so
+    /// every reply reads back the set-point just written and a late reply to an earlier cycle
+    /// can be told by its older set-point ([`super::wire::RtuWire`]).
+    pub fn rtu(map: &RegisterMap) -> Plan {
+        Plan::build(map, true)
+    }
+
+    fn build(map: &RegisterMap, readback: bool) -> Plan {
         let pos = map.position;
-        let pos_w = pos.format.width();
-        // The read block: position alone, or position and status together.
-        let joined = map.status.and_then(|s| {
-            let start = pos.address.min(s.address);
-            let end = (u32::from(pos.address) + u32::from(pos_w)).max(u32::from(s.address) + 1);
-            let span = end - u32::from(start);
-            (s.table == pos.table && span <= u32::from(MAX_JOINED_SPAN)).then_some((
-                start,
-                span as u16,
-                s.address - start,
-            ))
-        });
-        let (read_start, read_count) = match joined {
-            Some((start, span, _)) => (start, span),
-            None => (pos.address, pos_w),
-        };
+        // The read block: the position, with the status and (RTU) the set-point when they sit
+        // in its table close enough to be read in one request.
+        let mut block = (pos.address, pos.format.width());
+        let mut joined_status = None;
+        if let Some(s) = map.status.filter(|s| s.table == pos.table) {
+            if let Some(b) = widened(block, (s.address, 1)) {
+                block = b;
+                joined_status = Some(s.address);
+            }
+        }
+        let sp = map.setpoint;
+        if readback && sp.table == pos.table {
+            block = widened(block, (sp.address, sp.format.width())).unwrap_or(block);
+        }
+        let (read_start, read_count) = block;
+        let joined = joined_status.map(|a| a - read_start);
         let first_read = if map.fc23 {
             Transaction::ReadWrite {
                 read_address: read_start,
@@ -142,7 +155,7 @@ impl Plan {
         };
         let status = match (map.status, joined) {
             (None, _) => None,
-            (Some(_), Some((_, _, off))) => Some(Slot {
+            (Some(_), Some(off)) => Some(Slot {
                 transaction: read_index,
                 offset: usize::from(off),
             }),
@@ -164,6 +177,41 @@ impl Plan {
             status,
         }
     }
+}
+
+impl Plan {
+    /// True when a read of the plan holds the set-point register of `map` (its reply reads the
+    /// set-point back).
+    pub fn reads_back(&self, map: &RegisterMap) -> bool {
+        let sp = map.setpoint;
+        let within = |start: u16, count: u16| {
+            sp.address >= start
+                && u32::from(sp.address) + u32::from(sp.format.width())
+                    <= u32::from(start) + u32::from(count)
+        };
+        self.transactions.iter().any(|t| match *t {
+            Transaction::Read {
+                table: Table::Holding,
+                address,
+                count,
+            } => within(address, count),
+            Transaction::ReadWrite {
+                read_address,
+                read_count,
+                ..
+            } => within(read_address, read_count),
+            _ => false,
+        })
+    }
+}
+
+/// The block `(start, count)` widened to take in `part`, if it then spans at most
+/// [`MAX_JOINED_SPAN`] registers.
+fn widened(block: (u16, u16), part: (u16, u16)) -> Option<(u16, u16)> {
+    let end = |(start, count): (u16, u16)| u32::from(start) + u32::from(count);
+    let start = block.0.min(part.0);
+    let span = end(block).max(end(part)) - u32::from(start);
+    (span <= u32::from(MAX_JOINED_SPAN)).then_some((start, span as u16))
 }
 
 #[cfg(test)]
@@ -232,6 +280,55 @@ mod tests {
         assert_eq!(p.transactions[0].function_code(), 23);
         assert_eq!(p.transactions[0].rtu_request_bytes(), 15);
         assert_eq!(p.transactions[0].rtu_response_bytes(), 11);
+    }
+
+    #[test]
+    fn rtu_reads_the_set_point_back_when_it_is_near() {
+        let map = RegisterMap {
+            fc23: true,
+            status: Some(StatusRegister {
+                table: Table::Holding,
+                address: 2,
+                setpoint_error_bit: 0,
+            }),
+            ..RegisterMap::default()
+        };
+        let p = Plan::rtu(&map);
+        assert_eq!(
+            p.transactions,
+            vec![Transaction::ReadWrite {
+                read_address: 0,
+                read_count: 3,
+                write_address: 0,
+                write_count: 1
+            }]
+        );
+        assert_eq!(
+            (p.position.offset, p.status.map(|s| s.offset)),
+            (1, Some(2))
+        );
+        assert!(p.reads_back(&map) && !Plan::new(&map).reads_back(&map));
+        // FC 16 then FC 3 over set-point and position.
+        let p = Plan::rtu(&RegisterMap::default());
+        assert_eq!(
+            p.transactions[1],
+            Transaction::Read {
+                table: Table::Holding,
+                address: 0,
+                count: 2
+            }
+        );
+        assert_eq!(p.position.offset, 1);
+        // A position in the input table, or far away, cannot read it back.
+        let far = RegisterMap {
+            position: Register {
+                address: 40,
+                ..RegisterMap::default().position
+            },
+            ..RegisterMap::default()
+        };
+        assert!(!Plan::rtu(&far).reads_back(&far));
+        assert_eq!(Plan::rtu(&far), Plan::new(&far));
     }
 
     #[test]

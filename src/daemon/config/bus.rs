@@ -37,7 +37,7 @@ pub fn budget(valves: &[ValveConfig], port: &str, members: &[usize], period_s: f
         .filter_map(|&i| {
             let v = &valves[i];
             rtu(v).map(|l| {
-                let b = Budget::rtu(l, &Plan::new(&v.registers), period_s);
+                let b = Budget::rtu(l, &Plan::rtu(&v.registers), period_s);
                 (v.label().to_string(), b)
             })
         })

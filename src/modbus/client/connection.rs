@@ -38,8 +38,10 @@ pub(super) struct Connection {
     last_answer: Instant,
     /// Why the link is down, for the cycles that find it so.
     down_because: String,
-    /// Late replies (TCP) counted so far on this connection.
+    /// Late replies counted so far on this connection.
     late_seen: u64,
+    /// Late replies discarded on the connections before this one.
+    late_before: u64,
     next_attempt: Instant,
     backoff: Duration,
     pub(super) reconnects: u64,
@@ -58,11 +60,17 @@ impl Connection {
             last_answer: Instant::now(),
             down_because: "not connected yet".into(),
             late_seen: 0,
+            late_before: 0,
             next_attempt: Instant::now(),
             backoff: FIRST_BACKOFF,
             reconnects: 0,
             attempts: 0,
         }
+    }
+
+    /// Replies discarded as late, on every connection so far.
+    pub(super) fn late_replies(&self) -> u64 {
+        self.late_before + self.wire.stale_replies()
     }
 
     /// True while a context is open.
@@ -99,6 +107,7 @@ impl Connection {
         match tokio::time::timeout_at(deadline, connecting).await {
             Ok(Ok(ctx)) => {
                 self.ctx = Some(ctx);
+                self.late_before = self.late_replies();
                 self.wire = wire;
                 self.late_seen = 0;
                 self.answered = false;

@@ -37,7 +37,7 @@ use tokio::time::Instant;
 use super::budget::{Budget, BudgetError};
 pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
-use super::plan::{Plan, Transaction};
+use super::plan::{Plan, Transaction, MAX_JOINED_SPAN};
 use connection::Connection;
 
 /// Wait after a failed connection attempt; doubles with each further one, up to [`MAX_BACKOFF`].
@@ -101,6 +101,17 @@ pub struct Reading {
     pub status: Option<u16>,
     /// The set-point as the device received it: O_P after the register's scaling and rounding, %.
     pub sent_pct: f64,
+}
+
+/// What a Modbus link went through, for the summary and the metrics.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Times a cycle (re)opened the link (not counting a connection made at start).
+    pub reconnects: u64,
+    /// Connection attempts, the first one included.
+    pub attempts: u64,
+    /// Replies discarded because they answered an earlier request (late replies).
+    pub late_replies: u64,
 }
 
 /// A Modbus positioner driven one cycle at a time (see the module documentation).
@@ -172,7 +183,20 @@ impl ModbusValve {
             Some(ms) => ms / 1000.0,
             None => DEFAULT_TIMEOUT_SHARE * period_s,
         });
-        let plan = Plan::new(&map);
+        let plan = match &link {
+            Link::Tcp(_) => Plan::new(&map),
+            Link::Rtu(_) => Plan::rtu(&map),
+        };
+        if matches!(link, Link::Rtu(_)) && !plan.reads_back(&map) {
+            tracing::warn!(
+                "{}: the set-point register is not within {MAX_JOINED_SPAN} registers of the \
+                 position in the holding table, so a reply cannot be checked against the \
+                 set-point just written: a reply later than timeout_ms to an earlier request \
+                 with the same function code could be taken for the current one (keep \
+                 timeout_ms above the device's slowest answer)",
+                link.describe()
+            );
+        }
         let (tcp_addr, budget) = match &link {
             Link::Tcp(l) => {
                 let addr = l.resolve().map_err(|reason| OpenError::Address {
@@ -265,6 +289,17 @@ impl ModbusValve {
     /// Connection attempts so far (the first one included; on a shared bus, the bus's).
     pub fn attempts(&self) -> u64 {
         self.conn.try_lock().map_or(0, |c| c.attempts)
+    }
+
+    /// Reconnects, attempts and late replies so far (on a shared bus, the bus's).
+    pub fn link_stats(&self) -> LinkStats {
+        self.conn
+            .try_lock()
+            .map_or(LinkStats::default(), |c| LinkStats {
+                reconnects: c.reconnects,
+                attempts: c.attempts,
+                late_replies: c.late_replies(),
+            })
     }
 
     /// True while a context is open.

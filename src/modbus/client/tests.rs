@@ -70,7 +70,7 @@ async fn settings_and_budget_are_checked_before_connecting() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.starts_with("bus budget: one cycle takes 29.5 ms"),
+        err.starts_with("bus budget: one cycle takes 30.6 ms"),
         "{err}"
     );
     let bad = RtuLink {

@@ -1,75 +1,29 @@
-//! The byte streams under the valve client's tokio-modbus context: what tokio-modbus does not do
-//! on its own, so that a link survives a late, lost or broken reply.
+//! [`TcpWire`]: a Modbus TCP stream that passes on only the reply to the latest request.
 //!
-//! - [`TcpWire`] passes on only the reply to the latest request. tokio-modbus numbers its
-//!   requests (MBAP transaction id) and refuses a reply with another number as a header
-//!   mismatch, but it does not skip it: after a timeout, the late reply would be taken (and
-//!   refused) as the answer to the next request, and every later one too (its issue #324). The
-//!   wire reads the transaction id of each request it writes and drops whole frames whose id
-//!   is not that one, so the connection is kept after a timeout and the next cycle gets its
-//!   own reply. It also records that the device closed the connection: tokio-modbus reports a
-//!   closed stream with whatever `errno` the thread last set (`Operation now in progress (os
-//!   error 115)` after a reconnect).
-//! - [`RtuWire`] records what arrives after each request (so a reply with a bad CRC, which
-//!   tokio-modbus silently discards and then waits on, is reported as a CRC error, see
-//!   [`rtu_frame_fault`]), and empties the port's input before each request: a late reply or a
-//!   broken frame cannot be taken for the next answer (RTU frames carry no transaction id).
-//!
-//! Both share a [`WireState`] with the client. Written by hand because they are thin
-//! pass-throughs with a side look at the bytes; no crate offers that for tokio's I/O traits.
-//! Not here: timeouts, reconnection, fault kinds (the client decides).
+//! tokio-modbus numbers its requests (MBAP transaction id) and refuses a reply with another
+//! number as a header mismatch, but it does not skip it: after a timeout, the late reply would be
+//! taken (and refused) as the answer to the next request, and every later one too (its issue
+//! #324). The wire reads the transaction id of each request it writes and drops whole frames
+//! whose id is not that one, so the connection is kept after a timeout and the next cycle gets
+//! its own reply. It also records that the device closed the connection: tokio-modbus reports a
+//! closed stream with whatever `errno` the thread last set (`Operation now in progress (os error
+//! 115)` after a reconnect).
 
 use std::io;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
 use std::task::{Context, Poll};
 
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::TcpStream;
-use tokio_serial::{SerialPort, SerialStream};
 
-use super::plan::Transaction;
-
-const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
+use super::WireState;
 
 /// MBAP header: transaction id, protocol id, length (of what follows it: unit id and PDU).
 const MBAP_HEADER: usize = 6;
 /// Largest MBAP length field: unit id and a 253-byte PDU.
 const MAX_MBAP_LENGTH: usize = 254;
-/// Most bytes of one RTU reply recorded (a whole frame and some).
-const RX_LOG_LIMIT: usize = 512;
-
-/// What the wire saw, shared with the client.
-#[derive(Debug, Default)]
-pub struct WireState {
-    rx: Mutex<Vec<u8>>,
-    closed: AtomicBool,
-    stale: AtomicU64,
-}
-
-impl WireState {
-    /// The bytes received since the current RTU request began.
-    pub fn received(&self) -> Vec<u8> {
-        self.rx.lock().unwrap_or_else(|p| p.into_inner()).clone()
-    }
-
-    /// True once the device closed the connection (the stream ended).
-    pub fn closed(&self) -> bool {
-        self.closed.load(Ordering::Relaxed)
-    }
-
-    /// Replies dropped because they answered an earlier request (TCP).
-    pub fn stale_replies(&self) -> u64 {
-        self.stale.load(Ordering::Relaxed)
-    }
-
-    fn log_rx(&self, bytes: &[u8]) {
-        let mut log = self.rx.lock().unwrap_or_else(|p| p.into_inner());
-        let room = RX_LOG_LIMIT.saturating_sub(log.len());
-        log.extend_from_slice(&bytes[..bytes.len().min(room)]);
-    }
-}
 
 /// A Modbus TCP stream that passes on only replies to the latest request (module docs).
 #[derive(Debug)]
@@ -144,7 +98,7 @@ impl TcpWire {
             if Some(tid) == self.expected {
                 self.ready.extend_from_slice(&self.rx[..total]);
             } else {
-                self.state.stale.fetch_add(1, Ordering::Relaxed);
+                self.state.count_stale();
                 tracing::debug!(
                     "dropped a late reply (transaction {tid}, waiting for {:?})",
                     self.expected
@@ -211,121 +165,10 @@ impl AsyncWrite for TcpWire {
     }
 }
 
-/// A serial stream that empties its input before each request and records each reply
-/// (module docs).
-#[derive(Debug)]
-pub struct RtuWire {
-    inner: SerialStream,
-    state: Arc<WireState>,
-    /// True between the first byte of a request written and the first byte of a reply read.
-    requesting: bool,
-}
-
-impl RtuWire {
-    /// Wraps an open port; `state` is shared with the client.
-    pub fn new(inner: SerialStream, state: Arc<WireState>) -> Self {
-        RtuWire {
-            inner,
-            state,
-            requesting: false,
-        }
-    }
-}
-
-impl AsyncRead for RtuWire {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<io::Result<()>> {
-        let before = buf.filled().len();
-        let result = Pin::new(&mut self.inner).poll_read(cx, buf);
-        if let Poll::Ready(Ok(())) = result {
-            let new = &buf.filled()[before..];
-            if !new.is_empty() {
-                self.requesting = false;
-                self.state.log_rx(new);
-            }
-        }
-        result
-    }
-}
-
-impl AsyncWrite for RtuWire {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<io::Result<usize>> {
-        if !self.requesting {
-            // A new request: what is still in the input (a late reply, the rest of a broken
-            // frame) is not its answer.
-            self.inner.clear(tokio_serial::ClearBuffer::Input)?;
-            self.state
-                .rx
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .clear();
-            self.requesting = true;
-        }
-        Pin::new(&mut self.inner).poll_write(cx, buf)
-    }
-
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
-    }
-
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
-    }
-}
-
-/// The fault of a complete but unusable RTU reply `rx` to `t`, or None if the reply is
-/// incomplete.
-pub fn rtu_frame_fault(rx: &[u8], t: &Transaction) -> Option<String> {
-    let fc = t.function_code();
-    let len = match rx.get(1) {
-        Some(&f) if f == fc | 0x80 => 5,
-        _ => t.rtu_response_bytes(),
-    };
-    let frame = rx.get(..len)?;
-    let (body, crc) = frame.split_at(len - 2);
-    let got = u16::from_le_bytes([crc[0], crc[1]]);
-    let want = MODBUS_CRC.checksum(body);
-    Some(if got != want {
-        format!("CRC error in reply to FC {fc}: received 0x{got:04X}, computed 0x{want:04X} over {body:02X?}")
-    } else {
-        format!("unexpected reply to FC {fc}: {frame:02X?}")
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::modbus::map::Table;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
-
-    #[test]
-    fn crc_errors_are_told_from_incomplete_replies() {
-        let t = Transaction::Read {
-            table: Table::Holding,
-            address: 1,
-            count: 1,
-        };
-        let mut frame = vec![1u8, 3, 2, 0x01, 0xF4];
-        let crc = MODBUS_CRC.checksum(&frame).to_le_bytes();
-        frame.extend_from_slice(&crc);
-        assert!(rtu_frame_fault(&frame[..5], &t).is_none(), "incomplete");
-        let ok = rtu_frame_fault(&frame, &t).unwrap();
-        assert!(ok.starts_with("unexpected reply"), "{ok}");
-        frame[6] ^= 0xFF;
-        let bad = rtu_frame_fault(&frame, &t).unwrap();
-        assert!(bad.starts_with("CRC error in reply to FC 3"), "{bad}");
-        // An exception reply is 5 bytes.
-        let mut exc = vec![1u8, 0x83, 2];
-        exc.extend_from_slice(&(MODBUS_CRC.checksum(&exc) ^ 1).to_le_bytes());
-        assert!(rtu_frame_fault(&exc, &t).unwrap().starts_with("CRC error"));
-    }
 
     /// An MBAP frame: transaction `tid`, unit 1, `pdu`.
     fn mbap(tid: u16, pdu: &[u8]) -> Vec<u8> {
