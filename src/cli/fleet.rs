@@ -51,7 +51,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     outln!(
         "{:>4}  {:<28} {:>9}  {:>6} {:>8} {:>8} {:>8} {:>8}  findings",
-        "rank", "valve", "attention", "T_d s", "rev. s", "band %", "open %/s", "close %/s"
+        "rank",
+        "valve",
+        "attention",
+        "T_d s",
+        "rev. s",
+        "band %",
+        "open %/s",
+        "close %/s"
     )?;
     let num = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
     for (i, v) in f.valves.iter().enumerate() {

@@ -257,7 +257,10 @@ impl Running {
 
     /// True once the loop thread has ended.
     pub fn is_finished(&self) -> bool {
-        self.threads.control.as_ref().is_none_or(|c| c.is_finished())
+        self.threads
+            .control
+            .as_ref()
+            .is_none_or(|c| c.is_finished())
     }
 
     /// The loop rate, Hz.
