@@ -4,11 +4,16 @@
 //! [`serve`] accepts connections until its task is dropped and hands each to a handler task. It
 //! never stops on its own: an `accept()` error (too many open files, no buffer space, a
 //! connection aborted before it was taken) is logged once per outage, counted, and retried
-//! after [`ACCEPT_RETRY`]. At most [`Limits::max_connections`] connections are open at once; a
-//! connection beyond that is closed at once (and counted), so a flood of idle clients cannot
-//! use up the file descriptors. Closing idle connections after [`Limits::idle_timeout`] is the
-//! handler's part (it knows what a request is). [`Health`] keeps the figures (accepted,
-//! refused, open, accept errors, time spent unable to accept) for the summary and the metrics.
+//! after [`ACCEPT_RETRY`]. At most [`Limits::max_connections`] connections are open at once, so
+//! a flood of clients cannot use up the file descriptors; a new connection is never turned
+//! away for an idle one, though: at the limit the open connection that has waited longest
+//! without a request is closed to make room (one that never sent a request first), and the
+//! log names its peer. A client that sends requests, a process controller, so keeps its place
+//! against any number of idle sockets. Each handler tells [`serve`] of its requests through its
+//! [`Activity`] and closes its connection after [`Limits::idle_timeout`] without one, or
+//! [`FIRST_REQUEST_TIMEOUT`] without a first (it knows what a request is). [`Health`] keeps the
+//! figures (accepted, evicted, idle-closed, open, accept errors, time spent unable to accept)
+//! for the summary and the metrics.
 //!
 //! Not here: any protocol (see [`crate::modbus::tcp_server`] and the daemon's exporter).
 
@@ -22,21 +27,77 @@ use tokio::net::{TcpListener, TcpStream};
 
 /// Pause after a failed `accept()` before the next try.
 pub const ACCEPT_RETRY: Duration = Duration::from_millis(100);
+/// A connection that sends no first request for this long (or the idle timeout, if shorter)
+/// is closed: a client connects to talk.
+pub const FIRST_REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// How many connections a server keeps, and for how long an idle one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
-    /// Connections open at once; more are closed as they arrive.
+    /// Connections open at once; at the limit the longest idle one makes room for a new one.
     pub max_connections: usize,
     /// A connection without a request for this long is closed.
     pub idle_timeout: Duration,
+}
+
+impl Limits {
+    /// How long a connection may wait for its next request: its first ([`FIRST_REQUEST_TIMEOUT`]
+    /// at most) or a later one.
+    pub fn request_timeout(&self, activity: &Activity) -> Duration {
+        if activity.requests() == 0 {
+            self.idle_timeout.min(FIRST_REQUEST_TIMEOUT)
+        } else {
+            self.idle_timeout
+        }
+    }
+}
+
+/// When a connection last sent a request, shared by its handler (which calls
+/// [`Activity::request`]) and [`serve`] (which evicts the longest idle at the limit).
+#[derive(Debug, Clone)]
+pub struct Activity(Arc<ActivityInner>);
+
+#[derive(Debug)]
+struct ActivityInner {
+    opened: Instant,
+    /// ns after `opened` of the last request.
+    last_ns: AtomicU64,
+    requests: AtomicU64,
+}
+
+impl Activity {
+    fn new() -> Activity {
+        Activity(Arc::new(ActivityInner {
+            opened: Instant::now(),
+            last_ns: AtomicU64::new(0),
+            requests: AtomicU64::new(0),
+        }))
+    }
+
+    /// A request arrived.
+    pub fn request(&self) {
+        let ns = self.0.opened.elapsed().as_nanos() as u64;
+        self.0.last_ns.store(ns, Ordering::Relaxed);
+        self.0.requests.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Requests so far.
+    pub fn requests(&self) -> u64 {
+        self.0.requests.load(Ordering::Relaxed)
+    }
+
+    /// Time since the last request (since the connection opened, before the first).
+    fn idle(&self) -> Duration {
+        let last = Duration::from_nanos(self.0.last_ns.load(Ordering::Relaxed));
+        self.0.opened.elapsed().saturating_sub(last)
+    }
 }
 
 /// The figures of one server, updated as it runs (lock-free but for the last error's text).
 #[derive(Debug, Default)]
 pub struct Health {
     accepted: AtomicU64,
-    refused: AtomicU64,
+    evicted: AtomicU64,
     idle_closed: AtomicU64,
     open: AtomicU64,
     accept_errors: AtomicU64,
@@ -50,8 +111,8 @@ pub struct Health {
 pub struct HealthView {
     /// Connections accepted.
     pub accepted: u64,
-    /// Connections closed on arrival because the limit was reached.
-    pub refused: u64,
+    /// Idle connections closed at the limit to make room for a new one.
+    pub evicted: u64,
     /// Connections closed for being idle.
     pub idle_closed: u64,
     /// Connections open now.
@@ -71,7 +132,7 @@ impl Health {
     pub fn view(&self) -> HealthView {
         HealthView {
             accepted: self.accepted.load(Ordering::Relaxed),
-            refused: self.refused.load(Ordering::Relaxed),
+            evicted: self.evicted.load(Ordering::Relaxed),
             idle_closed: self.idle_closed.load(Ordering::Relaxed),
             open: self.open.load(Ordering::Relaxed),
             accept_errors: self.accept_errors.load(Ordering::Relaxed),
@@ -92,12 +153,12 @@ impl Health {
 }
 
 impl std::fmt::Display for HealthView {
-    /// `12 connections (1 open), 3 refused at the limit, 2 closed idle, 5 accept errors (the
+    /// `12 connections (1 open), 3 evicted at the limit, 2 closed idle, 5 accept errors (the
     /// last: ...), unable to accept for 0.5 s`: the figures that are not zero.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} connections ({} open)", self.accepted, self.open)?;
-        if self.refused > 0 {
-            write!(f, ", {} refused at the limit", self.refused)?;
+        if self.evicted > 0 {
+            write!(f, ", {} evicted at the limit", self.evicted)?;
         }
         if self.idle_closed > 0 {
             write!(f, ", {} closed idle", self.idle_closed)?;
@@ -125,9 +186,16 @@ impl Drop for OpenGuard {
     }
 }
 
+/// An open connection, as [`serve`] keeps track of it.
+struct Open {
+    peer: SocketAddr,
+    activity: Activity,
+    task: tokio::task::AbortHandle,
+}
+
 /// Accepts connections on `listener` forever (see the module documentation); `what` names the
-/// server in the log. Each connection gets `TCP_NODELAY` and runs `handle(stream, peer)` on a
-/// task of its own; its error is logged at debug level.
+/// server in the log. Each connection gets `TCP_NODELAY` and runs `handle(stream, peer,
+/// activity)` on a task of its own; its error is logged at debug level.
 pub async fn serve<F, Fut>(
     what: &'static str,
     listener: TcpListener,
@@ -135,11 +203,11 @@ pub async fn serve<F, Fut>(
     health: Arc<Health>,
     handle: F,
 ) where
-    F: Fn(TcpStream, SocketAddr) -> Fut,
+    F: Fn(TcpStream, SocketAddr, Activity) -> Fut,
     Fut: Future<Output = std::io::Result<()>> + Send + 'static,
 {
     let mut down_since: Option<Instant> = None;
-    let mut refusing = false;
+    let mut open: Vec<Open> = Vec::with_capacity(limits.max_connections);
     loop {
         let (stream, peer) = match listener.accept().await {
             Ok(accepted) => accepted,
@@ -169,88 +237,120 @@ pub async fn serve<F, Fut>(
                 down.as_secs_f64()
             );
         }
-        if health.open.load(Ordering::Relaxed) >= limits.max_connections as u64 {
-            health.refused.fetch_add(1, Ordering::Relaxed);
-            if !refusing {
-                tracing::warn!(
-                    "{what}: {} connections open, the limit: closing new ones (from {peer}) \
-                     until one ends",
-                    limits.max_connections
-                );
-            }
-            refusing = true;
-            continue;
+        open.retain(|c| !c.task.is_finished());
+        if open.len() >= limits.max_connections {
+            evict(what, &mut open, &health, peer);
         }
-        refusing = false;
         health.accepted.fetch_add(1, Ordering::Relaxed);
         health.open.fetch_add(1, Ordering::Relaxed);
         let guard = OpenGuard(Arc::clone(&health));
         if let Err(e) = stream.set_nodelay(true) {
             tracing::debug!("{what}: TCP_NODELAY on {peer}: {e}");
         }
-        let task = handle(stream, peer);
-        tokio::spawn(async move {
+        let activity = Activity::new();
+        let task = handle(stream, peer, activity.clone());
+        let task = tokio::spawn(async move {
             let _open = guard;
             if let Err(e) = task.await {
                 tracing::debug!("{what}: connection from {peer} ended: {e}");
             }
         });
+        open.push(Open {
+            peer,
+            activity,
+            task: task.abort_handle(),
+        });
     }
+}
+
+/// Closes the connection of `open` that waited longest for a request (one that never sent any
+/// first), for the new one from `new_peer`.
+fn evict(what: &str, open: &mut Vec<Open>, health: &Health, new_peer: SocketAddr) {
+    let longest = (open.iter().enumerate())
+        .max_by_key(|(_, c)| (c.activity.requests() == 0, c.activity.idle()))
+        .map(|(i, _)| i);
+    let Some(i) = longest else { return };
+    let gone = open.swap_remove(i);
+    gone.task.abort();
+    health.evicted.fetch_add(1, Ordering::Relaxed);
+    let requests = gone.activity.requests();
+    tracing::warn!(
+        "{what}: at the limit of {} connections: closed the one from {} ({}, idle for {:.1} s) \
+         to take the new one from {new_peer}",
+        open.len() + 1,
+        gone.peer,
+        match requests {
+            0 => "no request".to_string(),
+            n => format!("{n} requests"),
+        },
+        gone.activity.idle().as_secs_f64()
+    );
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tokio::io::AsyncReadExt;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    /// Reads `c` until it closes or `ms` pass: true when it was closed.
+    async fn closed(c: &mut TcpStream, ms: u64) -> bool {
+        let mut b = [0u8; 1];
+        matches!(
+            tokio::time::timeout(Duration::from_millis(ms), c.read(&mut b)).await,
+            Ok(Ok(0) | Err(_))
+        )
+    }
 
     #[tokio::test]
-    async fn connections_beyond_the_limit_are_closed_and_counted() {
+    async fn at_the_limit_the_longest_idle_connection_makes_room() {
         let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         let health = Arc::new(Health::default());
         let limits = Limits {
-            max_connections: 2,
+            max_connections: 3,
             idle_timeout: Duration::from_secs(60),
         };
-        // Handlers hold their connection until the client closes it.
+        // Handlers count every byte as a request and hold their connection until it closes.
         let server = tokio::spawn(serve(
             "test",
             listener,
             limits,
             Arc::clone(&health),
-            |mut s, _| async move {
+            |mut s, _, activity| async move {
                 let mut b = [0u8; 1];
-                while s.read(&mut b).await? > 0 {}
+                while s.read(&mut b).await? > 0 {
+                    activity.request();
+                }
                 Ok(())
             },
         ));
-        let mut clients = Vec::new();
-        for _ in 0..5 {
-            clients.push(TcpStream::connect(addr).await.unwrap());
+        // A controller that talks, then two sockets that never do.
+        let mut controller = TcpStream::connect(addr).await.unwrap();
+        controller.write_all(b"x").await.unwrap();
+        let mut idle = Vec::new();
+        for _ in 0..2 {
+            idle.push(TcpStream::connect(addr).await.unwrap());
+            tokio::time::sleep(Duration::from_millis(20)).await;
         }
-        // The three beyond the limit read end-of-stream at once.
-        let mut closed = 0;
-        for c in &mut clients {
-            let mut b = [0u8; 1];
-            if let Ok(Ok(0)) =
-                tokio::time::timeout(Duration::from_millis(200), c.read(&mut b)).await
-            {
-                closed += 1;
-            }
+        // Ten more arrive, each while the controller keeps talking: each takes the place of
+        // the socket that has waited longest without a request; the controller stays.
+        for _ in 0..10 {
+            controller.write_all(b"x").await.unwrap();
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            idle.push(TcpStream::connect(addr).await.unwrap());
         }
-        assert_eq!(closed, 3);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        assert!(!closed(&mut controller, 100).await);
+        let mut still_open = 0;
+        for c in &mut idle {
+            still_open += usize::from(!closed(c, 50).await);
+        }
+        assert_eq!(still_open, 2);
         let v = health.view();
-        assert_eq!((v.accepted, v.refused, v.open), (2, 3, 2));
-        // One leaves: a new one is taken.
-        clients.remove(0);
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        let _new = TcpStream::connect(addr).await.unwrap();
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        assert_eq!(health.view().accepted, 3);
-        assert!(health
-            .view()
+        assert_eq!((v.accepted, v.evicted, v.open), (13, 10, 3));
+        assert!(v
             .to_string()
-            .starts_with("3 connections (2 open), 3 refused"));
+            .starts_with("13 connections (3 open), 10 evicted at the limit"));
         server.abort();
     }
 }

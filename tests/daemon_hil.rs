@@ -532,7 +532,7 @@ fn metrics_endpoint_answers_get_metrics() {
         "valve_bridge_server_up{server=\"metrics\"} 1",
         "valve_bridge_server_connections{server=\"metrics\"} 1",
         "valve_bridge_server_connections_accepted_total{server=\"metrics\"}",
-        "valve_bridge_server_connections_refused_total{server=\"metrics\"} 0",
+        "valve_bridge_server_connections_evicted_total{server=\"metrics\"} 0",
         "valve_bridge_server_accept_errors_total{server=\"metrics\"} 0",
     ] {
         assert!(body.lines().any(|l| l.starts_with(name)), "{name}: {body}");

@@ -4,8 +4,10 @@
 //! - With few file descriptors (RLIMIT_NOFILE 64) and no useful connection limit, a crowd of
 //!   idle connections makes `accept()` fail (too many open files): the servers keep serving
 //!   once connections are gone, and the summary and the metrics report the outage.
-//! - With the default limit, connections beyond it are closed at once, idle ones are closed
-//!   after `idle_timeout_s`, and a controller connecting afterwards is served.
+//! - With every slot of the connection limit held by idle sockets, and more arriving, a process
+//!   controller connects and is answered every time (the longest idle makes room, named in the
+//!   log; its watchdog never trips); sim-device the same. Sockets that never send a request are
+//!   closed after `idle_timeout_s` (at most 5 s).
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
@@ -168,11 +170,56 @@ fn daemon_servers_survive_running_out_of_file_descriptors() {
     common::assert_for_people(&summary);
 }
 
+/// A process controller on one connection: writes per-mille set-points into holding register
+/// 0 (FC 6), one request at a time.
+struct Controller {
+    stream: TcpStream,
+    tid: u16,
+}
+
+impl Controller {
+    fn connect(addr: &str) -> Controller {
+        let stream = TcpStream::connect(addr).unwrap();
+        stream
+            .set_read_timeout(Some(Duration::from_millis(500)))
+            .unwrap();
+        Controller { stream, tid: 0 }
+    }
+
+    /// Writes `value`; true when the echo came back.
+    fn write(&mut self, value: u16) -> bool {
+        self.tid = self.tid.wrapping_add(1);
+        let (t, v) = (self.tid.to_be_bytes(), value.to_be_bytes());
+        let request = [t[0], t[1], 0, 0, 0, 6, 1, 6, 0, 0, v[0], v[1]];
+        let mut reply = [0u8; 12];
+        self.stream.write_all(&request).is_ok()
+            && self.stream.read_exact(&mut reply).is_ok()
+            && reply[..2] == t
+            && reply[10..] == v
+    }
+}
+
+/// Writes `n` set-points 10 ms apart while idle sockets pile up against `addr` (`idle_per_write`
+/// more before each write): how many were answered, and the idle sockets.
+fn talk_through_a_crowd(addr: &str, n: usize, idle_per_write: usize) -> (usize, Vec<TcpStream>) {
+    let mut controller = Controller::connect(addr);
+    let mut idle = Vec::new();
+    let mut answered = 0;
+    for k in 0..n {
+        idle.extend(crowd(addr, idle_per_write));
+        answered += usize::from(controller.write(300 + k as u16));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (answered, idle)
+}
+
 #[test]
-fn connections_beyond_the_limit_and_idle_ones_are_closed() {
+fn idle_connections_cannot_lock_the_controller_out() {
     let _turn = real_time_turn();
     let dir = tempfile::tempdir().unwrap();
-    let config = format!("{HIL}max_connections = 4\nidle_timeout_s = 0.5\n");
+    // The default limit (8 connections) and a short watchdog: a controller locked out for
+    // 0.3 s would trip it.
+    let config = HIL.replace("watchdog_s = 60.0", "watchdog_s = 0.3");
     let mut child = daemon(&config, dir.path())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -180,24 +227,70 @@ fn connections_beyond_the_limit_and_idle_ones_are_closed() {
         .unwrap();
     let (mut ends, rest) = endpoints(&mut child, 1);
     let modbus = ends.remove(0);
-    let idle = crowd(&modbus, 30);
-    std::thread::sleep(Duration::from_millis(300));
-    // The limit is reached by idle connections: one more is closed at once.
-    assert!(write_register(&modbus, 300).is_err());
-    // Idle ones are closed after 0.5 s; then the controller is served.
-    std::thread::sleep(Duration::from_millis(700));
-    assert_eq!(write_register(&modbus, 300).unwrap(), 300);
-    drop(idle);
+    // Eight idle sockets take every slot; the controller connects and talks while 28 more pile
+    // up.
+    let held = crowd(&modbus, 8);
+    std::thread::sleep(Duration::from_millis(100));
+    let (answered, idle) = talk_through_a_crowd(&modbus, 28, 1);
+    assert_eq!(answered, 28);
+    drop((held, idle));
     let (summary, stderr) = stop(child, rest);
+    assert!(!summary.contains("cycles sent the safe O_P"), "{summary}");
     let line = server_line(&summary);
+    assert!(line.contains("29 evicted at the limit"), "{line}");
+    // The log names the peer that held the slot.
     assert!(
-        line.contains("refused at the limit") && line.contains("closed idle"),
-        "{line}"
+        stderr.contains("at the limit of 8 connections: closed the one from 127.0.0.1:")
+            && stderr.contains("(no request, idle for "),
+        "{stderr}"
     );
-    assert!(!line.contains("accept errors"), "{line}");
-    assert_eq!(
-        stderr.matches("the limit: closing new ones").count(),
-        1,
+}
+
+#[test]
+fn connections_that_never_send_a_request_are_closed() {
+    let _turn = real_time_turn();
+    let dir = tempfile::tempdir().unwrap();
+    let config = format!("{HIL}idle_timeout_s = 0.5\n");
+    let mut child = daemon(&config, dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut ends, rest) = endpoints(&mut child, 1);
+    let modbus = ends.remove(0);
+    let mut idle = crowd(&modbus, 3);
+    std::thread::sleep(Duration::from_millis(900));
+    for s in &mut idle {
+        s.set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        assert!(matches!(s.read(&mut [0u8; 1]), Ok(0)), "still open");
+    }
+    assert_eq!(write_register(&modbus, 300).unwrap(), 300);
+    let (summary, stderr) = stop(child, rest);
+    assert!(server_line(&summary).contains("3 closed idle"), "{summary}");
+    assert!(stderr.contains("no first request for 0.5 s"), "{stderr}");
+}
+
+#[test]
+fn sim_device_serves_a_client_through_a_crowd_of_idle_sockets() {
+    let mut cmd = Command::new(common::sim::sim_device_bin());
+    cmd.args(["--tcp", "127.0.0.1:0"]).env("RUST_LOG", "info");
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut ends, rest) = endpoints(&mut child, 1);
+    let addr = ends.remove(0);
+    // sim-device's default limit is 16.
+    let held = crowd(&addr, 16);
+    std::thread::sleep(Duration::from_millis(100));
+    let (answered, idle) = talk_through_a_crowd(&addr, 40, 1);
+    assert_eq!(answered, 40);
+    drop((held, idle));
+    let (_, stderr) = stop(child, rest);
+    assert!(
+        stderr.contains("at the limit of 16 connections"),
         "{stderr}"
     );
 }

@@ -22,7 +22,7 @@
 //!   measured with compensation, and the model's without it);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
-//!   `valve_bridge_server_connections_accepted_total`, `..._refused_total` (closed at the
+//!   `valve_bridge_server_connections_accepted_total`, `..._evicted_total` (idle ones closed at the
 //!   connection limit), `..._idle_closed_total` and `valve_bridge_server_accept_errors_total`.
 //!
 //! [`LoopMetrics`] registers every metric once at start-up and keeps each valve's handles
@@ -65,7 +65,7 @@ struct ServerMetrics {
     up: IntGaugeVec,
     open: IntGaugeVec,
     accepted: IntCounterVec,
-    refused: IntCounterVec,
+    evicted: IntCounterVec,
     idle_closed: IntCounterVec,
     accept_errors: IntCounterVec,
 }
@@ -392,9 +392,9 @@ impl ServerMetrics {
                 "valve_bridge_server_connections_accepted_total",
                 "Connections accepted",
             )?,
-            refused: counter(
-                "valve_bridge_server_connections_refused_total",
-                "Connections closed on arrival because the connection limit was reached",
+            evicted: counter(
+                "valve_bridge_server_connections_evicted_total",
+                "Idle connections closed at the connection limit to make room for a new one",
             )?,
             idle_closed: counter(
                 "valve_bridge_server_connections_idle_closed_total",
@@ -413,7 +413,7 @@ impl ServerMetrics {
         }
         let counters = [
             &self.accepted,
-            &self.refused,
+            &self.evicted,
             &self.idle_closed,
             &self.accept_errors,
         ];
@@ -428,7 +428,7 @@ impl ServerMetrics {
         self.open.with_label_values(&[name]).set(v.open as i64);
         for (c, total) in [
             (&self.accepted, v.accepted),
-            (&self.refused, v.refused),
+            (&self.evicted, v.evicted),
             (&self.idle_closed, v.idle_closed),
             (&self.accept_errors, v.accept_errors),
         ] {
@@ -453,19 +453,23 @@ pub async fn serve(
         listener,
         limits,
         health,
-        move |stream, _| {
+        move |stream, _, activity| {
             let (metrics, servers) = (metrics.clone(), Arc::clone(&servers));
             async move {
                 metrics.observe_servers(&servers);
-                answer(stream, metrics.registry()).await
+                answer(stream, metrics.registry(), &activity).await
             }
         },
     )
     .await
 }
 
-/// Reads one request head and writes the response.
-async fn answer(mut stream: TcpStream, registry: &Registry) -> std::io::Result<()> {
+/// Reads one request head (telling `activity`) and writes the response.
+async fn answer(
+    mut stream: TcpStream,
+    registry: &Registry,
+    activity: &net::Activity,
+) -> std::io::Result<()> {
     let mut head = Vec::with_capacity(512);
     let mut chunk = [0u8; 1024];
     let read_head = async {
@@ -481,6 +485,7 @@ async fn answer(mut stream: TcpStream, registry: &Registry) -> std::io::Result<(
     tokio::time::timeout(HEAD_TIMEOUT, read_head)
         .await
         .map_err(|_| std::io::Error::new(std::io::ErrorKind::TimedOut, "no request head"))??;
+    activity.request();
     let (status, content_type, body) = respond(&head, registry);
     let reply = format!(
         "HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\n\

@@ -5,7 +5,9 @@
 //! Each connection reads MBAP frames (transaction id, protocol 0, length, unit id, PDU),
 //! decodes the request with tokio-modbus, asks its [`Respond`] what to do with it and the unit
 //! id it is for, and writes the reply with the request's transaction and unit id. A connection
-//! that sends no request for [`Limits::idle_timeout`] is closed (and counted in [`Health`]).
+//! that sends no request for [`Limits::idle_timeout`] (no first one for
+//! [`net::FIRST_REQUEST_TIMEOUT`]) is closed and counted in [`Health`]; at the connection limit
+//! the longest idle makes room for a new one ([`net::serve`]).
 //!
 //! Written here rather than with tokio-modbus's `server::tcp::Server` because that one stops
 //! serving at the first `accept()` error (and cancels every open connection when it returns),
@@ -25,7 +27,7 @@ use tokio_modbus::bytes::Bytes;
 use tokio_modbus::{ExceptionCode, Request, Response};
 
 use super::server::response_pdu;
-use crate::net::{self, Health, Limits};
+use crate::net::{self, Activity, Health, Limits};
 
 /// What a server does with one request.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,35 +59,45 @@ pub async fn serve<R, C>(
     C: Fn(SocketAddr) -> R,
 {
     let conn_health = Arc::clone(&health);
-    net::serve(what, listener, limits, health, move |stream, peer| {
-        connection(
-            what,
-            stream,
-            peer,
-            connected(peer),
-            limits.idle_timeout,
-            Arc::clone(&conn_health),
-        )
-    })
+    net::serve(
+        what,
+        listener,
+        limits,
+        health,
+        move |stream, peer, activity| {
+            connection(
+                what,
+                (stream, peer, activity),
+                connected(peer),
+                limits,
+                Arc::clone(&conn_health),
+            )
+        },
+    )
     .await
 }
 
 /// Serves one connection until the client closes it, it idles or the responder closes it.
 async fn connection<R: Respond>(
     what: &'static str,
-    mut stream: TcpStream,
-    peer: SocketAddr,
+    (mut stream, peer, activity): (TcpStream, SocketAddr, Activity),
     mut responder: R,
-    idle: Duration,
+    limits: Limits,
     health: Arc<Health>,
 ) -> io::Result<()> {
     let mut header = [0u8; 7];
     loop {
+        let idle = limits.request_timeout(&activity);
         match tokio::time::timeout(idle, stream.read_exact(&mut header)).await {
             Err(_) => {
                 health.idle_closed();
                 tracing::info!(
-                    "{what}: closing the connection from {peer}: no request for {:.0} s",
+                    "{what}: closing the connection from {peer}: no {}request for {:.1} s",
+                    if activity.requests() == 0 {
+                        "first "
+                    } else {
+                        ""
+                    },
                     idle.as_secs_f64()
                 );
                 return Ok(());
@@ -103,6 +115,7 @@ async fn connection<R: Respond>(
         }
         let mut pdu = vec![0u8; length - 1];
         stream.read_exact(&mut pdu).await?;
+        activity.request();
         let fc = pdu[0];
         let reply = match Request::try_from(Bytes::from(pdu)) {
             Ok(request) => responder.respond(header[6], &request),

@@ -130,7 +130,7 @@ pub enum ClockKind {
 pub struct MetricsConfig {
     /// Address of the HTTP endpoint (`GET /metrics`).
     pub listen: ListenAddr,
-    /// Connections open at once; more are closed as they arrive.
+    /// Connections open at once; at the limit the longest idle one makes room for a new one.
     pub max_connections: usize,
 }
 

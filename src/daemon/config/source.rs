@@ -135,7 +135,7 @@ pub struct ModbusServerConfig {
     /// `[source.modbus-server.registers]`: the map served (default: per-mille set-point in
     /// holding 0, position in holding 1, status in holding 2).
     pub registers: RegisterMap,
-    /// Connections open at once; more are closed as they arrive.
+    /// Connections open at once; at the limit the longest idle one makes room for a new one.
     pub max_connections: usize,
     /// A connection without a request for this long is closed, s.
     pub idle_timeout_s: f64,
