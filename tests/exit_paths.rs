@@ -58,7 +58,7 @@ fn a_full_stderr_does_not_skip_the_stop_action() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{:?}\n{stdout}", out.status);
     assert!(
-        stdout.contains("stop action: safe-hold, O_P 40.00 %, V_P "),
+        stdout.contains("stop action: safe-hold O_P 40.00 %, V_P "),
         "{stdout}"
     );
     let rows = ends_with_safe_hold(&logs, 40.0);
@@ -98,7 +98,7 @@ fn a_closed_stderr_pipe_mid_run_does_not_skip_the_stop_action() {
     assert!(stdout.contains("stopped: stop requested"), "{stdout}");
     // The device is gone: the stop action is logged, and told as not sent.
     assert!(
-        stdout.contains("stop action: safe-hold, O_P 40.00 %: could not be sent (disconnected: "),
+        stdout.contains("stop action: safe-hold O_P 40.00 %: could not be sent (disconnected: "),
         "{stdout}"
     );
     let rows = ends_with_safe_hold(&logs, 40.0);
@@ -159,7 +159,7 @@ fn a_stop_action_to_nobody_is_told_as_not_sent() {
     };
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("stop action: safe-hold, O_P 40.00 %: could not be sent (disconnected: "),
+        stdout.contains("stop action: safe-hold O_P 40.00 %: could not be sent (disconnected: "),
         "{stdout}"
     );
     assert!(!stdout.contains("applied"), "{stdout}");

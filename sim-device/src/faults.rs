@@ -26,6 +26,11 @@ pub struct FaultConfig {
     pub corrupt_crc_every: Option<u64>,
     /// Answer exception 04 (server device failure) to requests whose number is a multiple of this.
     pub exception_every: Option<u64>,
+    /// Answer with one byte too many (a read's byte count off by one) to requests whose number
+    /// is a multiple of this.
+    pub bad_byte_count_every: Option<u64>,
+    /// Answer with an MBAP length of 0 (TCP only) to requests whose number is a multiple of this.
+    pub broken_frame_every: Option<u64>,
     /// Close a TCP connection on its N-th request, unanswered.
     pub disconnect_after: Option<u64>,
     /// Seed of `drop_prob`.
@@ -52,6 +57,10 @@ pub enum Action {
     Exception,
     /// Answer with a corrupted CRC.
     CorruptCrc,
+    /// Answer with one byte too many.
+    BadByteCount,
+    /// Answer with an MBAP length of 0.
+    BrokenFrame,
 }
 
 /// The shared fault state of one device.
@@ -106,6 +115,10 @@ impl Faults {
             Action::Exception
         } else if hits(self.cfg.corrupt_crc_every, n) {
             Action::CorruptCrc
+        } else if hits(self.cfg.bad_byte_count_every, n) {
+            Action::BadByteCount
+        } else if hits(self.cfg.broken_frame_every, n) {
+            Action::BrokenFrame
         } else {
             Action::Answer
         }

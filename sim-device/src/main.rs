@@ -14,7 +14,8 @@
 //! unit id is answered. A set-point outside 0-100 % keeps the last value and raises the status
 //! error bit, as Bürkert positioners do. Faults can be injected for tests (on every unit's
 //! requests, numbered across the device): response delay, dropped responses, corrupted CRC
-//! (RTU), exception responses and TCP disconnects; `--baud-emulation` makes a pty answer as
+//! (RTU), exception responses, a byte too many, broken MBAP frames (TCP) and TCP disconnects;
+//! `--baud-emulation` makes a pty answer as
 //! slowly as a real line would.
 //!
 //! On start it prints one line per endpoint on stdout, `tcp: 127.0.0.1:5502` and
@@ -130,6 +131,13 @@ struct Args {
     /// Corrupt the CRC of every N-th response (RTU).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     corrupt_crc_every: Option<u64>,
+    /// Answer every N-th request with one byte too many (a read's byte count off by one).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    bad_byte_count_every: Option<u64>,
+    /// Answer every N-th request with an MBAP length of 0, which puts the stream out of step
+    /// (TCP).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    broken_frame_every: Option<u64>,
     /// Answer every N-th request with exception 04 (server device failure).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     exception_every: Option<u64>,
@@ -230,6 +238,9 @@ fn check(args: &Args) -> anyhow::Result<()> {
     if args.corrupt_crc_every.is_some() && !rtu {
         bail!("--corrupt-crc-every needs --pty or --serial: Modbus TCP has no CRC");
     }
+    if args.broken_frame_every.is_some() && args.tcp.is_none() {
+        bail!("--broken-frame-every needs --tcp: it breaks Modbus TCP's MBAP framing");
+    }
     if args.baud_emulation.is_some() && !rtu {
         bail!("--baud-emulation needs --pty or --serial");
     }
@@ -285,6 +296,8 @@ async fn run(args: Args) -> anyhow::Result<()> {
         drop_prob: args.drop_prob,
         corrupt_crc_every: args.corrupt_crc_every,
         exception_every: args.exception_every,
+        bad_byte_count_every: args.bad_byte_count_every,
+        broken_frame_every: args.broken_frame_every,
         disconnect_after: args.disconnect_after,
         seed: args.seed,
     }));

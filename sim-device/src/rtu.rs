@@ -20,6 +20,7 @@ use tokio_modbus::bytes::{Bytes, BytesMut};
 use tokio_modbus::{ExceptionCode, Request};
 use tokio_serial::SerialStream;
 use valve_bridge::modbus::server::response_pdu;
+use valve_bridge::modbus::tcp_server::{garble_pdu, Garble};
 
 use crate::faults::{Action, Decision, Faults};
 use crate::units::Banks;
@@ -116,7 +117,11 @@ impl RtuDevice {
             return None;
         }
         let mut adu = vec![slave];
-        adu.extend_from_slice(&response_pdu(fc, &result));
+        let mut pdu = response_pdu(fc, &result);
+        if action == Action::BadByteCount {
+            garble_pdu(&mut pdu, Garble::ByteCount);
+        }
+        adu.extend_from_slice(&pdu);
         Some((seal(adu, action == Action::CorruptCrc), delay))
     }
 

@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use tokio::net::TcpListener;
 use tokio_modbus::{ExceptionCode, Request};
-use valve_bridge::modbus::tcp_server::{self, Reply, Respond};
+use valve_bridge::modbus::tcp_server::{self, Garble, Reply, Respond};
 use valve_bridge::net::{Health, Limits};
 
 use crate::faults::{Action, Decision, Faults};
@@ -49,6 +49,8 @@ impl Respond for Connection {
             Action::Drop => Reply::Silent,
             Action::Exception => Reply::Answer(Err(ExceptionCode::ServerDeviceFailure), delay),
             Action::Answer | Action::CorruptCrc => Reply::Answer(bank.handle(request), delay),
+            Action::BadByteCount => Reply::Garbled(bank.handle(request), delay, Garble::ByteCount),
+            Action::BrokenFrame => Reply::Garbled(bank.handle(request), delay, Garble::FrameLength),
         }
     }
 }

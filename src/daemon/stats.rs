@@ -195,11 +195,11 @@ pub struct StopAction {
 }
 
 impl fmt::Display for StopAction {
-    /// `safe-hold, O_P 59.90 %, V_P 59.70 %`, or what became of an action not confirmed:
-    /// `safe-hold, O_P 59.90 %: could not be sent (disconnected: ...)`.
+    /// `safe-hold O_P 59.90 %, V_P 59.70 %`, or what became of an action not confirmed:
+    /// `safe-hold O_P 59.90 %: could not be sent (disconnected: ...)`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let op = self.row.op_pct.map_or("-".into(), |v| format!("{v:.2}"));
-        write!(f, "{}, O_P {op} %", self.row.status.as_str())?;
+        write!(f, "{} O_P {op} %", self.row.status.as_str())?;
         match (&self.fault, self.row.vp_pct) {
             (None, Some(vp)) => write!(f, ", V_P {vp:.2} %"),
             (None, None) => write!(f, ", V_P not read"),

@@ -34,10 +34,32 @@ use crate::net::{self, Activity, Health, Limits};
 pub enum Reply {
     /// Answer (a response or an exception) after `delay`.
     Answer(Result<Response, ExceptionCode>, Duration),
+    /// Answer garbled as `Garble` says (a device's fault, for tests of clients).
+    Garbled(Result<Response, ExceptionCode>, Duration, Garble),
     /// Send nothing; keep reading requests.
     Silent,
     /// Send nothing and close the connection.
     Close,
+}
+
+/// How a [`Reply::Garbled`] answer is spoiled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Garble {
+    /// One data byte too many, counted in the PDU's byte count (a read) or not (a write's
+    /// echo): the frame is whole, its PDU does not fit the request.
+    ByteCount,
+    /// An MBAP length of 0: the stream is out of step.
+    FrameLength,
+}
+
+/// Spoils the PDU `body` of a reply as `garble` says (only [`Garble::ByteCount`] touches it).
+pub fn garble_pdu(body: &mut Vec<u8>, garble: Garble) {
+    if garble == Garble::ByteCount {
+        if matches!(body.first(), Some(3 | 4 | 23)) {
+            body[1] = body[1].wrapping_add(1);
+        }
+        body.push(0);
+    }
 }
 
 /// Answers the requests of one connection, in order.
@@ -121,18 +143,26 @@ async fn connection<R: Respond>(
             Ok(request) => responder.respond(header[6], &request),
             Err(_) => Reply::Answer(Err(ExceptionCode::IllegalFunction), Duration::ZERO),
         };
-        let (result, delay) = match reply {
-            Reply::Answer(result, delay) => (result, delay),
+        let (result, delay, garble) = match reply {
+            Reply::Answer(result, delay) => (result, delay, None),
+            Reply::Garbled(result, delay, garble) => (result, delay, Some(garble)),
             Reply::Silent => continue,
             Reply::Close => return Ok(()),
         };
         if !delay.is_zero() {
             tokio::time::sleep(delay).await;
         }
-        let body = response_pdu(fc, &result);
+        let mut body = response_pdu(fc, &result);
+        if let Some(g) = garble {
+            garble_pdu(&mut body, g);
+        }
+        let length = match garble {
+            Some(Garble::FrameLength) => 0,
+            _ => body.len() as u16 + 1,
+        };
         let mut frame = Vec::with_capacity(7 + body.len());
         frame.extend_from_slice(&header[..4]);
-        frame.extend_from_slice(&(body.len() as u16 + 1).to_be_bytes());
+        frame.extend_from_slice(&length.to_be_bytes());
         frame.push(header[6]);
         frame.extend_from_slice(&body);
         stream.write_all(&frame).await?;

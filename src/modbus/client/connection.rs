@@ -44,6 +44,8 @@ pub(super) struct Connection {
     late_before: u64,
     next_attempt: Instant,
     backoff: Duration,
+    /// How often the device's replies broke the stream lately.
+    garbled: GarbleRate,
     pub(super) reconnects: u64,
     pub(super) attempts: u64,
 }
@@ -63,6 +65,7 @@ impl Connection {
             late_before: 0,
             next_attempt: Instant::now(),
             backoff: FIRST_BACKOFF,
+            garbled: GarbleRate::default(),
             reconnects: 0,
             attempts: 0,
         }
@@ -138,6 +141,26 @@ impl Connection {
             self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
         }
         self.down_because = why;
+    }
+
+    /// Drops the link because the device's replies broke the stream (`why`). A device that
+    /// answers on every new connection, but garbled now and then, would otherwise be reconnected
+    /// at once each time: the reopening waits by the rate of such failures instead
+    /// ([`GarbleRate`]), not by how many came in a row.
+    fn drop_garbled(&mut self, who: &Link, why: String) {
+        let wait = self.garbled.hit(Instant::now());
+        self.drop_link(why);
+        if !wait.is_zero() {
+            self.next_attempt = self.next_attempt.max(Instant::now() + wait);
+            tracing::warn!(
+                "{}: replies break the stream often ({:.1} times in the last {} s): next \
+                 connection in {} ms",
+                who.describe(),
+                self.garbled.level,
+                GarbleRate::HALF_LIFE.as_secs(),
+                wait.as_millis()
+            );
+        }
     }
 
     /// Reopens the link if the backoff allows, within `deadline`, for the valve `who` (its
@@ -233,12 +256,17 @@ impl Connection {
                 Err(fault)
             }
             Ok(Err(tokio_modbus::Error::Transport(e))) => {
+                let garbled = e.kind() == io::ErrorKind::InvalidData;
                 let (fault, broken) = self.classify_transport(who, t, e);
                 if broken {
                     let why = match &fault {
                         Fault::Disconnected(m) | Fault::Error(m) | Fault::Timeout(m) => m.clone(),
                     };
-                    self.drop_link(why);
+                    if garbled {
+                        self.drop_garbled(who, why);
+                    } else {
+                        self.drop_link(why);
+                    }
                 }
                 Err(fault)
             }
@@ -246,7 +274,7 @@ impl Connection {
                 // With the wire's transaction filter a mismatch means the stream is out of
                 // step: on TCP it is reopened. RTU has nothing to resynchronise.
                 if matches!(self.link, Link::Tcp(_)) {
-                    self.drop_link(format!("FC {fc}: {e}"));
+                    self.drop_garbled(who, format!("FC {fc}: {e}"));
                 }
                 Err(Fault::Error(format!("FC {fc}: {e}")))
             }
@@ -265,7 +293,10 @@ impl Connection {
         let ms = timeout.as_millis();
         let fc = t.function_code();
         if !matches!(self.link, Link::Rtu(_)) {
-            return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
+            return match self.wire.malformed() {
+                Some(m) => Fault::Error(m.to_string()),
+                None => Fault::Timeout(format!("no reply to FC {fc} within {ms} ms")),
+            };
         }
         let rx = self.wire.received();
         if rx.is_empty() {
@@ -313,6 +344,35 @@ impl Connection {
     }
 }
 
+/// Stream-breaking replies as a count that halves every [`GarbleRate::HALF_LIFE`]: the wait
+/// before reopening grows with it, whatever good replies came between.
+#[derive(Debug, Default)]
+struct GarbleRate {
+    level: f64,
+    at: Option<Instant>,
+}
+
+impl GarbleRate {
+    const HALF_LIFE: Duration = Duration::from_secs(5);
+    /// Failures within about a half-life before the reopening waits.
+    const FREE: f64 = 2.0;
+
+    /// Counts one failure at `now`; the wait before the next connection.
+    fn hit(&mut self, now: Instant) -> Duration {
+        let decay = self.at.map_or(0.0, |at| {
+            0.5f64.powf((now - at).as_secs_f64() / Self::HALF_LIFE.as_secs_f64())
+        });
+        self.level = self.level * decay + 1.0;
+        self.at = Some(now);
+        if self.level <= Self::FREE {
+            return Duration::ZERO;
+        }
+        // Past 2^5 the wait is MAX_BACKOFF anyway.
+        let doublings = (self.level - Self::FREE - 1.0).min(5.0);
+        FIRST_BACKOFF.mul_f64(2f64.powf(doublings)).min(MAX_BACKOFF)
+    }
+}
+
 /// Runs one transaction; a write returns no words.
 async fn call(
     ctx: &mut Context,
@@ -343,5 +403,27 @@ async fn call(
             ctx.read_write_multiple_registers(read_address, read_count, write_address, setpoint)
                 .await
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_wait_grows_with_the_rate_of_broken_streams_not_the_run_of_them() {
+        let t0 = Instant::now();
+        let mut rate = GarbleRate::default();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        // Two within a half-life: reopened at once.
+        assert_eq!(rate.hit(at(0)), Duration::ZERO);
+        assert_eq!(rate.hit(at(20)), Duration::ZERO);
+        // Then every 20 ms, good replies or not between: the wait doubles up to the most.
+        let waits: Vec<Duration> = (2..12).map(|k| rate.hit(at(20 * k))).collect();
+        assert!(waits.windows(2).all(|w| w[1] >= w[0]), "{waits:?}");
+        assert!(waits[0] > Duration::ZERO && waits[0] < FIRST_BACKOFF * 2);
+        assert_eq!(waits[9], MAX_BACKOFF);
+        // Quiet for a minute: the next one is reopened at once again.
+        assert_eq!(rate.hit(at(60_000)), Duration::ZERO);
     }
 }

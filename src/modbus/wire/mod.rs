@@ -34,6 +34,36 @@ pub struct WireState {
     rx: Mutex<Vec<u8>>,
     closed: AtomicBool,
     stale: AtomicU64,
+    malformed: Mutex<Option<Malformed>>,
+}
+
+/// A reply to the current request, whole and in step with the stream, whose PDU does not fit
+/// the request: not passed on, so the link is kept and the cycle fails on its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Malformed {
+    /// A read's byte count is not two per register asked, or not what the frame holds.
+    ByteCount { fc: u8, got: u8, want: usize },
+    /// The PDU is not as long as its function code says.
+    Length { fc: u8, bytes: usize },
+    /// The reply carries another function code than the request.
+    Function { asked: u8, got: u8 },
+}
+
+impl std::fmt::Display for Malformed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Malformed::ByteCount { fc, got, want } => write!(
+                f,
+                "malformed reply to FC {fc}: byte count {got}, {want} expected"
+            ),
+            Malformed::Length { fc, bytes } => {
+                write!(f, "malformed reply to FC {fc}: a {bytes}-byte PDU")
+            }
+            Malformed::Function { asked, got } => {
+                write!(f, "malformed reply to FC {asked}: function code {got}")
+            }
+        }
+    }
 }
 
 impl WireState {
@@ -50,6 +80,15 @@ impl WireState {
     /// Replies discarded because they answered an earlier request.
     pub fn stale_replies(&self) -> u64 {
         self.stale.load(Ordering::Relaxed)
+    }
+
+    /// The malformed reply to the current request, if one came.
+    pub fn malformed(&self) -> Option<Malformed> {
+        *self.malformed.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn set_malformed(&self, m: Option<Malformed>) {
+        *self.malformed.lock().unwrap_or_else(|p| p.into_inner()) = m;
     }
 
     fn count_stale(&self) {

@@ -5,9 +5,12 @@
 //! taken (and refused) as the answer to the next request, and every later one too (its issue
 //! #324). The wire reads the transaction id of each request it writes and drops whole frames
 //! whose id is not that one, so the connection is kept after a timeout and the next cycle gets
-//! its own reply. It also records that the device closed the connection: tokio-modbus reports a
-//! closed stream with whatever `errno` the thread last set (`Operation now in progress (os error
-//! 115)` after a reconnect).
+//! its own reply. A reply to the latest request whose PDU does not fit it (a read's byte count
+//! off, another function code) is not passed on either but recorded ([`Malformed`]): the
+//! stream is still in step, so the client fails the cycle and keeps the connection, where
+//! tokio-modbus would leave its framed stream in an error state. It also records that the
+//! device closed the connection: tokio-modbus reports a closed stream with whatever `errno` the
+//! thread last set (`Operation now in progress (os error 115)` after a reconnect).
 
 use std::io;
 use std::pin::Pin;
@@ -18,12 +21,14 @@ use std::task::{Context, Poll};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::TcpStream;
 
-use super::WireState;
+use super::{Malformed, WireState};
 
 /// MBAP header: transaction id, protocol id, length (of what follows it: unit id and PDU).
 const MBAP_HEADER: usize = 6;
 /// Largest MBAP length field: unit id and a 253-byte PDU.
 const MAX_MBAP_LENGTH: usize = 254;
+/// Bytes of a request kept after its MBAP header: unit id, function code, address, quantity.
+const REQUEST_HEAD: usize = 6;
 
 /// A Modbus TCP stream that passes on only replies to the latest request (module docs).
 #[derive(Debug)]
@@ -36,6 +41,9 @@ pub struct TcpWire {
     out_rest: usize,
     /// Transaction id of the latest request.
     expected: Option<u16>,
+    /// The latest request's first bytes after its header (see [`REQUEST_HEAD`]).
+    request: [u8; REQUEST_HEAD],
+    request_len: usize,
     /// Received bytes not yet framed.
     rx: Vec<u8>,
     /// Bytes of accepted replies not yet handed to tokio-modbus.
@@ -51,16 +59,23 @@ impl TcpWire {
             out_header: Vec::with_capacity(MBAP_HEADER),
             out_rest: 0,
             expected: None,
+            request: [0; REQUEST_HEAD],
+            request_len: 0,
             rx: Vec::with_capacity(512),
             ready: Vec::with_capacity(512),
         }
     }
 
-    /// Follows the request bytes written: the transaction id of each request's header.
+    /// Follows the request bytes written: the transaction id of each request's header, and
+    /// the first bytes of its PDU.
     fn track_written(&mut self, mut bytes: &[u8]) {
         while !bytes.is_empty() {
             if self.out_rest > 0 {
                 let n = self.out_rest.min(bytes.len());
+                let keep = n.min(REQUEST_HEAD - self.request_len);
+                self.request[self.request_len..self.request_len + keep]
+                    .copy_from_slice(&bytes[..keep]);
+                self.request_len += keep;
                 self.out_rest -= n;
                 bytes = &bytes[n..];
                 continue;
@@ -73,6 +88,8 @@ impl TcpWire {
                 self.expected = Some(u16::from_be_bytes([h[0], h[1]]));
                 self.out_rest = usize::from(u16::from_be_bytes([h[4], h[5]]));
                 self.out_header.clear();
+                self.request_len = 0;
+                self.state.set_malformed(None);
                 // What was not handed over yet belongs to an earlier exchange.
                 self.ready.clear();
             }
@@ -96,7 +113,14 @@ impl TcpWire {
             }
             let tid = u16::from_be_bytes([self.rx[0], self.rx[1]]);
             if Some(tid) == self.expected {
-                self.ready.extend_from_slice(&self.rx[..total]);
+                let request = &self.request[..self.request_len];
+                match malformed(request, &self.rx[MBAP_HEADER + 1..total]) {
+                    None => self.ready.extend_from_slice(&self.rx[..total]),
+                    Some(m) => {
+                        tracing::debug!("{m}: {:02X?}", &self.rx[..total]);
+                        self.state.set_malformed(Some(m));
+                    }
+                }
             } else {
                 self.state.count_stale();
                 tracing::debug!(
@@ -107,6 +131,33 @@ impl TcpWire {
             self.rx.drain(..total);
         }
         Ok(())
+    }
+}
+
+/// Why the reply PDU `pdu` does not fit the request whose first bytes after the MBAP header are
+/// `request` (unit id, function code, address, quantity), if it does not.
+fn malformed(request: &[u8], pdu: &[u8]) -> Option<Malformed> {
+    let (&asked, &fc) = (request.get(1)?, pdu.first()?);
+    let bytes = pdu.len();
+    if fc == asked | 0x80 {
+        return (bytes != 2).then_some(Malformed::Length { fc: asked, bytes });
+    }
+    if fc != asked {
+        return Some(Malformed::Function { asked, got: fc });
+    }
+    match fc {
+        3 | 4 | 23 => {
+            let count = u16::from_be_bytes([*request.get(4)?, *request.get(5)?]);
+            let want = 2 * usize::from(count);
+            let got = *pdu.get(1)?;
+            (usize::from(got) != want || bytes != 2 + want).then_some(Malformed::ByteCount {
+                fc,
+                got,
+                want,
+            })
+        }
+        6 | 16 => (bytes != 5).then_some(Malformed::Length { fc, bytes }),
+        _ => None,
     }
 }
 
@@ -169,6 +220,48 @@ impl AsyncWrite for TcpWire {
 mod tests {
     use super::*;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    #[test]
+    fn replies_that_do_not_fit_the_request_are_told() {
+        // Read 2 holding registers from 1 (unit 1).
+        let read = [1, 3, 0, 1, 0, 2];
+        assert_eq!(malformed(&read, &[3, 4, 0, 1, 0, 2]), None);
+        assert_eq!(
+            malformed(&read, &[3, 5, 0, 1, 0, 2, 0]),
+            Some(Malformed::ByteCount {
+                fc: 3,
+                got: 5,
+                want: 4
+            })
+        );
+        // A byte count that fits the request but not the frame.
+        assert!(malformed(&read, &[3, 4, 0, 1, 0]).is_some());
+        assert_eq!(
+            malformed(&read, &[4, 4, 0, 1, 0, 2]),
+            Some(Malformed::Function { asked: 3, got: 4 })
+        );
+        assert_eq!(malformed(&read, &[0x83, 2]), None);
+        assert_eq!(
+            malformed(&read, &[0x83, 2, 0]),
+            Some(Malformed::Length { fc: 3, bytes: 3 })
+        );
+        // FC 23 reads 3 registers; FC 16 echoes address and count.
+        assert_eq!(
+            malformed(&[1, 23, 0, 0, 0, 3], &[23, 6, 0, 0, 0, 0, 0, 0]),
+            None
+        );
+        assert_eq!(malformed(&[1, 16, 0, 0, 0, 1], &[16, 0, 0, 0, 1]), None);
+        assert!(malformed(&[1, 16, 0, 0, 0, 1], &[16, 0, 0, 0, 1, 0]).is_some());
+        assert_eq!(
+            Malformed::ByteCount {
+                fc: 23,
+                got: 5,
+                want: 4
+            }
+            .to_string(),
+            "malformed reply to FC 23: byte count 5, 4 expected"
+        );
+    }
 
     /// An MBAP frame: transaction `tid`, unit 1, `pdu`.
     fn mbap(tid: u16, pdu: &[u8]) -> Vec<u8> {
