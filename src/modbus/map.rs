@@ -13,7 +13,11 @@
 //! status   = { table = "holding", address = 2, setpoint_error_bit = 0 }   # optional
 //! word_order = "big"   # 32-bit formats: "big" = high word first, "little" = low word first
 //! fc23 = false         # one Read/Write Multiple Registers transaction per cycle
+//! position_valid_pct = [-10.0, 110.0]   # a position outside is no reading (an error row)
 //! ```
+//!
+//! A position outside `position_valid_pct` is not data: transmitters report "no value" with
+//! codes such as -32768 (i16) or 65535 (u16), which would read as -3276.8 % or 6553.5 %.
 //!
 //! Percent = raw × scale + offset. This module converts and checks; it does no I/O and knows
 //! nothing of function codes beyond which table a register lives in.
@@ -167,6 +171,13 @@ pub struct RegisterMap {
     /// Use one Read/Write Multiple Registers (FC 23) transaction per cycle.
     #[serde(default)]
     pub fc23: bool,
+    /// The positions a reading can have, %: one outside is an error, not a V_P.
+    #[serde(default = "default_position_valid")]
+    pub position_valid_pct: [f64; 2],
+}
+
+fn default_position_valid() -> [f64; 2] {
+    [-10.0, 110.0]
 }
 
 fn default_setpoint() -> Register {
@@ -197,6 +208,7 @@ impl Default for RegisterMap {
             status: None,
             word_order: WordOrder::Big,
             fc23: false,
+            position_valid_pct: default_position_valid(),
         }
     }
 }
@@ -239,6 +251,15 @@ pub enum ValueError {
         scale: f64,
         offset: f64,
         format: Format,
+        lo: f64,
+        hi: f64,
+    },
+    /// The position read is outside `position_valid_pct` (a "no value" code, most often).
+    #[error("{what} reads {words:04X?} = {pct} %, outside its valid range {lo} to {hi} % (position_valid_pct): a transmitter's no-value code, or a wrong scale")]
+    Invalid {
+        what: &'static str,
+        words: Vec<u16>,
+        pct: f64,
         lo: f64,
         hi: f64,
     },
@@ -378,6 +399,13 @@ impl RegisterMap {
                     r.address, r.format, r.format.width(), 0x1_0000 - u32::from(r.format.width())));
             }
         }
+        let [lo, hi] = self.position_valid_pct;
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            bad(
+                "position_valid_pct",
+                format!("[{lo}, {hi}] is not allowed: two finite percentages, the lower first (default [-10.0, 110.0])"),
+            );
+        }
         if self.setpoint.table != Table::Holding {
             bad("setpoint.table", "\"input\" is not allowed: input registers are read-only; the set-point must be a holding register".into());
         }
@@ -443,9 +471,23 @@ impl RegisterMap {
         self.setpoint.encode("set-point", pct, self.word_order)
     }
 
-    /// The position in percent from its register words.
+    /// The position in percent from its register words; one outside `position_valid_pct` is an
+    /// error.
     pub fn decode_position(&self, words: &[u16]) -> Result<f64, ValueError> {
-        self.position.decode("position", words, self.word_order)
+        let pct = self.position.decode("position", words, self.word_order)?;
+        let [lo, hi] = self.position_valid_pct;
+        if (lo..=hi).contains(&pct) {
+            Ok(pct)
+        } else {
+            let width = usize::from(self.position.format.width()).min(words.len());
+            Err(ValueError::Invalid {
+                what: "position",
+                words: words[..width].to_vec(),
+                pct,
+                lo,
+                hi,
+            })
+        }
     }
 }
 
@@ -477,6 +519,22 @@ mod tests {
         // A negative set-point does not fit a u16.
         let err = m.encode_setpoint(-1.0).unwrap_err().to_string();
         assert!(err.contains("outside u16"), "{err}");
+        // An i16 transmitter's "no value" is no position.
+        let err = m.decode_position(&[0x8000]).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "position reads [8000] = -3276.8 %, outside its valid range -10 to 110 % \
+             (position_valid_pct): a transmitter's no-value code, or a wrong scale"
+        );
+        assert!(m.decode_position(&[1101]).is_err() && m.decode_position(&[1100]).is_ok());
+        let narrow = parse("[registers]\nposition_valid_pct = [0.0, 100.0]\n").unwrap();
+        assert!(narrow.decode_position(&[(-3i16) as u16]).is_err());
+        let err = parse("[registers]\nposition_valid_pct = [100.0, 0.0]\n").unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("m.toml:2: registers.position_valid_pct: [100, 0] is not allowed"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -32,7 +32,8 @@ pub const MAX_RW_WRITE: u16 = 121;
 /// What the bank does with a set-point outside the accepted range.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OutOfRange {
-    /// Keep the last set-point, raise the status error bit, answer normally (Bürkert).
+    /// Keep the last set-point, raise the status error bit, answer normally (Bürkert); with no
+    /// status register in the map, refuse as [`OutOfRange::Exception`].
     KeepAndFlag,
     /// Refuse the write with exception 03 (illegal data value).
     Exception,
@@ -237,11 +238,14 @@ impl RegisterBank {
             _ => {
                 st.rejected += 1;
                 match self.policy {
-                    OutOfRange::KeepAndFlag => {
+                    // With no status register there is no bit to raise: refused outright.
+                    OutOfRange::KeepAndFlag if mask != 0 => {
                         st.status |= mask;
                         Ok(())
                     }
-                    OutOfRange::Exception => Err(ExceptionCode::IllegalDataValue),
+                    OutOfRange::KeepAndFlag | OutOfRange::Exception => {
+                        Err(ExceptionCode::IllegalDataValue)
+                    }
                 }
             }
         }
@@ -296,6 +300,14 @@ mod tests {
 
     fn write(b: &RegisterBank, raw: u16) -> Result<Response, ExceptionCode> {
         b.handle(&Request::WriteMultipleRegisters(0, Cow::Owned(vec![raw])))
+    }
+
+    #[test]
+    fn out_of_range_without_a_status_register_is_refused() {
+        let b = RegisterBank::new(RegisterMap::default(), 0.0, 100.0, OutOfRange::KeepAndFlag);
+        assert_eq!(write(&b, 420), Ok(Response::WriteMultipleRegisters(0, 1)));
+        assert_eq!(write(&b, 65535), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(b.setpoint_pct(), 42.0, "kept");
     }
 
     #[test]
@@ -435,13 +447,15 @@ mod tests {
         b.handle(&Request::WriteMultipleRegisters(10, Cow::Owned(w)))
             .unwrap();
         assert_eq!(b.setpoint_pct(), 33.5);
-        // NaN is out of range: kept.
+        // NaN is out of range: kept, and refused (no status register to flag it in).
         let nan = f32::NAN.to_bits();
-        b.handle(&Request::WriteMultipleRegisters(
-            10,
-            Cow::Owned(vec![nan as u16, (nan >> 16) as u16]),
-        ))
-        .unwrap();
+        assert_eq!(
+            b.handle(&Request::WriteMultipleRegisters(
+                10,
+                Cow::Owned(vec![nan as u16, (nan >> 16) as u16]),
+            )),
+            Err(ExceptionCode::IllegalDataValue)
+        );
         assert_eq!(b.setpoint_pct(), 33.5);
         b.set_position_pct(12.25);
         let Ok(Response::ReadInputRegisters(words)) = b.handle(&Request::ReadInputRegisters(0, 2))

@@ -86,3 +86,60 @@ async fn settings_and_budget_are_checked_before_connecting() {
         "{err}"
     );
 }
+
+/// A device whose position register reads `raw` (register 1; set-point in 0, status in 2).
+async fn device_reading(raw: u16) -> std::net::SocketAddr {
+    use crate::modbus::tcp_server::{self, Reply, Respond};
+    use tokio_modbus::{Request, Response};
+    struct NoValue(u16);
+    impl Respond for NoValue {
+        fn respond(&mut self, _unit: u8, request: &Request<'_>) -> Reply {
+            let words = [500, self.0, 0];
+            let response = match request {
+                Request::ReadWriteMultipleRegisters(..) => {
+                    Response::ReadWriteMultipleRegisters(words[1..].to_vec())
+                }
+                _ => Response::ReadHoldingRegisters(words[1..2].to_vec()),
+            };
+            Reply::Answer(Ok(response), Duration::ZERO)
+        }
+    }
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let limits = crate::net::Limits {
+        max_connections: 2,
+        idle_timeout: Duration::from_secs(5),
+    };
+    tokio::spawn(tcp_server::serve(
+        "test",
+        listener,
+        limits,
+        Arc::default(),
+        move |_| NoValue(raw),
+    ));
+    addr
+}
+
+#[tokio::test]
+async fn a_no_value_code_is_an_error_with_its_raw_word_not_a_position() {
+    let addr = device_reading(0x8000).await;
+    let tcp = TcpLink {
+        address: addr.to_string(),
+        unit_id: 1,
+        timeout_ms: Some(50.0),
+    };
+    let map = RegisterMap {
+        fc23: true,
+        ..RegisterMap::device_default()
+    };
+    let mut valve = ModbusValve::open(Link::Tcp(tcp), map, 0.01).await.unwrap();
+    let fault = valve.transact(50.0).await.unwrap_err();
+    assert_eq!(
+        fault,
+        Fault::Error(
+            "position reads [8000] = -3276.8 %, outside its valid range -10 to 110 % \
+             (position_valid_pct): a transmitter's no-value code, or a wrong scale"
+                .into()
+        )
+    );
+}
