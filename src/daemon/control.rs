@@ -10,7 +10,7 @@
 
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, Sender};
+use std::sync::mpsc::{Receiver, Sender, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
@@ -68,7 +68,7 @@ pub(super) struct Lane {
     pub(super) compensation: Option<Compensation>,
     pub(super) backend: Backend,
     pub(super) metrics: Option<ValveMetrics>,
-    pub(super) tx: Sender<Sample>,
+    pub(super) tx: SyncSender<Sample>,
     pub(super) stats: Stats,
     /// The O_P this cycle's source asked for (taken before any valve transacts).
     pub(super) op: f64,
@@ -86,7 +86,7 @@ impl Lane {
         (source, compensation): (Source, Option<Compensation>),
         backend: Backend,
         metrics: Option<ValveMetrics>,
-        tx: Sender<Sample>,
+        tx: SyncSender<Sample>,
     ) -> Self {
         Lane {
             name,
@@ -385,10 +385,24 @@ impl Loop {
                 lane.source.watchdog_trips(),
             );
         }
-        // The logger only hangs up by panicking; its join reports that.
-        lane.tx
-            .send(row)
-            .map_err(|_| DaemonError::Panicked("logger"))
+        // The logger only hangs up by panicking; its join reports that. On the wall clock a
+        // cycle never waits for it: a row that finds its queue full is dropped and counted (the
+        // stop action's row excepted, the loop is over then).
+        let hung_up = |_| DaemonError::Panicked("logger");
+        if self.clock == ClockKind::Virtual || row.status.is_stop_action() {
+            return lane.tx.send(row).map_err(hung_up);
+        }
+        match lane.tx.try_send(row) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(_)) => {
+                lane.stats.dropped_log_row();
+                if let Some(m) = &lane.metrics {
+                    m.dropped_log_row();
+                }
+                Ok(())
+            }
+            Err(TrySendError::Disconnected(_)) => Err(DaemonError::Panicked("logger")),
+        }
     }
 }
 

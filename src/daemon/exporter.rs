@@ -12,6 +12,7 @@
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
 //! - `valve_bridge_late_replies_total`: Modbus replies discarded as answers to earlier requests;
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
+//! - `valve_bridge_log_rows_dropped_total`: rows dropped because the logger fell behind;
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
 //!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
 //!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
@@ -194,6 +195,7 @@ pub struct ValveMetrics {
     reconnects: IntCounter,
     late_replies: IntCounter,
     watchdog_trips: IntCounter,
+    dropped_log_rows: IntCounter,
 }
 
 impl LoopMetrics {
@@ -242,6 +244,10 @@ impl LoopMetrics {
             "valve_bridge_late_replies_total",
             "Modbus replies discarded because they answered an earlier request, after its deadline",
         )?;
+        let dropped_log_rows = counter(
+            "valve_bridge_log_rows_dropped_total",
+            "Rows the loop dropped because the logger's queue was full",
+        )?;
         let watchdog_trips = counter(
             "valve_bridge_watchdog_trips_total",
             "Times the process controller's watchdog fired (modbus-server source)",
@@ -273,12 +279,20 @@ impl LoopMetrics {
                     reconnects: reconnects.get_metric_with_label_values(&[v])?,
                     late_replies: late_replies.get_metric_with_label_values(&[v])?,
                     watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
+                    dropped_log_rows: dropped_log_rows.get_metric_with_label_values(&[v])?,
                 })
             })
             .collect::<Result<Vec<_>, prometheus::Error>>()?;
         registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
-        for c in [cycles, missed, reconnects, late_replies, watchdog_trips] {
+        for c in [
+            cycles,
+            missed,
+            reconnects,
+            late_replies,
+            watchdog_trips,
+            dropped_log_rows,
+        ] {
             registry.register(Box::new(c))?;
         }
         for g in [op_ratio, vp_ratio] {
@@ -363,6 +377,11 @@ impl ValveMetrics {
         if let Some(vp) = row.vp_pct {
             self.vp_ratio.set(vp / 100.0);
         }
+    }
+
+    /// Counts a row the logger's queue had no room for.
+    pub fn dropped_log_row(&self) {
+        self.dropped_log_rows.inc();
     }
 
     /// Brings the link's and the watchdog's counters up to the totals the loop's parts keep.

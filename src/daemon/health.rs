@@ -22,7 +22,7 @@
 use std::collections::VecDeque;
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, Sender};
+use std::sync::mpsc::{Receiver, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
@@ -234,7 +234,7 @@ pub struct Watched {
 /// The running health thread: where the loggers send rows (with the valve's index), and the
 /// thread.
 pub struct Health {
-    pub tx: Sender<(usize, Sample)>,
+    pub tx: SyncSender<(usize, Sample)>,
     pub handle: JoinHandle<Result<Vec<HealthReport>, DaemonError>>,
 }
 
@@ -280,7 +280,8 @@ pub fn start(
             history: Vec::new(),
         });
     }
-    let (tx, rx) = std::sync::mpsc::channel();
+    // Bounded like the loggers' queues; a logger waits for the health thread, never the loop.
+    let (tx, rx) = std::sync::mpsc::sync_channel(super::logger::QUEUE_ROWS);
     let cfg = cfg.clone();
     let handle = std::thread::Builder::new()
         .name("vb-health".into())

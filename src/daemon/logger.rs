@@ -39,7 +39,7 @@ use std::fs::File;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
@@ -118,6 +118,11 @@ impl Status {
             Status::SafeHold => "safe-hold",
             Status::SafeGoTo => "safe-go-to",
         }
+    }
+
+    /// True for the stop action's row.
+    pub fn is_stop_action(self) -> bool {
+        matches!(self, Status::SafeHold | Status::SafeGoTo)
     }
 }
 
@@ -208,12 +213,17 @@ pub struct LogReport {
 }
 
 /// Where a logger passes on the rows it wrote: the health thread, with the valve's index.
-pub type Forward = (usize, Sender<(usize, Sample)>);
+pub type Forward = (usize, SyncSender<(usize, Sample)>);
+
+/// Rows a logger's queue holds (40 s at 100 Hz). Bounded, so memory stays flat however long a
+/// run and however slow the disk: on the wall clock the loop drops a row that finds the queue
+/// full (and counts it) rather than wait; on the virtual clock it waits.
+pub const QUEUE_ROWS: usize = 4096;
 
 /// The running logger: the channel to send rows on, and its thread.
 pub struct Logger {
     /// Where the loop sends rows.
-    pub tx: Sender<Sample>,
+    pub tx: SyncSender<Sample>,
     /// The thread; joins when every sender is dropped.
     pub handle: JoinHandle<Result<LogReport, DaemonError>>,
 }
@@ -383,7 +393,7 @@ impl Logger {
         };
         files.open(0.0)?;
         let flush_every = Duration::from_millis(cfg.flush_interval_ms);
-        let (tx, rx) = mpsc::channel();
+        let (tx, rx) = mpsc::sync_channel(QUEUE_ROWS);
         let handle = std::thread::Builder::new()
             .name("vb-logger".into())
             .spawn(move || write_all(rx, files, flush_every, forward, &stop))

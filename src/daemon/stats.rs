@@ -27,6 +27,8 @@ const FAILURES: [Status; 3] = [Status::Timeout, Status::Error, Status::Disconnec
 pub struct Stats {
     lateness_ns: Histogram<u64>,
     counts: [u64; Status::ALL.len()],
+    /// Rows dropped because the logger's queue was full.
+    dropped_log_rows: u64,
     /// The last fault of each failure kind (timeout, error, disconnected).
     last_faults: [Option<Fault>; 3],
 }
@@ -45,8 +47,19 @@ impl Stats {
             lateness_ns: Histogram::new_with_bounds(1, 60_000_000_000, 3)
                 .unwrap_or_else(|e| panic!("histogram bounds: {e}")),
             counts: [0; Status::ALL.len()],
+            dropped_log_rows: 0,
             last_faults: [None, None, None],
         }
+    }
+
+    /// Counts a row the logger's queue had no room for.
+    pub fn dropped_log_row(&mut self) {
+        self.dropped_log_rows += 1;
+    }
+
+    /// Rows dropped because the logger's queue was full.
+    pub fn dropped_log_rows(&self) -> u64 {
+        self.dropped_log_rows
     }
 
     /// Keeps `fault` as the last of its kind (the summary says what went wrong).
@@ -341,6 +354,13 @@ impl ValveSummary {
             writeln!(f, "{indent}last {fault}")?;
         }
         writeln!(f, "{indent}missed cycles: {}", self.missed())?;
+        if s.dropped_log_rows() > 0 {
+            writeln!(
+                f,
+                "{indent}log rows dropped: {} (the logger fell behind the loop: a slow or full disk?)",
+                s.dropped_log_rows()
+            )?;
+        }
         if let Some(l) = self.link {
             writeln!(
                 f,
