@@ -11,13 +11,23 @@
 //! the paper's level loop, the paper's random steps, and small steps. Figures per run:
 //! `valve_bridge::compensate::trial::Figures`.
 //!
-//! Run: `cargo bench --bench compensation -- [--seeds N] [--kick-share S] [--plot PATH]`
-//! (default 3 seeds and the default `kick_share`; shares above the config's limit of 1 are
-//! taken, to show why there is one); `--plot PATH.svg` writes the SVG of a reversal of the 1.5 % valve with and without
-//! compensation, and `PATH-kick.svg` the set-point sent.
+//! Then the physical valves once more over Modbus ([`modbus`]): each a unit of sim-device,
+//! logged by `valve-bridge run`, diagnosed by `valve-bridge diagnose` from that log, and run
+//! with and without compensation, in real time (short runs).
+//!
+//! Run: `cargo bench --bench compensation -- [--seeds N] [--kick-share S] [--plot PATH]
+//! [--modbus-log-s S] [--modbus-run-s S] [--no-modbus]` (default 3 seeds and the default
+//! `kick_share`; shares above the config's limit of 1 are taken, to show why there is one;
+//! over Modbus a 300 s log and 180 s runs). It writes the SVG of a reversal of the 1.5 % valve
+//! with and without compensation to PATH (default `target/compensation-bench/reversal.svg`),
+//! and the set-point sent to `PATH-kick.svg`; the Modbus part's files go to
+//! `target/compensation-bench/modbus/`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+#[path = "compensation/modbus.rs"]
+mod modbus;
 
 use valve_bridge::compensate::trial::{self, Figures, Run, Scenario};
 use valve_bridge::compensate::{CompensationConfig, Compensator};
@@ -28,6 +38,11 @@ use valve_bridge::report::plot::{self, Series};
 use valve_bridge::synth::{self, physical, Excitation};
 
 type Error = Box<dyn std::error::Error>;
+
+/// Where the bench writes what it makes unless told otherwise.
+fn work_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("target/compensation-bench")
+}
 
 const DT: f64 = 0.01;
 /// Length of the identification log and of each scenario run, s.
@@ -47,14 +62,23 @@ struct Bench {
 struct Args {
     seeds: u64,
     kick_share: f64,
-    plot: Option<PathBuf>,
+    plot: PathBuf,
+    /// The Modbus part's log and runs, s (None: not run).
+    modbus: Option<(f64, f64)>,
 }
 
 fn options() -> Result<Args, Error> {
     let mut out = Args {
         seeds: 3,
         kick_share: CompensationConfig::default().kick_share,
-        plot: None,
+        plot: work_dir().join("reversal.svg"),
+        modbus: Some((300.0, 180.0)),
+    };
+    let secs = |a: Option<String>, name: &str| -> Result<f64, Error> {
+        let s: f64 = a.ok_or(format!("{name} needs seconds"))?.parse()?;
+        (s >= 30.0)
+            .then_some(s)
+            .ok_or_else(|| format!("{name}: at least 30 s").into())
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -66,7 +90,16 @@ fn options() -> Result<Args, Error> {
             "--kick-share" => {
                 out.kick_share = args.next().ok_or("--kick-share needs a number")?.parse()?;
             }
-            "--plot" => out.plot = Some(PathBuf::from(args.next().ok_or("--plot needs a path")?)),
+            "--plot" => out.plot = PathBuf::from(args.next().ok_or("--plot needs a path")?),
+            "--modbus-log-s" => {
+                let s = secs(args.next(), "--modbus-log-s")?;
+                out.modbus = out.modbus.map(|m| (s, m.1));
+            }
+            "--modbus-run-s" => {
+                let s = secs(args.next(), "--modbus-run-s")?;
+                out.modbus = out.modbus.map(|m| (m.0, s));
+            }
+            "--no-modbus" => out.modbus = None,
             "--bench" => {}
             other => return Err(format!("unknown argument `{other}`").into()),
         }
@@ -96,6 +129,20 @@ fn diagnosed(valve: &ModelSpec) -> Result<ModelSpec, Error> {
     Ok(diagnose::diagnose(&rec.view(), None, &|_, _| {})?
         .final_model
         .spec)
+}
+
+/// The compensator of the model file `path`, default settings.
+fn compensator(path: &Path) -> Result<Compensator, Error> {
+    let cfg = CompensationConfig {
+        model_file: Some(path.to_path_buf()),
+        ..CompensationConfig::default()
+    };
+    Ok(Compensator::new(
+        &cfg,
+        &ModelSpec::load(path)?,
+        DT,
+        (0.0, 100.0),
+    )?)
 }
 
 fn benches(kick_share: f64) -> Result<Vec<Bench>, Error> {
@@ -293,6 +340,9 @@ fn reversal_plot(b: &Bench, path: &PathBuf) -> Result<(), Error> {
         ],
         window,
     );
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
     std::fs::write(path, positions)?;
     let kick_path = path.with_file_name(format!(
         "{}-kick.svg",
@@ -311,6 +361,7 @@ fn main() -> Result<(), Error> {
         seeds,
         kick_share,
         plot: plot_path,
+        modbus: modbus_secs,
     } = options()?;
     let benches = benches(kick_share)?;
     println!("Models identified from each valve's own 15-minute log, and what they compensate:");
@@ -326,12 +377,61 @@ fn main() -> Result<(), Error> {
             println!("{}", row(b, scenario, &results));
         }
     }
-    if let Some(path) = plot_path {
-        let b = benches
+    let b = benches
+        .iter()
+        .find(|b| b.name.contains("1.5 %"))
+        .ok_or("no 1.5 % valve")?;
+    reversal_plot(b, &plot_path)?;
+    if let Some((log_s, run_s)) = modbus_secs {
+        let physical: Vec<(String, ModelSpec)> = benches
             .iter()
-            .find(|b| b.name.contains("1.5 %"))
-            .ok_or("no 1.5 % valve")?;
-        reversal_plot(b, &path)?;
+            .filter(|b| b.valve.model == ModelKind::Physical && !b.name.contains("identify"))
+            .map(|b| (b.name.clone(), b.valve.clone()))
+            .collect();
+        let outcomes = modbus::run(
+            &physical,
+            &work_dir().join("modbus"),
+            (log_s, run_s, LOG_SEED),
+            &|what| eprintln!("{what}"),
+        )?;
+        modbus_table(&outcomes, (log_s, run_s));
     }
     Ok(())
+}
+
+/// The Modbus part's table.
+fn modbus_table(outcomes: &[modbus::Outcome], (log_s, run_s): (f64, f64)) {
+    println!();
+    println!("Over Modbus (sim-device, seed 1): models diagnosed from each valve's {log_s:.0} s log over Modbus, runs of {run_s:.0} s:");
+    let first = outcomes
+        .iter()
+        .filter(|o| o.scenario == outcomes[0].scenario);
+    for o in first {
+        println!("- {}: {}", o.name, o.described);
+    }
+    println!();
+    println!("| valve | scenario | tracking error of the V_P read, % RMS | travel, % | reversals | rows that read a V_P | compensation |");
+    println!("|---|---|---|---|---|---|---|");
+    for o in outcomes {
+        let pct = |a: f64, b: f64| if a > 0.0 { 100.0 * (b / a - 1.0) } else { 0.0 };
+        let (a, b) = (&o.without, &o.with);
+        println!(
+            "| {} | {} | {:.3} → {:.3} ({:+.0} %) | {:.0} → {:.0} ({:+.0} %) | {} → {} | {} and {} of {} | {} |",
+            o.name,
+            o.scenario.name(),
+            a.tracking_pct,
+            b.tracking_pct,
+            pct(a.tracking_pct, b.tracking_pct),
+            a.travel.travel_pct,
+            b.travel.travel_pct,
+            pct(a.travel.travel_pct, b.travel.travel_pct),
+            a.travel.reversals,
+            b.travel.reversals,
+            a.read.0,
+            b.read.0,
+            a.read.1.max(b.read.1),
+            o.switched_off_s
+                .map_or("on".to_string(), |t| format!("off at {t:.0} s")),
+        );
+    }
 }

@@ -11,13 +11,16 @@
 //!   ([`kick`]). A kick can only make the positioner push harder up to its speed limit: a
 //!   reversal that already runs at full flow cannot be shortened by any set-point.
 //! - **deadband**: the inverse of the model's deadband (the valve stops short by half of it):
-//!   the set-point goes half the band beyond where the valve should stop, as a minimum step.
+//!   the set-point goes half the band beyond where the valve should stop, in the direction of
+//!   the move.
 //! - **calibration**: the inverse of the fitted gain and offset (`V_P = a O_P + b` at rest).
 //!
 //! The kick acts only while the model says the stem cannot move yet (the pressure inside the
-//! band); the deadband step on every move the controller asks for, so the valve does not stop
-//! short. Both act only on moves of the controller larger than its own noise (three times its
-//! mean sample-to-sample change, at least `min_move_pct`, two samples in a row): a noisy
+//! band). The deadband step begins with every move the controller asks for, on the side the
+//! valve comes from (closing moves get it below the target, opening ones above), and lasts
+//! until the controller's next move: a valve held at the edge of its deadband stays at the
+//! target. Both begin only on moves of the controller larger than its own noise (three times
+//! its mean sample-to-sample change, at least `min_move_pct`, two samples in a row): a noisy
 //! controller output is not a sequence of reversals worth kicking (that would make the valve
 //! follow the noise).
 //!
@@ -32,9 +35,10 @@
 //!
 //! Guard rails: the set-point stays within the source's `op_min_pct..op_max_pct`; what
 //! compensation adds to the controller's O_P changes by at most `max_rate_pct_per_s`; and the
-//! [`guard`] compares, every `guard_window_s`, the tracking error measured with compensation
-//! against the model's own uncompensated tracking error over the same window: if compensation
-//! is worse by more than `guard_margin`, it switches itself off for good (the caller warns).
+//! [`guard`] compares, every `guard_window_s`, what the valve does with compensation
+//! (reversals, travel, overshoot past the target, where it comes to rest) with what the
+//! identified model, driven by the same set-points, says it does: beyond `guard_margin` and
+//! the guard's slack, compensation switches itself off for good (the caller warns).
 //!
 //! Stepping allocates nothing. Not here: the daemon's log and metrics, the config's file
 //! checks (`crate::daemon::config`), the bench.
@@ -77,7 +81,8 @@ pub struct CompensationConfig {
     pub min_move_pct: f64,
     /// The guard's window, s.
     pub guard_window_s: f64,
-    /// How much worse (relative) the tracking error with compensation may be than without.
+    /// How much more (relative) the valve may reverse, travel, overshoot and miss its targets
+    /// with compensation than its model says it does with it.
     pub guard_margin: f64,
 }
 
@@ -195,8 +200,11 @@ pub struct Compensator {
     /// The model in friction-band form, without dead time, stepped with the set-points sent:
     /// the state each new set-point meets when it reaches the valve.
     inverse: Valve,
+    /// The model as identified, stepped with the set-points sent: the valve with compensation
+    /// as the model sees it, for the guard.
+    with: Valve,
     /// The model as identified, stepped with the controller's O_P: the valve without
-    /// compensation, for the guard.
+    /// compensation, for the guard's report.
     without: Valve,
     guard: Guard,
     active: bool,
@@ -212,6 +220,16 @@ pub struct Compensator {
     /// Samples in a row the controller has asked for a move beyond the gate, and which way.
     asked_run: u32,
     asked_dir: f64,
+    /// The side of the deadband step, +1 (opening) or -1 (closing): the side the valve comes
+    /// from, kept once the model has come within the gate of the wish.
+    deadband_dir: f64,
+    /// The controller's O_P when it last asked for a move: the deadband step lasts while it
+    /// stays within the gate of it (None: no step).
+    step_op: Option<f64>,
+    /// The gate of the last sample, %.
+    gate: f64,
+    /// A kick or a deadband step shaped the last set-point (not the calibration alone).
+    shaping: bool,
 }
 
 /// The settings a compensator keeps.
@@ -234,6 +252,8 @@ const NOISE_TAU_S: f64 = 10.0;
 const NOISE_FACTOR: f64 = 3.0;
 /// ... and asked for this many samples in a row (white noise seldom is, twice over).
 const PERSIST: u32 = 2;
+/// Set-points closer than this are the same, % (rounding of the arithmetic).
+const SAME_PLACE_PCT: f64 = 1e-9;
 
 impl Compensator {
     /// The compensator of `cfg` for `model`, at a sample period of `dt` s, sending set-points
@@ -248,7 +268,6 @@ impl Compensator {
             return Err(CompensateError::Physical);
         }
         let (inverse_spec, identified) = inverse_model(model, dt, (op_min, op_max));
-        let window = (cfg.guard_window_s / dt).round().max(1.0) as u64;
         Ok(Compensator {
             parts: Parts {
                 backlash: cfg.backlash && identified.band_pct > 0.0,
@@ -266,8 +285,9 @@ impl Compensator {
             op_min,
             op_max,
             inverse: Valve::new(&inverse_spec, dt)?,
+            with: Valve::new(model, dt)?,
             without: Valve::new(model, dt)?,
-            guard: Guard::new(window, cfg.guard_margin),
+            guard: Guard::new(cfg.guard_window_s, dt, cfg.guard_margin),
             active: true,
             started: false,
             last_t: 0.0,
@@ -278,6 +298,10 @@ impl Compensator {
             seen: 0,
             asked_run: 0,
             asked_dir: 0.0,
+            deadband_dir: 1.0,
+            step_op: None,
+            gate: 0.0,
+            shaping: false,
         })
     }
 
@@ -329,6 +353,7 @@ impl Compensator {
     /// through with the set-point held, as a valve holds it.
     pub fn setpoint(&mut self, op: f64, t_s: f64) -> f64 {
         self.catch_up(op, t_s);
+        self.shaping = false;
         let wanted = if self.active { self.shape(op) } else { op };
         let excursion = (wanted - op).clamp(
             self.excursion - self.parts.rate,
@@ -344,8 +369,15 @@ impl Compensator {
     /// The V_P read for the last set-point (None when none was read); returns the guard's
     /// verdict when a window ends. A window judged worse switches compensation off for good.
     pub fn observe(&mut self, vp_pct: Option<f64>) -> Option<Window> {
-        let predicted = self.without.step(self.last_op);
-        let window = self.guard.add(self.last_op, predicted, vp_pct)?;
+        let window = self.guard.add(guard::Sample {
+            op: self.last_op,
+            target: self.base(self.last_op),
+            gate: self.gate,
+            compensated: self.shaping,
+            model_with: self.with.step(self.last_sent),
+            model_without: self.without.step(self.last_op),
+            measured: vp_pct,
+        })?;
         if window.worse {
             self.active = false;
         }
@@ -359,6 +391,7 @@ impl Compensator {
             if missed < MAX_GAP_SAMPLES as f64 {
                 for _ in 0..missed.max(0.0) as u64 {
                     self.inverse.step(self.last_sent);
+                    self.with.step(self.last_sent);
                     self.without.step(self.last_op);
                 }
                 return;
@@ -366,8 +399,10 @@ impl Compensator {
         }
         self.started = true;
         self.inverse.reset(op, self.calibrated(op));
+        self.with.reset(op, self.calibrated(op));
         self.without.reset(op, self.calibrated(op));
         (self.last_op, self.last_sent, self.excursion) = (op, op, 0.0);
+        self.step_op = None;
     }
 
     /// Where the valve settles for the O_P `op` by the model's calibration, %.
@@ -375,16 +410,20 @@ impl Compensator {
         self.identified.calibration_gain * op + self.identified.calibration_offset_pct
     }
 
-    /// The set-point the enabled parts want for the controller's O_P `op`.
-    fn shape(&mut self, op: f64) -> f64 {
-        let id = self.identified;
-        // The input the valve's core should get: `op` itself when the calibration is inverted
-        // (the valve then settles at `op`), else what the valve makes of `op` anyway.
-        let base = if self.parts.calibration {
+    /// The input the valve's core should get for the controller's O_P `op`, where it comes to
+    /// rest: `op` itself when the calibration is inverted, else what the valve makes of `op`.
+    fn base(&self, op: f64) -> f64 {
+        if self.parts.calibration {
             op
         } else {
             self.calibrated(op)
-        };
+        }
+    }
+
+    /// The set-point the enabled parts want for the controller's O_P `op`.
+    fn shape(&mut self, op: f64) -> f64 {
+        let id = self.identified;
+        let base = self.base(op);
         // Kick and deadband step only while the controller asks for a move.
         let cart = (self.inverse.pin_reach(1.0)).map_or(base, |r| r.cart_pct);
         let moving = self.moving(op, base - cart);
@@ -393,7 +432,15 @@ impl Compensator {
         } else {
             base
         };
-        let before_deadband = if self.parts.deadband && moving {
+        // The deadband step begins with a move and lasts until the controller leaves the place
+        // it asked for: a valve held at the edge of its deadband stays at the target, one let
+        // go as its model arrives stops short wherever the valve is slower than the model.
+        if moving {
+            self.step_op = Some(op);
+        } else if self.step_op.is_some_and(|o| (op - o).abs() > self.gate) {
+            self.step_op = None;
+        }
+        let before_deadband = if self.parts.deadband && self.step_op.is_some() {
             // A band on the input moves its target; one in the positioner acts on the valve.
             let from = if id.deadband_in_positioner {
                 cart
@@ -401,10 +448,16 @@ impl Compensator {
                 self.inverse.input_target()
             };
             let gap = wish - from;
-            wish + gap.signum() * id.deadband_pct / 2.0
+            // Decided where the move begins: near the wish the model's stem may stop a hair
+            // either side of it, which is no change of direction.
+            if gap.abs() > self.gate {
+                self.deadband_dir = gap.signum();
+            }
+            wish + self.deadband_dir * id.deadband_pct / 2.0
         } else {
             wish
         };
+        self.shaping = (before_deadband - base).abs() > SAME_PLACE_PCT;
         (before_deadband - id.calibration_offset_pct) / id.calibration_gain
     }
 
@@ -420,6 +473,7 @@ impl Compensator {
         let weight = (self.dt / NOISE_TAU_S).max(1.0 / self.seen as f64);
         self.noise += weight * (du.min(clip) - self.noise);
         let gate = self.parts.min_move.max(NOISE_FACTOR * self.noise);
+        self.gate = gate;
         self.asked_run = if asked.abs() <= gate {
             0
         } else if asked.signum() == self.asked_dir {

@@ -113,6 +113,52 @@ fn the_inverse_calibration_and_deadband_bring_the_valve_to_the_target() {
 }
 
 #[test]
+fn the_deadband_step_is_on_the_side_of_the_move_closing_as_well_as_opening() {
+    // A band on the input (the form diagnose writes for a positioner deadband seen through a
+    // log) and one in the positioner; steps both ways, each held 3 s.
+    let levels = [50.0, 49.0, 51.0, 49.5, 48.0, 49.0];
+    let op: Vec<f64> = levels
+        .iter()
+        .flat_map(|&x| std::iter::repeat_n(x, 300))
+        .collect();
+    for positioner in [false, true] {
+        let mut valve = band_valve(0.0);
+        if positioner {
+            valve.effects.positioner_deadband_pct = 0.5;
+        } else {
+            valve.effects.deadband_pct = 0.744;
+        }
+        let (_, plain) = run(&valve, None, &op);
+        let mut comp = compensator(&valve);
+        let (sent, comped) = run(&valve, Some(&mut comp), &op);
+        for (i, w) in levels.windows(2).enumerate() {
+            let (from, to) = (w[0], w[1]);
+            let dir = (to - from).signum();
+            let hold = 300 * (i + 1)..300 * (i + 2);
+            // Every set-point the step adds is beyond the target on the side of the move.
+            assert!(
+                sent[hold.clone()].iter().all(|&s| dir * (s - to) >= -1e-9),
+                "{positioner} {from} -> {to}: {:?}",
+                &sent[hold.start..hold.start + 40]
+            );
+            // Without, the valve stops short; with, at the target.
+            let end = hold.end - 1;
+            assert!(
+                dir * (to - plain[end]) > 0.2,
+                "{positioner} {from} -> {to}: {}",
+                plain[end]
+            );
+            assert!(
+                (comped[end] - to).abs() < 0.03,
+                "{positioner} {from} -> {to}: {} against {} without",
+                comped[end],
+                plain[end]
+            );
+        }
+    }
+}
+
+#[test]
 fn a_noisy_controller_output_is_not_kicked() {
     // 0.45 % of white noise on every sample (the level loop's controller): its changes are
     // not reversals worth kicking.

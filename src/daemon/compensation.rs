@@ -11,6 +11,7 @@ use super::config::ValveConfig;
 use super::exporter::CompensationMetrics;
 use super::logger::{round_pct, Sample};
 use super::DaemonError;
+use crate::compensate::guard::Figure;
 use crate::compensate::{CompensateError, Compensator, Window};
 use crate::model::ModelSpec;
 
@@ -94,13 +95,12 @@ impl Compensation {
         }
         if !self.comp.active() && self.report.switched_off_s.is_none() {
             self.report.switched_off_s = Some(self.t_s);
+            let (figure, valve, model) = guard_figures(&w);
             tracing::warn!(
                 valve = %self.valve,
-                "compensation switched off: the tracking error with it, {:.3} % RMS, is worse \
-                 than the model's {:.3} % without it over the last window; the controller's O_P \
-                 is sent unchanged from now on",
-                w.with_pct,
-                w.without_pct
+                "compensation switched off: over the last window the valve's {figure} with it, \
+                 {valve}, exceeds what its model says compensation gives, {model}; the \
+                 controller's O_P is sent unchanged from now on"
             );
         }
     }
@@ -109,4 +109,28 @@ impl Compensation {
     pub(super) fn report(self) -> CompensationReport {
         self.report
     }
+}
+
+/// The figure that tripped the guard, the valve's and the model's, in words.
+fn guard_figures(w: &Window) -> (&'static str, String, String) {
+    let Some(figure) = w.exceeded else {
+        return ("figures", String::new(), String::new());
+    };
+    let (m, p) = (&w.measured, &w.predicted);
+    let (valve, model) = match figure {
+        Figure::Reversals => (m.reversals.to_string(), p.reversals.to_string()),
+        Figure::Travel => (
+            format!("{:.2} %", m.travel_pct),
+            format!("{:.2} %", p.travel_pct),
+        ),
+        Figure::Overshoot => (
+            format!("{:.2} %", m.overshoot_pct),
+            format!("{:.2} %", p.overshoot_pct),
+        ),
+        Figure::Miss => (
+            format!("{:.2} %", m.miss_pct),
+            format!("{:.2} %", p.miss_pct),
+        ),
+    };
+    (figure.name(), valve, model)
 }

@@ -666,6 +666,7 @@ mod tests {
             without_pct: 0.25,
             rows: 100,
             worse: true,
+            ..Window::default()
         };
         b.publish(Some(&w), false);
         let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());

@@ -21,7 +21,7 @@ pub mod stats;
 mod travel;
 
 pub use filter::{filtfilt_butter_lowpass, PAPER_FILTER_CUTOFF_HZ, PAPER_FILTER_ORDER};
-pub use travel::{travel, Travel};
+pub use travel::{travel, Travel, TravelCounter};
 
 /// One row of Table 1.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

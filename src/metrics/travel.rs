@@ -18,25 +18,49 @@ pub struct Travel {
 /// The travel and reversals of `x` (%), counted through `deadband_pct` (> 0, e.g. a few noise
 /// standard deviations). Non-finite samples are skipped.
 pub fn travel(x: &[f64], deadband_pct: f64) -> Travel {
-    let mut out = Travel::default();
-    let mut anchor: Option<f64> = None;
-    let mut dir = 0.0;
-    for &v in x.iter().filter(|v| v.is_finite()) {
-        let Some(a) = anchor else {
-            anchor = Some(v);
-            continue;
+    let mut counter = TravelCounter::default();
+    for &v in x {
+        counter.push(v, deadband_pct);
+    }
+    counter.total()
+}
+
+/// The travel accumulator one sample at a time (what [`travel`] runs over a series).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TravelCounter {
+    anchor: Option<f64>,
+    dir: f64,
+    total: Travel,
+}
+
+impl TravelCounter {
+    /// Adds the position `v` (%), counted through `deadband_pct`; true when it counted a move.
+    /// A non-finite sample is skipped.
+    pub fn push(&mut self, v: f64, deadband_pct: f64) -> bool {
+        if !v.is_finite() {
+            return false;
+        }
+        let Some(a) = self.anchor else {
+            self.anchor = Some(v);
+            return false;
         };
         let d = v - a;
-        if d.abs() >= deadband_pct {
-            if dir != 0.0 && d.signum() != dir {
-                out.reversals += 1;
-            }
-            dir = d.signum();
-            out.travel_pct += d.abs();
-            anchor = Some(v);
+        if d.abs() < deadband_pct {
+            return false;
         }
+        if self.dir != 0.0 && d.signum() != self.dir {
+            self.total.reversals += 1;
+        }
+        self.dir = d.signum();
+        self.total.travel_pct += d.abs();
+        self.anchor = Some(v);
+        true
     }
-    out
+
+    /// The travel and reversals counted so far.
+    pub fn total(&self) -> Travel {
+        self.total
+    }
 }
 
 #[cfg(test)]
