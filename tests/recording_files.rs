@@ -183,3 +183,29 @@ fn rotated_logs_join_in_time_order_with_their_gap_kept() {
         .to_string();
     assert!(e.contains("no .csv file"), "{e}");
 }
+
+#[test]
+fn a_set_may_end_with_a_short_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = ReadOptions::default();
+    let a = rotated(dir.path(), "vb-1.csv", 0.0, 100);
+    // The last file of a rotated set with one row; a file with none (a restart that wrote
+    // only the header) is skipped, with a warning.
+    let b = rotated(dir.path(), "vb-2.csv", 10.0, 1);
+    let c = rotated(dir.path(), "vb-3.csv", 10.5, 0);
+    let rec = read_all(&[a, b.clone(), c], &opts).unwrap();
+    assert_eq!(rec.t.len(), 101);
+    assert!(
+        rec.warnings
+            .iter()
+            .any(|w| w.ends_with("vb-3.csv: no data rows, skipped")),
+        "{:?}",
+        rec.warnings
+    );
+    // Alone, a one-row file is no recording.
+    let e = read_all(&[b], &opts).unwrap_err().to_string();
+    assert!(
+        e.ends_with("1 usable data row(s); a recording needs at least 2"),
+        "{e}"
+    );
+}

@@ -121,6 +121,7 @@ fn read(
         skip_missing,
         reverse_sorted: reverse,
         scale,
+        valve: None,
     };
     let rec = py
         .allow_threads(|| recording::read(&path, &opts))

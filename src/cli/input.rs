@@ -1,5 +1,5 @@
 //! The recording-reading flags every analysis command shares (`--columns`, `--skip-missing`,
-//! `--reverse`, `--timestamps`, `--scale`), mapped onto [`ReadOptions`].
+//! `--reverse`, `--timestamps`, `--scale`, `--valve`), mapped onto [`ReadOptions`].
 
 use valve_bridge::recording::{ColumnMap, ReadOptions};
 
@@ -21,6 +21,10 @@ pub struct RecordingArgs {
     /// Multiply O_P and V_P by this factor (100 for fractions of full travel).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    /// Of a log directory holding several valves' logs, the valve to read (its `[[valve]]
+    /// name`).
+    #[arg(long, value_name = "NAME")]
+    valve: Option<String>,
 }
 
 impl RecordingArgs {
@@ -36,6 +40,7 @@ impl RecordingArgs {
             reverse_sorted: self.reverse,
             timestamps: self.timestamps,
             scale: self.scale,
+            valve: self.valve.clone(),
         })
     }
 }

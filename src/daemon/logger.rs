@@ -301,10 +301,12 @@ impl Files {
         }
     }
 
-    /// Writes one row, rotating first if the current file is full.
+    /// Writes one row, rotating first if the current file is full (never for the stop action's
+    /// row: a file holding only that row would be no recording).
     fn write(&mut self, s: &Sample) -> Result<(), DaemonError> {
         let full = match &self.current {
             None => true,
+            Some(_) if s.status.is_stop_action() => false,
             Some(f) => {
                 f.csv.get_ref().bytes >= self.max_bytes || s.t_s - f.first_t_s >= self.max_span_s
             }

@@ -150,6 +150,24 @@ pub enum RecordingError {
         /// The directory.
         dir: String,
     },
+    /// A directory holds the daemon logs of several valves and none was chosen.
+    #[error("{dir} holds the logs of {} valves ({}): choose one with --valve NAME", found.len(), found.join(", "))]
+    SeveralValves {
+        /// The directory.
+        dir: String,
+        /// The valves whose logs it holds (`(unnamed)` for an unnamed valve's).
+        found: Vec<String>,
+    },
+    /// `--valve` names a valve whose logs the directory does not hold.
+    #[error("{dir} holds no logs of valve {valve} (--valve); it holds those of: {}", found.join(", "))]
+    NoSuchValve {
+        /// The directory.
+        dir: String,
+        /// The valve asked for.
+        valve: String,
+        /// The valves whose logs it holds.
+        found: Vec<String>,
+    },
     /// In-memory data that cannot form a recording, or columns of different lengths to write.
     #[error("{file}: {detail}")]
     Invalid {

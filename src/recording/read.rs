@@ -32,6 +32,9 @@ pub struct ReadOptions {
     pub timestamps: bool,
     /// Factor applied to O_P and V_P (`--scale`, e.g. 100 for fractions of full travel).
     pub scale: f64,
+    /// Of a directory holding the daemon logs of several valves, the valve whose logs to read
+    /// (`--valve`, its `[[valve]] name`).
+    pub valve: Option<String>,
 }
 
 impl Default for ReadOptions {
@@ -42,6 +45,7 @@ impl Default for ReadOptions {
             reverse_sorted: false,
             timestamps: false,
             scale: 1.0,
+            valve: None,
         }
     }
 }
@@ -64,16 +68,21 @@ pub fn read_from<R: Read>(
     label: &str,
     opts: &ReadOptions,
 ) -> Result<Recording, RecordingError> {
-    let (rows, warnings) = read_rows(reader, label, opts)?;
+    let (rows, warnings) = read_rows(reader, label, opts, MIN_ROWS)?;
     Ok(rows.into_recording(label.into(), warnings))
 }
 
+/// The fewest rows a recording has.
+pub(super) const MIN_ROWS: usize = 2;
+
 /// The checked rows of one file in time order (times from its first row for timestamps, with
-/// that row's time in ns since 1970), and what was tolerated.
+/// that row's time in ns since 1970), and what was tolerated; fewer than `min_rows` rows is an
+/// error (a file of a set may be short: the set is a recording).
 pub(super) fn read_rows<R: Read>(
     mut reader: R,
     label: &str,
     opts: &ReadOptions,
+    min_rows: usize,
 ) -> Result<(Rows, Vec<String>), RecordingError> {
     if !(opts.scale.is_finite() && opts.scale != 0.0 && opts.scale.abs() <= MAX_SCALE) {
         return Err(RecordingError::Invalid {
@@ -170,16 +179,17 @@ pub(super) fn read_rows<R: Read>(
         warnings.push(format!("dropped line {line}: it looks cut off ({problem})"));
         dropped += 1;
     }
-    if rows.t.len() < 2 {
+    if rows.t.len() < min_rows {
         return Err(RecordingError::TooFewRows {
             file: label.into(),
             rows: rows.t.len(),
             dropped,
         });
     }
-    rows.order(label, opts.reverse_sorted)?;
-    if let Some(t_ref) = cols.t_ref {
-        let t0 = rows.t[0];
+    if rows.t.len() > 1 {
+        rows.order(label, opts.reverse_sorted)?;
+    }
+    if let (Some(t_ref), Some(&t0)) = (cols.t_ref, rows.t.first()) {
         rows.t.iter_mut().for_each(|t| *t -= t0);
         rows.t_ref_ns = Some(t_ref + (t0 * 1e9).round() as i128);
     }

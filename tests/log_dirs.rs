@@ -1,0 +1,119 @@
+//! A log directory reads back as written: a run of exactly `rotate_after_s` leaves no file that
+//! holds only the stop row, and a directory with several valves' logs and their `health-*.csv`
+//! is read one valve at a time (`--valve`), the health files left out.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
+
+/// Two named emulated valves with `[health]`, files rotated every 30 s.
+const CONFIG: &str = r#"
+[[valve]]
+name = "level"
+kind = "emulated"
+[valve.source]
+kind = "random-steps"
+[valve.source.random-steps]
+hold_min_s = 1.0
+hold_max_s = 4.0
+seed = 3
+[[valve]]
+name = "cyclone"
+kind = "emulated"
+[valve.source]
+kind = "random-steps"
+[valve.source.random-steps]
+hold_min_s = 1.0
+hold_max_s = 4.0
+seed = 4
+[log]
+rotate_after_s = 30.0
+[health]
+window_s = 30.0
+every_s = 30.0
+"#;
+
+fn valve_bridge(args: &[&str], cwd: &Path) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn a_log_directory_reads_back_one_valve_at_a_time() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("two.toml"), CONFIG).unwrap();
+    let logs = dir.path().join("logs");
+    let logs_arg = logs.to_str().unwrap();
+    // Exactly two rotation spans: the stop row belongs to the second file of each valve.
+    let run = valve_bridge(
+        &[
+            "run",
+            "--config",
+            "two.toml",
+            "--as-fast-as-possible",
+            "--duration",
+            "60",
+            "--log-dir",
+            logs_arg,
+        ],
+        dir.path(),
+    );
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let mut names: Vec<String> = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 6, "{names:?}");
+    for n in names.iter().filter(|n| n.starts_with("vb-")) {
+        let rows = std::fs::read_to_string(logs.join(n))
+            .unwrap()
+            .lines()
+            .count()
+            - 1;
+        assert!(rows >= 3000, "{n}: {rows} rows");
+    }
+    // Several valves: the reader asks which.
+    let out = valve_bridge(&["steps", logs_arg], dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        text(&out.stderr).lines().last().unwrap_or(""),
+        format!(
+            "valve-bridge: error: {logs_arg} holds the logs of 2 valves (cyclone, level): \
+             choose one with --valve NAME"
+        )
+    );
+    let out = valve_bridge(&["steps", logs_arg, "--valve", "pump"], dir.path());
+    assert!(
+        text(&out.stderr)
+            .contains("holds no logs of valve pump (--valve); it holds those of: cyclone, level"),
+        "{}",
+        text(&out.stderr)
+    );
+    // One valve: its two files joined (6001 rows), the health files and the other valve's
+    // logs left out, and said so.
+    let out = Command::new(BIN)
+        .args(["diagnose", logs_arg, "--valve", "level", "--json"])
+        .current_dir(dir.path())
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap();
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("reading 2 files (vb-level-")
+            && stderr.contains("left out 2 files that are not valve level's logs")
+            && stderr.contains("left out 2 health files (the daemon's health figures)"),
+        "{stderr}"
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(json.is_object(), "{json}");
+}
