@@ -159,3 +159,34 @@ fn no_device_or_no_modbus_valve_is_one_line() {
         "{err}"
     );
 }
+
+#[test]
+fn a_pty_link_is_removed_on_stop_and_a_dangling_one_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("vb-sim-link");
+    let link_arg = link.to_str().unwrap();
+    let device = SimDevice::start_bare(&["--pty", "--pty-link", link_arg], RTU_CONFIG);
+    assert_eq!(
+        std::fs::read_link(&link).unwrap().to_str(),
+        Some(device.endpoint.as_str())
+    );
+    let cfg = common::sim::config(dir.path(), RTU_CONFIG.0, &[(RTU_CONFIG.1, link_arg)], "");
+    assert!(probe(&cfg, &[]).status.success());
+    let pty = device.endpoint.clone();
+    device.signal(libc::SIGINT);
+    let _ = device.stop();
+    assert!(
+        std::fs::symlink_metadata(&link).is_err(),
+        "the link is left"
+    );
+    // A link to a pseudo-terminal that is gone (left by something else) is named as such.
+    std::os::unix::fs::symlink(&pty, &link).unwrap();
+    let (out, err) = text(&probe(&cfg, &[]));
+    assert!(
+        err.trim_end().ends_with(&format!(
+            "cannot open serial port {link_arg}: it is a link to {pty}, which does not exist \
+             (the device behind it is gone) (check [valve.modbus-rtu] port)"
+        )),
+        "{out}{err}"
+    );
+}

@@ -5,7 +5,10 @@
 //! trailing `# ...` is a comment, and ``# prints `TEXT` `` says what its first line of output
 //! is (`N` stands for a number). Each block runs in order, in a scratch directory laid out like
 //! the checkout (its entries linked), with `valve-bridge` and `sim-device` on PATH as the built
-//! binaries and `cargo run [--release] [-p sim-device] --` meaning them, through `bash -c`:
+//! binaries and `cargo run [--release] [-p sim-device] --` meaning them, through `bash -c`; the
+//! paths README gives under `/tmp/` are taken under the scratch directory's `tmp/` (a test
+//! writes in its own directories only), but for the pseudo-terminal links `/tmp/vb-sim-*` that
+//! the shipped configs name:
 //!
 //! - `valve-bridge`, `sim-device`, `mbpoll`, `curl`, `python3` and `for` loops run to the end
 //!   and must exit 0 (within [`FOREGROUND_LIMIT`]); a `valve-bridge run` with `--duration`
@@ -249,6 +252,7 @@ impl Scratch {
             }
             std::os::unix::fs::symlink(entry.path(), dir.path().join(&name)).unwrap();
         }
+        std::fs::create_dir(dir.path().join("tmp")).unwrap();
         let bin = tempfile::tempdir().unwrap();
         std::os::unix::fs::symlink(BIN, bin.path().join("valve-bridge")).unwrap();
         std::os::unix::fs::symlink(sim_device_bin(), bin.path().join("sim-device")).unwrap();
@@ -264,12 +268,21 @@ impl Scratch {
         }
     }
 
+    /// `text` with README's `/tmp/` paths under the scratch directory (see the module
+    /// documentation).
+    fn local(&self, text: &str) -> String {
+        let tmp = self.dir.path().join("tmp");
+        let tmp = format!("{}/", tmp.display());
+        text.replace("/tmp/", &tmp)
+            .replace(&format!("{tmp}vb-sim-"), "/tmp/vb-sim-")
+    }
+
     /// `bash -c TEXT` in the scratch directory, in a process group of its own.
     fn command(&self, text: &str) -> Command {
         use std::os::unix::process::CommandExt;
         let mut c = Command::new("bash");
         c.arg("-c")
-            .arg(text)
+            .arg(self.local(text))
             .current_dir(self.dir.path())
             .env("PATH", &self.path)
             .env_remove("RUST_LOG")

@@ -315,6 +315,8 @@ async fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let mut servers: tokio::task::JoinSet<anyhow::Result<()>> = tokio::task::JoinSet::new();
+    // Removed when serving ends, however it ends.
+    let mut link: Option<PtyLink> = None;
     let health = Arc::new(Health::default());
     if let Some(addr) = args.tcp {
         let listener = TcpListener::bind(addr)
@@ -347,7 +349,7 @@ async fn run(args: Args) -> anyhow::Result<()> {
                 turnaround: Duration::from_secs_f64(args.turnaround_ms / 1000.0),
             }),
         };
-        spawn_rtu(&mut servers, &args, device)?;
+        link = spawn_rtu(&mut servers, &args, device)?;
     }
     // Serve until a signal, or until the first server ends (a serial port that closed).
     let result = tokio::select! {
@@ -367,6 +369,7 @@ async fn run(args: Args) -> anyhow::Result<()> {
         },
     };
     stepping.abort_all();
+    drop(link);
     result
 }
 
@@ -418,26 +421,50 @@ async fn stop_signal() -> anyhow::Result<&'static str> {
     })
 }
 
+/// The `--pty-link` made for this run's pseudo-terminal: removed on drop, if it still points
+/// there (a later run may have taken the name).
+struct PtyLink {
+    link: PathBuf,
+    target: PathBuf,
+}
+
+impl Drop for PtyLink {
+    fn drop(&mut self) {
+        if std::fs::read_link(&self.link).is_ok_and(|t| t == self.target) {
+            if let Err(e) = std::fs::remove_file(&self.link) {
+                tracing::warn!("cannot remove {}: {e}", self.link.display());
+            }
+        }
+    }
+}
+
 /// Opens the pseudo-terminal (`--pty`) or the serial device (`--serial`), announces it and
-/// serves `device` on it.
+/// serves `device` on it; the `--pty-link` made, if any.
 fn spawn_rtu(
     servers: &mut tokio::task::JoinSet<anyhow::Result<()>>,
     args: &Args,
     device: RtuDevice,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Option<PtyLink>> {
     if args.pty {
         let (server_end, client_end) =
             SerialStream::pair().context("cannot open a pseudo-terminal (--pty)")?;
         let path = client_end
             .name()
             .context("the pseudo-terminal has no path")?;
-        if let Some(link) = &args.pty_link {
-            // Replace a link left by an earlier run; a missing one is fine.
-            let _ = std::fs::remove_file(link);
-            std::os::unix::fs::symlink(&path, link).with_context(|| {
-                format!("cannot create the link {} (--pty-link)", link.display())
-            })?;
-        }
+        let made = match &args.pty_link {
+            Some(link) => {
+                // Replace a link left by an earlier run; a missing one is fine.
+                let _gone = std::fs::remove_file(link);
+                std::os::unix::fs::symlink(&path, link).with_context(|| {
+                    format!("cannot create the link {} (--pty-link)", link.display())
+                })?;
+                Some(PtyLink {
+                    link: link.clone(),
+                    target: PathBuf::from(&path),
+                })
+            }
+            None => None,
+        };
         announce(&format!("pty: {path}"));
         servers.spawn(async move {
             // The client end stays open for the device's life: without it, the server end
@@ -445,6 +472,7 @@ fn spawn_rtu(
             let _client_end = client_end;
             device.serve(server_end).await.context("pseudo-terminal")
         });
+        return Ok(made);
     } else if let Some(path) = &args.serial {
         let name = path.display().to_string();
         let port = serial::open(&line(args, &name))
@@ -452,5 +480,5 @@ fn spawn_rtu(
         announce(&format!("serial: {name}"));
         servers.spawn(async move { device.serve(port).await.with_context(|| name) });
     }
-    Ok(())
+    Ok(None)
 }

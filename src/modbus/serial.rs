@@ -9,8 +9,26 @@ use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
 
 use super::link::{Parity, RtuLink};
 
-/// Opens `link.port` with the link's line settings and empties its buffers.
-pub fn open(link: &RtuLink) -> tokio_serial::Result<SerialStream> {
+/// Opens `link.port` with the link's line settings and empties its buffers. A port that is a
+/// link to a device that is gone (a pseudo-terminal whose server stopped, an unplugged
+/// adapter's by-id name) says so.
+pub fn open(link: &RtuLink) -> std::io::Result<SerialStream> {
+    open_port(link).map_err(|e| {
+        let e = std::io::Error::from(e);
+        match std::fs::read_link(&link.port) {
+            Ok(target) if e.kind() == std::io::ErrorKind::NotFound => std::io::Error::new(
+                e.kind(),
+                format!(
+                    "it is a link to {}, which does not exist (the device behind it is gone)",
+                    target.display()
+                ),
+            ),
+            _ => e,
+        }
+    })
+}
+
+fn open_port(link: &RtuLink) -> tokio_serial::Result<SerialStream> {
     let stream = tokio_serial::new(&link.port, link.baud)
         .parity(match link.parity {
             Parity::None => tokio_serial::Parity::None,

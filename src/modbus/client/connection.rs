@@ -101,7 +101,7 @@ impl Connection {
                     Ok::<_, io::Error>(tcp::attach_slave(wire, Slave(l.unit_id)))
                 }
                 Link::Rtu(l) => {
-                    let port = crate::modbus::serial::open(l).map_err(io::Error::from)?;
+                    let port = crate::modbus::serial::open(l)?;
                     let wire = RtuWire::new(port, Arc::clone(&wire));
                     Ok(rtu::attach_slave(wire, Slave(l.slave_id)))
                 }
