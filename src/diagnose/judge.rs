@@ -386,6 +386,8 @@ mod tests {
             lattice_pct: 0.0,
             noise_pct: 0.1,
             reversals: 0,
+            turns: vec![],
+            dt: 0.01,
             slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
             stop_high_pct: None,
             stop_low_pct: None,

@@ -365,7 +365,7 @@ pub(crate) fn fit(
     let reference = scorer.simulate(current);
     let measured_slips = facts::slips(&reference, scorer.vp, scale);
     let measured = histograms(&measured_slips, threshold, &pieces);
-    let sensor = Sensor::new(scorer.vp.len(), sigma, facts.lattice_pct);
+    let sensor = Sensor::new(scorer.vp, sigma, facts.lattice_pct);
     let run = |spec: &ModelSpec| {
         let y = scorer.simulate(spec);
         let slips = facts::slips(&reference, &sensor.read(&y), scale);
@@ -464,21 +464,28 @@ pub(crate) fn fit(
 }
 
 /// The recording's sensor, for simulations: seeded Gaussian noise of the noise floor, then the
-/// sensor lattice.
+/// sensor lattice, and no reading where the recording has none (so a simulation's slips are
+/// counted on the same rows as the measured ones).
 struct Sensor {
     noise: Vec<f64>,
     lattice: f64,
 }
 
 impl Sensor {
-    fn new(n: usize, sigma: f64, lattice: f64) -> Self {
+    /// The sensor of the measured V_P `vp` (NaN where missing).
+    fn new(vp: &[f64], sigma: f64, lattice: f64) -> Self {
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51_1b5);
-        let noise = (0..n)
-            .map(|_| {
+        let noise = vp
+            .iter()
+            .map(|v| {
                 let e: f64 = StandardNormal.sample(&mut rng);
-                sigma * e
+                if v.is_finite() {
+                    sigma * e
+                } else {
+                    f64::NAN
+                }
             })
             .collect();
         Sensor { noise, lattice }

@@ -7,10 +7,12 @@
 //! so O_P moves gently and reverses often, the way a valve sees normal operation. The
 //! open-loop excitations live in [`excite`]. A physical valve (`model = "physical"`) has its
 //! own sensor with its own noise (`[physical] sensor_noise_pct`, seeded by its `noise_seed`),
-//! so no noise is added to it here. Nothing here reads or writes files.
+//! so no noise is added to it here. [`logged`] turns a recording into what the daemon's log
+//! would hold of it (per mille, lost replies). Nothing here reads or writes files.
 
 pub mod excite;
 pub mod level;
+pub mod logged;
 pub mod physical;
 
 use rand::SeedableRng;
