@@ -273,7 +273,7 @@ fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) 
         "final_heldout_sse": out.final_heldout_sse,
         "gain": out.gain(),
         "seconds": out.seconds,
-        "verdict": report::verdict(&d.outcome),
+        "verdict": report::verdict(d),
         "notes": d.notes,
     })
     .to_string()

@@ -76,7 +76,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!("   {}", metrics::table1_row("FOPDT", &base));
     println!("3. valve-bridge diagnose {}:", args.out.display());
     if d.findings.is_empty() {
-        println!("   found nothing: {}", report::verdict(&d.outcome));
+        println!("   found nothing: {}", report::verdict(&d));
     }
     for f in &d.findings {
         println!(
@@ -91,7 +91,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "4. {} {}",
         if hit { "Right:" } else { "Missed:" },
-        report::verdict(&d.outcome)
+        report::verdict(&d)
     );
     Ok(())
 }
