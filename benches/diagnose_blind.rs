@@ -12,7 +12,8 @@
 //! `VB_BLIND_CASES`; defaults seed 1, 220 cases, plus the broadened healthy class: 33 healthy
 //! valves in closed loop under a noisy controller). `--as-logged` diagnoses each recording as
 //! the daemon logs it (per mille, 0.5 % of the rows without V_P in bursts of 1-3);
-//! `--materiality` and `--heldout-share` set the [`diagnose::Tuning`] thresholds.
+//! `--materiality` and `--heldout-share` set the [`diagnose::Tuning`] thresholds; `--stride K`
+//! runs every K-th valve of the plan (the same valves as the full run's, by index).
 //! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis;
 //! `--case N` runs only the case of that index; `--csv DIR` also writes each case's recording
 //! (`case-N.csv`) and its truth (`case-N.truth.json`, the labels and the physical model file
@@ -45,6 +46,7 @@ struct Options {
     write_only: bool,
     as_logged: bool,
     tuning: diagnose::Tuning,
+    stride: usize,
 }
 
 /// Share of the rows a logged recording lacks V_P in (`--as-logged`).
@@ -71,6 +73,7 @@ fn options() -> Result<Options, String> {
         write_only: false,
         as_logged: false,
         tuning: diagnose::Tuning::default(),
+        stride: 1,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -105,6 +108,12 @@ fn options() -> Result<Options, String> {
             "--csv" => o.csv = Some(PathBuf::from(value("a directory")?)),
             "--write-only" => o.write_only = true,
             "--as-logged" => o.as_logged = true,
+            "--stride" => {
+                o.stride = value("a number")?
+                    .parse::<usize>()
+                    .map_err(|_| "--stride: expected a whole number".to_string())?
+                    .max(1)
+            }
             "--materiality" => {
                 o.tuning.materiality = value("a number")?
                     .parse()
@@ -119,7 +128,7 @@ fn options() -> Result<Options, String> {
             "--bench" => {}
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only, --as-logged, --materiality X, --heldout-share Y"
+                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only, --as-logged, --materiality X, --heldout-share Y, --stride K"
                 ))
             }
         }
@@ -149,6 +158,7 @@ fn run() -> Result<(), String> {
     if let Some(index) = o.case {
         plans.retain(|p| p.index == index);
     }
+    plans.retain(|p| p.index % o.stride == 0);
     if o.write_only && o.csv.is_none() {
         return Err("--write-only needs --csv DIR".into());
     }
