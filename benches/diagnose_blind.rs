@@ -8,7 +8,12 @@
 //! finds; each 10-minute recording at 100 Hz is diagnosed and scored (`benches/blind/score.rs`).
 //!
 //! Run: `cargo bench --bench diagnose_blind -- [--seed N] [--cases N] [--only EFFECT|none]
-//! [--jsonl PATH]` (also `VB_BLIND_SEED`, `VB_BLIND_CASES`; defaults seed 1, 220 cases).
+//! [--jsonl PATH] [--as-logged] [--materiality X] [--heldout-share Y]` (also `VB_BLIND_SEED`,
+//! `VB_BLIND_CASES`; defaults seed 1, 220 cases, plus the broadened healthy class: 33 healthy
+//! valves in closed loop under a noisy controller). `--as-logged` diagnoses each recording as
+//! the daemon logs it (per mille, 0.5 % of the rows without V_P in bursts of 1-3);
+//! `--materiality` and `--heldout-share` set the [`diagnose::Tuning`] thresholds; `--stride K`
+//! runs every K-th valve of the plan (the same valves as the full run's, by index).
 //! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis;
 //! `--case N` runs only the case of that index; `--csv DIR` also writes each case's recording
 //! (`case-N.csv`) and its truth (`case-N.truth.json`, the labels and the physical model file
@@ -39,7 +44,13 @@ struct Options {
     jsonl: Option<PathBuf>,
     csv: Option<PathBuf>,
     write_only: bool,
+    as_logged: bool,
+    tuning: diagnose::Tuning,
+    stride: usize,
 }
+
+/// Share of the rows a logged recording lacks V_P in (`--as-logged`).
+const LOST_SHARE: f64 = 0.005;
 
 fn env_number(name: &str) -> Result<Option<u64>, String> {
     match std::env::var(name) {
@@ -60,6 +71,9 @@ fn options() -> Result<Options, String> {
         jsonl: None,
         csv: None,
         write_only: false,
+        as_logged: false,
+        tuning: diagnose::Tuning::default(),
+        stride: 1,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -93,11 +107,28 @@ fn options() -> Result<Options, String> {
             "--jsonl" => o.jsonl = Some(PathBuf::from(value("a file path")?)),
             "--csv" => o.csv = Some(PathBuf::from(value("a directory")?)),
             "--write-only" => o.write_only = true,
+            "--as-logged" => o.as_logged = true,
+            "--stride" => {
+                o.stride = value("a number")?
+                    .parse::<usize>()
+                    .map_err(|_| "--stride: expected a whole number".to_string())?
+                    .max(1)
+            }
+            "--materiality" => {
+                o.tuning.materiality = value("a number")?
+                    .parse()
+                    .map_err(|_| "--materiality: expected a number".to_string())?
+            }
+            "--heldout-share" => {
+                o.tuning.min_heldout_share = value("a number")?
+                    .parse()
+                    .map_err(|_| "--heldout-share: expected a number".to_string())?
+            }
             // `cargo bench` passes `--bench` to every bench binary.
             "--bench" => {}
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only"
+                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only, --as-logged, --materiality X, --heldout-share Y, --stride K"
                 ))
             }
         }
@@ -127,6 +158,7 @@ fn run() -> Result<(), String> {
     if let Some(index) = o.case {
         plans.retain(|p| p.index == index);
     }
+    plans.retain(|p| p.index % o.stride == 0);
     if o.write_only && o.csv.is_none() {
         return Err("--write-only needs --csv DIR".into());
     }
@@ -142,14 +174,24 @@ fn run() -> Result<(), String> {
         None => None,
     };
     println!(
-        "diagnose_blind: seed {}, {} valves, {DURATION_S} s at 100 Hz each",
+        "diagnose_blind: seed {}, {} valves, {DURATION_S} s at 100 Hz each{}; materiality x{}, held-out share {}",
         o.seed,
-        plans.len()
+        plans.len(),
+        if o.as_logged {
+            ", as the daemon logs them (per mille, 0.5 % of rows without V_P)"
+        } else {
+            ""
+        },
+        o.tuning.materiality,
+        o.tuning.min_heldout_share
     );
     let mut outcomes = Vec::new();
     for (k, plan) in plans.iter().enumerate() {
-        let case =
+        let mut case =
             cases::build(plan, DURATION_S).map_err(|e| format!("case {}: {e}", plan.index))?;
+        if o.as_logged {
+            case.rec = valve_bridge::synth::logged::as_logged(&case.rec, LOST_SHARE, plan.seed);
+        }
         let rec = &case.rec;
         if let Some(dir) = &o.csv {
             write_case(dir, &case)?;
@@ -158,7 +200,7 @@ fn run() -> Result<(), String> {
             }
         }
         let started = Instant::now();
-        let d = diagnose::diagnose(&rec.view(), None, &|_, _| {})
+        let d = diagnose::diagnose_with(&rec.view(), None, &o.tuning, &|_, _| {})
             .map_err(|e| format!("case {}: diagnose: {e}", plan.index))?;
         let seconds = started.elapsed().as_secs_f64();
         let out = score::Outcome {
@@ -169,6 +211,7 @@ fn run() -> Result<(), String> {
             baseline_heldout_sse: d.baseline.heldout_sse,
             final_heldout_sse: d.final_model.heldout_sse,
             seconds,
+            items: items(&d),
         };
         eprintln!(
             "{:>4}/{} case {:>3} {:<13} noise {:.2} lattice {:.3} labels [{}] found [{}] gain {:>5.1} % {:.1} s",
@@ -195,8 +238,29 @@ fn run() -> Result<(), String> {
     score::print_confusion(&outcomes);
     let (precision, recall) = score::print_precision_recall(&outcomes);
     score::print_smallest_found(&outcomes, &cases::EXCITATIONS);
+    let mut excitations = cases::EXCITATIONS.to_vec();
+    excitations.push(cases::NOISY_LOOP);
+    score::print_curve(&outcomes, &excitations, o.tuning.min_heldout_share);
     score::print_overall(&outcomes, precision, recall);
     Ok(())
+}
+
+/// The findings and traces of `d`, weighed (see [`score::Item`]).
+fn items(d: &diagnose::Diagnosis) -> Vec<score::Item> {
+    let findings = d.findings.iter().map(|f| score::Item {
+        effect: f.effect,
+        worth: f.size.worth,
+        heldout_share: match f.measure {
+            diagnose::Measure::HeldoutSse { before, after } => 1.0 - after / before.max(1e-12),
+            diagnose::Measure::SlipDistance { .. } => 1.0,
+        },
+    });
+    let traces = d.traces.iter().map(|t| score::Item {
+        effect: t.effect,
+        worth: t.size.worth,
+        heldout_share: t.heldout_share,
+    });
+    findings.chain(traces).collect()
 }
 
 /// The case's recording, model file and truth, for the command line.
@@ -247,6 +311,8 @@ fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) 
                 "heldout_sse_after": f.heldout_sse_after,
                 "support": f.support,
                 "alternatives": f.alternatives,
+                "size": f.size,
+                "measure": f.measure,
             })
         })
         .collect();
@@ -273,7 +339,8 @@ fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) 
         "final_heldout_sse": out.final_heldout_sse,
         "gain": out.gain(),
         "seconds": out.seconds,
-        "verdict": report::verdict(&d.outcome),
+        "verdict": report::verdict(d),
+        "traces": d.traces,
         "notes": d.notes,
     })
     .to_string()

@@ -6,7 +6,7 @@
 #[path = "../benches/blind/cases.rs"]
 mod cases;
 
-use cases::{build, outside_healthy, plans, Plan, EXCITATIONS};
+use cases::{build, outside_healthy, plans, Plan, EXCITATIONS, NOISY_LOOP};
 use valve_bridge::diagnose::Effect;
 
 const SHORT_S: f64 = 600.0;
@@ -50,10 +50,31 @@ fn generation_is_deterministic() {
 }
 
 #[test]
+fn a_healthy_valve_of_the_broadened_class_has_no_label() {
+    // A noisy controller and slow reversals, a friction band up to 0.2 %, a positioner gain
+    // down to 2 /s and sensor noise up to 0.4 %: none of it is an effect.
+    for i in 0..4 {
+        let p = Plan {
+            excitation: NOISY_LOOP,
+            ..plan(i, Vec::new())
+        };
+        let case = build(&p, SHORT_S).unwrap();
+        assert!(case.labels.is_empty(), "{:?}", case.labels);
+        let ph = case.spec.physical.unwrap();
+        assert!(ph.coulomb_band_pct <= 0.2 && ph.positioner_gain_per_s >= 2.0);
+    }
+}
+
+#[test]
 fn the_full_plan_covers_every_effect_and_excitation() {
     let all = plans(1, 200);
-    assert_eq!(all.len(), 200);
-    let healthy = all.iter().filter(|p| p.effects.is_empty()).count();
+    assert_eq!(all.len(), 230);
+    let broad = all.iter().filter(|p| p.excitation == NOISY_LOOP).count();
+    assert_eq!(broad, 30);
+    assert!(all[200..]
+        .iter()
+        .all(|p| p.effects.is_empty() && p.excitation == NOISY_LOOP));
+    let healthy = all.iter().filter(|p| p.effects.is_empty()).count() - broad;
     let doubles = all.iter().filter(|p| p.effects.len() == 2).count();
     assert!(healthy >= 40, "{healthy}");
     assert!((25..=35).contains(&doubles), "{doubles}");

@@ -2,17 +2,30 @@
 //! with a truth file each): the effects named must be the truth's, nothing on the clean case,
 //! and the held-out error must drop whenever something is added, except for stick-slip judged
 //! by the slips of V_P (a limit cycle's phase is beyond the free-run error), which must say so.
+//! Every case also as the daemon would log it (per mille, 0.5 % of the rows without V_P in
+//! bursts of 1-3): the same effects must be named.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::Value;
+use valve_bridge::recording::{self, ReadOptions};
+use valve_bridge::synth::logged;
+
+/// Share of the rows of a logged case without V_P.
+const LOST_SHARE: f64 = 0.005;
 
 fn diagnose(case: &str) -> (Value, Vec<String>) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cases");
+    diagnose_file(&dir.join(format!("{case}.csv")), case)
+}
+
+/// Diagnoses the recording at `path` against the truth of `case`.
+fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cases");
     let out = Command::new(env!("CARGO_BIN_EXE_valve-bridge"))
         .arg("diagnose")
-        .arg(dir.join(format!("{case}.csv")))
+        .arg(path)
         .arg("--json")
         .output()
         .unwrap();
@@ -39,6 +52,29 @@ fn diagnose(case: &str) -> (Value, Vec<String>) {
 /// Diagnoses `case`, checks the shape of the JSON and that the effects named are the truth's.
 fn named(case: &str) -> (Value, Vec<String>) {
     let (d, want) = diagnose(case);
+    check_named(case, d, want)
+}
+
+/// `case` as the daemon would log it ([`logged::as_logged`]), written to a file in `dir`.
+fn logged_file(case: &str, dir: &Path) -> PathBuf {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/data/cases/{case}.csv"));
+    let rec = recording::read(&src, &ReadOptions::default()).unwrap();
+    let log = logged::as_logged(&rec, LOST_SHARE, 29);
+    let path = dir.join(format!("{case}-logged.csv"));
+    recording::write(&path, &log).unwrap();
+    path
+}
+
+/// `case` as the daemon would log it names the same effects, and says nothing of NaN.
+fn logged_named(case: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let (d, want) = diagnose_file(&logged_file(case, dir.path()), case);
+    assert!(!d.to_string().contains("NaN"), "{case}: {d}");
+    check_named(&format!("{case} as logged"), d, want);
+}
+
+/// Checks the shape of the JSON `d` of `case` and that the effects named are `want`.
+fn check_named(case: &str, d: Value, want: Vec<String>) -> (Value, Vec<String>) {
     for key in [
         "baseline",
         "noise_floor_pct",
@@ -151,4 +187,49 @@ fn hunting_valve_in_closed_loop_is_stiction_judged_by_its_slips() {
     assert_eq!(f["heldout_sse_before"], d["baseline"]["heldout_sse"]);
     assert_eq!(f["heldout_sse_after"], d["final"]["heldout_sse"]);
     assert!(f["params"]["breakaway_pct"].as_f64().unwrap() > 0.1);
+}
+
+#[test]
+fn clean_valve_as_logged() {
+    logged_named("pub_clean_rs");
+}
+
+#[test]
+fn backlash_as_logged() {
+    logged_named("pub_backlash_rs");
+}
+
+#[test]
+fn backlash_in_closed_loop_as_logged() {
+    logged_named("pub_backlash_normal_op");
+}
+
+#[test]
+fn asymmetry_as_logged() {
+    logged_named("pub_asym_rs");
+}
+
+#[test]
+fn slew_rate_as_logged() {
+    logged_named("pub_slew_mixed");
+}
+
+#[test]
+fn dead_time_as_logged() {
+    logged_named("pub_deadtime_mixed");
+}
+
+#[test]
+fn state_dependent_delay_as_logged() {
+    logged_named("pub_sdd_rs");
+}
+
+#[test]
+fn paper_like_slow_valve_as_logged() {
+    logged_named("pub_sdd_paper_rs");
+}
+
+#[test]
+fn stiction_as_logged() {
+    logged_named("pub_stiction_normal_op");
 }

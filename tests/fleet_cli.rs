@@ -150,3 +150,58 @@ fn a_wide_export_is_split_by_the_mapping_file() {
         (Some(2), Some(1))
     );
 }
+
+#[test]
+fn one_valve_shows_the_same_figures_in_every_output() {
+    // A worn valve: its friction band, dead time and stroke speeds are one number each in the
+    // fleet row, `diagnose --json` (what the Python package returns) and the valve's report.
+    let dir = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        case("pub_backlash_rs.csv"),
+        dir.path().join("pub_backlash_rs.csv"),
+    )
+    .unwrap();
+    run(&[
+        "fleet",
+        dir.path().to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    let row = &json(&out.path().join("summary.json"))["valves"][0];
+    let alone = run(&[
+        "diagnose",
+        dir.path().join("pub_backlash_rs.csv").to_str().unwrap(),
+        "--json",
+    ]);
+    let d: Value = serde_json::from_slice(&alone.stdout).unwrap();
+    let figures = &d["figures"];
+    for (in_row, in_json) in [
+        ("friction_band_pct", "friction_band_pct"),
+        ("dead_time_s", "dead_time_s"),
+        ("stroke_speed_open_pct_per_s", "opening_speed_pct_per_s"),
+        ("stroke_speed_close_pct_per_s", "closing_speed_pct_per_s"),
+    ] {
+        assert_eq!(row[in_row], figures[in_json], "{in_row}: {row} {figures}");
+    }
+    // The finding's size is the figure, with its interval, in the row and the report alike.
+    let band = figures["friction_band_pct"].as_f64().unwrap();
+    let size = &d["findings"][0]["size"];
+    assert_eq!(size["name"], "friction_band_pct");
+    assert_eq!(size["value"].as_f64(), Some(band));
+    assert!(size["low"].as_f64().unwrap() <= band && band <= size["high"].as_f64().unwrap());
+    assert!((4.5..7.0).contains(&band), "{band}");
+    let text = row["sizes"][0].as_str().unwrap();
+    assert!(
+        text.starts_with(&format!("friction band {band:.2} % (")),
+        "{text}"
+    );
+    let page =
+        std::fs::read_to_string(out.path().join("valves/pub_backlash_rs/report.html")).unwrap();
+    assert!(page.contains(text), "{text}");
+    assert!(
+        page.contains(&format!("friction band {band:.2} %,")),
+        "the figures line"
+    );
+    assert!(d["verdict"].as_str().unwrap().contains(text));
+}

@@ -91,6 +91,21 @@ pub const HEALTHY_LATTICE_PCT: (f64, f64) = (0.005, 0.05);
 /// Sensor noise levels, %.
 pub const NOISE_LEVELS_PCT: [f64; 3] = [0.02, 0.1, 0.25];
 
+// The broadened healthy class: valves in good order as they look in closed loop under a noisy
+// controller with slow reversals (the level loop's inflow turns over minutes), wider than the
+// ranges above where a healthy valve in service can be.
+/// The excitation of the broadened healthy class.
+pub const NOISY_LOOP: &str = "noisy_loop";
+/// Coulomb band, %.
+pub const BROAD_COULOMB_PCT: (f64, f64) = (0.0, 0.2);
+/// Positioner gain, 1/s (the other healthy valves: 3-10).
+pub const BROAD_GAIN_PER_S: (f64, f64) = (2.0, 10.0);
+/// Sensor noise levels, %.
+pub const BROAD_NOISE_LEVELS_PCT: [f64; 4] = [0.02, 0.1, 0.25, 0.4];
+/// Noise of the loop's level sensor, %: the controller's output moves three times as much
+/// (the default loop's is 0.15 %).
+pub const BROAD_LEVEL_NOISE_PCT: (f64, f64) = (0.1, 0.5);
+
 /// The excitations cycled over the cases.
 pub const EXCITATIONS: [&str; 5] = [
     "random_steps",
@@ -154,8 +169,24 @@ pub struct Case {
 }
 
 /// `n` plans from `seed`: a fifth healthy (at least 40 when `n` >= 200), 15 % with two
-/// effects, the rest with one, every effect equally often, shuffled.
+/// effects, the rest with one, every effect equally often, shuffled; then `n` * 3 / 20 more
+/// healthy valves of the broadened class ([`NOISY_LOOP`]).
 pub fn plans(seed: u64, n: usize) -> Vec<Plan> {
+    let mut out = plans_of_effects(seed, n);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xb20ad);
+    for _ in 0..n * 3 / 20 {
+        out.push(Plan {
+            index: out.len(),
+            seed: rng.gen(),
+            effects: Vec::new(),
+            excitation: NOISY_LOOP,
+        });
+    }
+    out
+}
+
+/// The `n` plans of [`plans`] before the broadened healthy class.
+fn plans_of_effects(seed: u64, n: usize) -> Vec<Plan> {
     let healthy = if n >= 200 {
         40.max(n / 5)
     } else {
@@ -238,13 +269,21 @@ fn draw_case(
     rng: &mut ChaCha8Rng,
     draws: usize,
 ) -> Result<Case, SynthError> {
-    let noise = NOISE_LEVELS_PCT[rng.gen_range(0..NOISE_LEVELS_PCT.len())];
+    let broad = plan.excitation == NOISY_LOOP;
+    let noise = if broad {
+        BROAD_NOISE_LEVELS_PCT[rng.gen_range(0..BROAD_NOISE_LEVELS_PCT.len())]
+    } else {
+        NOISE_LEVELS_PCT[rng.gen_range(0..NOISE_LEVELS_PCT.len())]
+    };
     let lattice = if rng.gen_bool(0.5) {
         rng.gen_range(HEALTHY_LATTICE_PCT.0..=HEALTHY_LATTICE_PCT.1)
     } else {
         0.0
     };
-    let healthy = healthy_spec(rng, noise, lattice, plan.seed);
+    let mut healthy = healthy_spec(rng, noise, lattice, plan.seed);
+    if broad {
+        broaden(&mut healthy, rng);
+    }
     let excitation = excitation(plan.excitation, rng);
     // Each draw its own O_P sequence, so a redraw is not stuck with one that never exercises
     // the planned effect.
@@ -313,8 +352,23 @@ fn healthy_spec(rng: &mut ChaCha8Rng, noise: f64, lattice: f64, seed: u64) -> Mo
     spec
 }
 
+/// A healthy valve of the broadened class: its friction band and positioner gain drawn from
+/// the wider ranges.
+fn broaden(spec: &mut ModelSpec, rng: &mut ChaCha8Rng) {
+    if let Some(p) = spec.physical.as_mut() {
+        let excess = p.static_band_pct - p.coulomb_band_pct;
+        p.coulomb_band_pct = rng.gen_range(BROAD_COULOMB_PCT.0..=BROAD_COULOMB_PCT.1);
+        p.static_band_pct = p.coulomb_band_pct + excess;
+        p.positioner_gain_per_s = rng.gen_range(BROAD_GAIN_PER_S.0..=BROAD_GAIN_PER_S.1);
+    }
+}
+
 fn excitation(name: &str, rng: &mut ChaCha8Rng) -> Excitation {
     match name {
+        NOISY_LOOP => Excitation::NoisyLoop {
+            level_pct: rng.gen_range(30.0..=70.0),
+            level_noise_pct: rng.gen_range(BROAD_LEVEL_NOISE_PCT.0..=BROAD_LEVEL_NOISE_PCT.1),
+        },
         "closed_loop" => Excitation::ClosedLoop {
             level_pct: rng.gen_range(30.0..=70.0),
         },

@@ -54,3 +54,17 @@ def test_fleet_run_and_listing_errors(tmp_path):
         assert "no *.csv recordings" in str(e)
     else:
         raise AssertionError("an empty directory is refused")
+
+
+def test_a_valve_row_quotes_the_figures_of_its_diagnosis(tmp_path):
+    # One figure per quantity: the row diagnose_valve returns and vb.diagnose's document give
+    # the same friction band, dead time and stroke speeds, and the row the findings' sizes.
+    d = _fleet_dir(tmp_path)
+    job = next(j for j in vb.fleet_jobs(str(d)) if j["valve"] == "pub_asym_rs")
+    row = vb.diagnose_valve(job)
+    f = vb.diagnose(vb.read(str(d / "pub_asym_rs.csv")))["figures"]
+    assert row["friction_band_pct"] == f["friction_band_pct"]
+    assert row["dead_time_s"] == f["dead_time_s"]
+    assert row["stroke_speed_open_pct_per_s"] == f["opening_speed_pct_per_s"]
+    assert row["stroke_speed_close_pct_per_s"] == f["closing_speed_pct_per_s"]
+    assert len(row["sizes"]) == len(row["findings"]) == 1

@@ -76,7 +76,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     outln!("   {}", metrics::table1_row("FOPDT", &base))?;
     outln!("3. valve-bridge diagnose {}:", args.out.display())?;
     if d.findings.is_empty() {
-        outln!("   found nothing: {}", report::verdict(&d.outcome))?;
+        outln!("   found nothing: {}", report::verdict(&d))?;
     }
     for f in &d.findings {
         outln!(
@@ -91,7 +91,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     outln!(
         "4. {} {}",
         if hit { "Right:" } else { "Missed:" },
-        report::verdict(&d.outcome)
+        report::verdict(&d)
     )?;
     Ok(())
 }

@@ -224,6 +224,19 @@ impl Evidence {
         }
     }
 
+    /// The same evidence with the fit's numbers read from `spec` (the final model, after the
+    /// joint refit), so a finding quotes the values the final model has; the dead time it was
+    /// before stays.
+    pub(crate) fn in_final(&mut self, effect: Effect, spec: &ModelSpec, facts: &Facts, sigma: f64) {
+        let mut detail = detail(effect, spec, spec, facts, sigma);
+        if let (Detail::DeadTime { was_s, .. }, Detail::DeadTime { was_s: before, .. }) =
+            (&mut detail, &self.detail)
+        {
+            *was_s = *before;
+        }
+        self.detail = detail;
+    }
+
     /// The evidence for stick-slip judged by its slips.
     pub(crate) fn of_slips(
         c: &stickslip::Candidate,

@@ -6,7 +6,7 @@
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
 use crate::fit::steps::{self, StepOptions};
-use crate::metrics::stats::{median, quantile};
+use crate::metrics::stats::{self, median, quantile, Differences};
 use crate::recording::RecordingView;
 
 /// One step of O_P and how V_P answered it.
@@ -53,6 +53,10 @@ pub struct Facts {
     pub noise_pct: f64,
     /// Number of direction reversals of O_P.
     pub reversals: usize,
+    /// Where O_P turned back, through a hysteresis above its own noise (see [`turns`]).
+    pub turns: Vec<usize>,
+    /// Sample period, s.
+    pub dt: f64,
     /// What counts as a slip in this recording.
     pub slip_scale: SlipScale,
     /// Levels V_P stops at while O_P asks to go beyond (travel stops short of 100 or 0 %).
@@ -80,6 +84,8 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let vp_span_pct = span(vp);
     Facts {
         reversals: count_reversals(op),
+        turns: turns(op),
+        dt,
         steps: step_responses(rec),
         holds: holds(op, vp, dt),
         open_speed,
@@ -122,7 +128,7 @@ fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
     let h = ((0.05 / dt).round() as usize).max(1);
     let settle = ((0.5 / dt).round() as usize).max(1);
     let min_hold = ((2.0 / dt).round() as usize).max(2 * h + settle + 1);
-    let s = running_sums(vp);
+    let s = Sums::new(vp);
     let mut out = Vec::new();
     let mut a = 0;
     for b in 1..=op.len() {
@@ -130,17 +136,17 @@ fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
             continue;
         }
         let (settled, step) = if a > 0 && b - a >= min_hold {
-            let settled = (s[b] - s[b - settle]) / settle as f64;
-            (settled, settled - (s[a + h] - s[a]) / h as f64)
+            let settled = s.mean(b - settle, b);
+            (settled, settled - s.mean(a, a + h))
         } else {
             (0.0, 0.0)
         };
         if step.abs() >= 1.0 {
             for k in a + h..b - settle - h {
-                let here = (s[k + h / 2 + 1] - s[k - h / 2]) / (2 * (h / 2) + 1) as f64;
+                let here = s.mean(k - h / 2, k + h / 2 + 1);
                 let left = (settled - here) * step.signum();
-                let speed = step_at(&s, k, h) / (h as f64 * dt) * step.signum();
-                if left > 0.0 && left < 0.8 * step.abs() {
+                let speed = slope_at(&s, k, h) / dt * step.signum();
+                if left > 0.0 && left < 0.8 * step.abs() && speed.is_finite() {
                     out.push((left, speed));
                 }
             }
@@ -162,7 +168,7 @@ const STOP_ASKED_S: f64 = 5.0;
 /// total, and the level is short of the end of travel (99.5 %, or 0.5 % for the lower stop).
 /// A slow valve still on its way to where O_P asks is not held by a stop.
 fn stop(op: &[f64], vp: &[f64], dt: f64, sensor: (f64, f64), high: bool) -> Option<f64> {
-    let mut sorted = vp.to_vec();
+    let mut sorted: Vec<f64> = vp.iter().copied().filter(|v| v.is_finite()).collect();
     let level = quantile(&mut sorted, if high { 0.999 } else { 0.001 });
     if (high && level >= 99.5) || (!high && level <= 0.5) {
         return None;
@@ -170,10 +176,10 @@ fn stop(op: &[f64], vp: &[f64], dt: f64, sensor: (f64, f64), high: bool) -> Opti
     let (sigma, lattice) = sensor;
     let held = 6.0 * sigma + lattice + 0.05;
     let h = ((0.25 / dt).round() as usize).max(1);
-    let s = running_sums(op);
+    let s = Sums::new(op);
     let beyond = (h..op.len().saturating_sub(h))
         .filter(|&k| {
-            let mean = (s[k + h] - s[k - h]) / (2 * h) as f64;
+            let mean = s.mean(k - h, k + h);
             if high {
                 mean >= level + STOP_MARGIN_PCT && vp[k] >= level - held
             } else {
@@ -182,6 +188,28 @@ fn stop(op: &[f64], vp: &[f64], dt: f64, sensor: (f64, f64), high: bool) -> Opti
         })
         .count();
     (beyond as f64 * dt >= STOP_ASKED_S).then_some(level)
+}
+
+/// Where O_P turned back: the extremes of a travel accumulator with a hysteresis of 0.1 % or
+/// three times the noise of O_P (a controller's noisy output turns back all the time; the
+/// valve sees its trend), each turn at the sample where the extreme was reached.
+fn turns(op: &[f64]) -> Vec<usize> {
+    let band = (3.0 * stats::noise_sd(op, Differences::Second)).max(0.1);
+    let mut out = Vec::new();
+    let (mut dir, mut extreme) = (0.0, 0);
+    for k in 1..op.len() {
+        let d = op[k] - op[extreme];
+        if dir * d > 0.0 {
+            extreme = k;
+        } else if d.abs() > band {
+            if dir != 0.0 {
+                out.push(extreme);
+            }
+            dir = d.signum();
+            extreme = k;
+        }
+    }
+    out
 }
 
 fn count_reversals(op: &[f64]) -> usize {
@@ -223,7 +251,8 @@ fn step_responses(rec: &RecordingView) -> Vec<StepResponse> {
         .collect()
 }
 
-/// Stretches of constant O_P of at least 3 s, with the settled V_P of their last second.
+/// Stretches of constant O_P of at least 3 s, with the settled V_P of their last second (the
+/// rows of it with a measured V_P; a hold without any is left out).
 fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
     let n = op.len();
     let min_hold = (3.0 / dt) as usize;
@@ -234,12 +263,16 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
         if b < n && (op[b] - op[b - 1]).abs() <= 1e-9 {
             continue;
         }
-        if b - a >= min_hold && a > 0 {
-            let tail = &vp[b - settle..b];
-            let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+        let mean = if b - a >= min_hold && a > 0 {
+            finite_mean(&vp[b - settle..b])
+        } else {
+            f64::NAN
+        };
+        if mean.is_finite() {
             let max_jump = vp[a + settle..b]
                 .windows(2)
                 .map(|w| (w[1] - w[0]).abs())
+                .filter(|d| d.is_finite())
                 .fold(0.0, f64::max);
             holds.push(Hold {
                 op_pct: op[a],
@@ -254,7 +287,8 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
 }
 
 /// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
-/// taken out: over each window, the 99.9th percentile of the speeds in each direction less what
+/// taken out (windows with an end not measured left out): over each window, the 99.9th
+/// percentile of the speeds in each direction less what
 /// noise alone reaches there (2.8 sigmas of the difference of two readings, over the window);
 /// the largest over the windows. Short windows see fast strokes, long ones the slow moves that
 /// noise hides in short ones.
@@ -270,7 +304,7 @@ fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
             let s = (vp[k] - vp[k - h]) / w;
             if s > 0.0 {
                 up.push(s);
-            } else {
+            } else if s <= 0.0 {
                 down.push(-s);
             }
         }
@@ -327,8 +361,8 @@ pub fn speed_ratio(op: &[f64], vp: &[f64], dt: f64, sigma: f64, span: (f64, f64)
 /// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
 ///
 /// The smallest nonzero change of V_P that occurs at least three times is the candidate
-/// spacing; V_P is on a lattice when at least 95 % of its values sit within 2 % of a spacing of a
-/// multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
+/// spacing; V_P is on a lattice when at least 95 % of its measured values sit within 2 % of a
+/// spacing of a multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
 pub fn lattice(vp: &[f64]) -> f64 {
     let mut diffs: Vec<f64> = vp
         .windows(2)
@@ -353,7 +387,8 @@ pub fn lattice(vp: &[f64]) -> f64 {
             f.abs() < 0.02
         })
         .count();
-    if near as f64 >= 0.95 * vp.len() as f64 {
+    let measured = vp.iter().filter(|v| v.is_finite()).count();
+    if near as f64 >= 0.95 * measured as f64 {
         q
     } else {
         0.0
@@ -404,22 +439,71 @@ impl SlipScale {
     }
 }
 
-/// Running sums of `x` with a leading 0: the sum of `x[a..b]` is `s[b] - s[a]`.
-fn running_sums(x: &[f64]) -> Vec<f64> {
-    let mut s = Vec::with_capacity(x.len() + 1);
-    let mut acc = 0.0;
-    s.push(acc);
-    for &v in x {
-        acc += v;
-        s.push(acc);
-    }
-    s
+/// Running sums of the measured (finite) values of a signal and of their number, each with a
+/// leading 0, so the mean of the measured values of any stretch costs two subtractions: rows
+/// without V_P (a lost reply) leave a mean over the rest, never a NaN that spreads.
+struct Sums {
+    sum: Vec<f64>,
+    count: Vec<u32>,
+    /// Running sums of the indices of the measured values (where a stretch's mean sits).
+    at: Vec<f64>,
 }
 
-/// Mean of `x[k..k + h]` minus mean of `x[k - h..k]`, from the running sums `s` of `x`
-/// (needs h <= k <= len - h).
-fn step_at(s: &[f64], k: usize, h: usize) -> f64 {
-    ((s[k + h] - s[k]) - (s[k] - s[k - h])) / h as f64
+impl Sums {
+    fn new(x: &[f64]) -> Self {
+        let mut sum = Vec::with_capacity(x.len() + 1);
+        let mut count = Vec::with_capacity(x.len() + 1);
+        let mut at = Vec::with_capacity(x.len() + 1);
+        let (mut acc, mut n, mut k_acc) = (0.0, 0u32, 0.0);
+        sum.push(acc);
+        count.push(n);
+        at.push(k_acc);
+        for (k, &v) in x.iter().enumerate() {
+            if v.is_finite() {
+                acc += v;
+                n += 1;
+                k_acc += k as f64;
+            }
+            sum.push(acc);
+            count.push(n);
+            at.push(k_acc);
+        }
+        Sums { sum, count, at }
+    }
+
+    /// Mean index of the measured values of `x[a..b]`; NaN when none was measured.
+    fn centre(&self, a: usize, b: usize) -> f64 {
+        match self.count[b] - self.count[a] {
+            0 => f64::NAN,
+            n => (self.at[b] - self.at[a]) / n as f64,
+        }
+    }
+
+    /// Mean of the measured values of `x[a..b]`; NaN when none was measured.
+    fn mean(&self, a: usize, b: usize) -> f64 {
+        match self.count[b] - self.count[a] {
+            0 => f64::NAN,
+            n => (self.sum[b] - self.sum[a]) / n as f64,
+        }
+    }
+}
+
+/// Mean of the measured values of `x` (NaN when none was).
+fn finite_mean(x: &[f64]) -> f64 {
+    let s = Sums::new(x);
+    s.mean(0, x.len())
+}
+
+/// Mean of `x[k..k + h]` minus mean of `x[k - h..k]` (measured values), from the sums `s` of
+/// `x` (needs h <= k <= len - h); NaN when either side has no measured value.
+fn step_at(s: &Sums, k: usize, h: usize) -> f64 {
+    s.mean(k, k + h) - s.mean(k - h, k)
+}
+
+/// The speed of `x` at sample `k` over `h` samples either side, per sample: [`step_at`] over
+/// how far apart the two means sit (h when every value was measured).
+fn slope_at(s: &Sums, k: usize, h: usize) -> f64 {
+    step_at(s, k, h) / (s.centre(k, k + h) - s.centre(k - h, k))
 }
 
 /// The slips of `y` (a measured or simulated V_P) that `reference` does not explain.
@@ -444,14 +528,17 @@ pub fn slips(reference: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
     if n < 4 * h + 1 {
         return out;
     }
-    let (sy, so) = (running_sums(&y[..n]), running_sums(&reference[..n]));
+    let (sy, so) = (Sums::new(&y[..n]), Sums::new(&reference[..n]));
     let d = |k: usize| step_at(&sy, k, h);
+    // Written so that a stretch without any measured V_P (NaN) is never at rest.
+    let at_rest = |j: usize, a: f64| d(j).abs() * 2.0 <= a;
     let mut k = 2 * h;
     while k + 2 * h <= n {
         let a = d(k).abs();
-        if a < scale.threshold_pct
-            || d(k - h).abs() * 2.0 > a
-            || d(k + h).abs() * 2.0 > a
+        if a.is_nan()
+            || a < scale.threshold_pct
+            || !at_rest(k - h, a)
+            || !at_rest(k + h, a)
             || (k - h + 1..k + h).any(|j| d(j).abs() > a)
             || (k.saturating_sub(scale.lookback).max(h)..=k)
                 .any(|j| step_at(&so, j, h).abs() * 2.0 >= a)
@@ -469,6 +556,14 @@ pub fn slips(reference: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
 mod tests {
     use super::*;
     use crate::metrics::stats::tests::noise;
+
+    /// `x` without a reading in every 25th row and in three rows in a row every 300.
+    fn with_holes(x: &[f64]) -> Vec<f64> {
+        let lost = |k: usize| k % 25 == 7 || (150..153).contains(&(k % 300));
+        (x.iter().enumerate())
+            .map(|(k, &v)| if lost(k) { f64::NAN } else { v })
+            .collect()
+    }
 
     #[test]
     fn lattice_is_found_only_on_a_lattice() {
@@ -517,6 +612,15 @@ mod tests {
         // The same moves are no slips when O_P stepped 0.1 s before them.
         let stepping: Vec<f64> = (0..n).map(|k| level(k + 10)).collect();
         assert!(slips(&stepping, &vp, &scale).is_empty());
+        // Rows without V_P (a lost reply in every 25, a burst of three in every 300) leave the
+        // same slips.
+        let holed = with_holes(&vp);
+        let again: Vec<usize> = slips(&op, &holed, &scale).iter().map(|s| s.k).collect();
+        assert_eq!(again.len(), ks.len());
+        assert!(
+            again.iter().zip(&ks).all(|(a, b)| a.abs_diff(*b) <= 3),
+            "{again:?}"
+        );
     }
 
     #[test]
@@ -634,9 +738,9 @@ mod tests {
             .collect();
         let e = noise(n, 0.05);
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-        let tails = |floor: f64| {
+        let tails = |floor: f64, holes: bool| {
             let mut x = op[0];
-            let vp: Vec<f64> = (0..n)
+            let mut vp: Vec<f64> = (0..n)
                 .map(|k| {
                     let err = op[k] - x;
                     let v = (5.0 * err.abs()).max(floor).min(err.abs() / dt);
@@ -644,6 +748,9 @@ mod tests {
                     x + e[k]
                 })
                 .collect();
+            if holes {
+                vp = with_holes(&vp);
+            }
             let rec = RecordingView {
                 restarts: &[],
                 t: &t,
@@ -654,10 +761,20 @@ mod tests {
             measure(&rec, 0.05, 0.0)
         };
         // 0.25-0.5 % from rest: 1.25-2.5 %/s proportionally, 4 %/s with the floor.
-        let slowing = tails(0.0).approach_speed(0.25, 0.5).unwrap();
+        let slowing = tails(0.0, false).approach_speed(0.25, 0.5).unwrap();
         assert!((1.4..2.4).contains(&slowing), "{slowing}");
-        let floor = tails(4.0).approach_speed(0.25, 0.5).unwrap();
+        let floor = tails(4.0, false).approach_speed(0.25, 0.5).unwrap();
         assert!((3.6..4.4).contains(&floor), "{floor}");
-        assert!(tails(0.0).approach_speed(6.0, 7.0).is_none());
+        assert!(tails(0.0, false).approach_speed(6.0, 7.0).is_none());
+        // Rows without V_P change none of what is measured.
+        let (a, b) = (tails(4.0, false), tails(4.0, true));
+        let holed = b.approach_speed(0.25, 0.5).unwrap();
+        assert!((holed - floor).abs() < 0.1, "{holed} {floor}");
+        assert_eq!(
+            (a.holds.len(), a.steps.len()),
+            (b.holds.len(), b.steps.len())
+        );
+        assert!((a.open_speed - b.open_speed).abs() < 0.05 * a.open_speed);
+        assert!((a.holds[3].vp_pct - b.holds[3].vp_pct).abs() < 0.01);
     }
 }

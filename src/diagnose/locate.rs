@@ -47,7 +47,7 @@ pub fn noise_floor(vp: &[f64]) -> f64 {
 }
 
 /// Finds the mismatch windows of `residual` (measured - simulated) in `rec` given the noise
-/// `sigma`.
+/// `sigma`. Rows without a measured V_P (NaN) are left out of the means.
 pub fn windows(rec: &RecordingView, residual: &[f64], sigma: f64) -> Vec<Window> {
     let dt = rec.dt;
     let n = residual.len();
@@ -56,12 +56,23 @@ pub fn windows(rec: &RecordingView, residual: &[f64], sigma: f64) -> Vec<Window>
     // Floor the threshold at 0.05 %² so noiseless recordings do not flag rounding noise.
     let threshold = (4.0 * var).max(2.5e-3);
     let mut out = Vec::new();
-    let mut acc: f64 = residual[..w.min(n)].iter().map(|r| r * r).sum();
+    // Squared residual and whether it was measured.
+    let sq = |k: usize| {
+        let r = residual[k];
+        if r.is_finite() {
+            (r * r, 1.0)
+        } else {
+            (0.0, 0.0)
+        }
+    };
+    let (mut acc, mut count) = (0..w.min(n))
+        .map(sq)
+        .fold((0.0, 0.0), |(a, c), (x, m)| (a + x, c + m));
     let mut start: Option<usize> = None;
     let mut last_hot = 0;
     let gap = w / 2;
     for i in 0..n.saturating_sub(w) {
-        let hot = acc / w as f64 > threshold;
+        let hot = count > 0.0 && acc / count > threshold;
         if hot {
             if start.is_none() {
                 start = Some(i);
@@ -73,7 +84,9 @@ pub fn windows(rec: &RecordingView, residual: &[f64], sigma: f64) -> Vec<Window>
                 start = None;
             }
         }
-        acc += residual[i + w] * residual[i + w] - residual[i] * residual[i];
+        let ((add, m_add), (drop, m_drop)) = (sq(i + w), sq(i));
+        acc += add - drop;
+        count += m_add - m_drop;
     }
     if let Some(s) = start {
         out.push(make(rec, residual, var, s..last_hot.min(n)));
@@ -88,13 +101,21 @@ fn make(rec: &RecordingView, r: &[f64], var: f64, range: std::ops::Range<usize>)
     let hot = |k: &usize| r[*k] * r[*k] > 4.0 * var;
     let a = (a..b).find(hot).unwrap_or(a);
     let b = (a..b).rev().find(hot).map_or(b, |k| k + 1);
-    let excess_sse = r[a..b].iter().map(|x| x * x - var).sum::<f64>().max(0.0);
+    let excess_sse = (r[a..b].iter())
+        .filter(|x| x.is_finite())
+        .map(|x| x * x - var)
+        .sum::<f64>()
+        .max(0.0);
+    let measured: Vec<f64> = (rec.vp[a..b].iter())
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
     Window {
         start_s: rec.t[a],
         end_s: rec.t[b.saturating_sub(1)],
         excess_sse,
         kind: classify(rec.op, rec.vp, a, b, rec.dt),
-        opening_pct: rec.vp[a..b].iter().sum::<f64>() / (b - a).max(1) as f64,
+        opening_pct: measured.iter().sum::<f64>() / measured.len().max(1) as f64,
     }
 }
 
@@ -102,7 +123,8 @@ fn make(rec: &RecordingView, r: &[f64], var: f64, range: std::ops::Range<usize>)
 pub fn classify(op: &[f64], vp: &[f64], a: usize, b: usize, dt: f64) -> Context {
     let back = (2.0 / dt) as usize;
     let lo = a.saturating_sub(back);
-    let near = |x: f64| !(2.0..=98.0).contains(&x);
+    // A row without V_P (NaN) is near nothing.
+    let near = |x: f64| x.is_finite() && !(2.0..=98.0).contains(&x);
     if op[lo..b].iter().chain(&vp[a..b]).any(|&x| near(x)) {
         return Context::NearLimit;
     }

@@ -12,15 +12,19 @@
 //!    numbers of a composed pin-cart II valve ([`composed`]). Each candidate
 //!    ([`candidates`]) is added and refitted ([`refit`]) on the fit blocks ([`scorer`]), and
 //!    kept only if, on **held-out** blocks that were never fitted, it lowers the error by more
-//!    than chance, by a real share of the error above the noise floor, BIC agrees, and its size
-//!    matters ([`judge`]). The best candidate wins a round; rounds repeat until nothing passes,
-//!    so several effects can be found. Stick-slip that hunts is a limit cycle whose phase O_P
-//!    does not set, which free-run error cannot judge: when nothing passes, it is judged by the
-//!    slips of V_P instead ([`stickslip`]).
-//! 4. **Conclude**: typed evidence per finding ([`evidence`]), Table 1 rows before and after on
-//!    the held-out blocks, the windows before and after, the final model, an [`Outcome`] and
-//!    [`Note`]s (look-alikes the data cannot separate). The sentences are written by
-//!    `report::diagnose`.
+//!    than chance, by a real share of the error above the noise floor, BIC agrees, and it is
+//!    material: its size in engineering units ([`size`]) is worth maintenance and it removes a
+//!    real share of the held-out error ([`judge`], thresholds in one [`Tuning`]). The best
+//!    candidate wins a round; rounds repeat until nothing passes, so several effects can be
+//!    found. One that is real but immaterial is a [`Trace`]. Stick-slip that hunts is a limit
+//!    cycle whose phase O_P does not set, which free-run error cannot judge: when nothing
+//!    passes, it is judged by the slips of V_P instead ([`stickslip`]), in the distance
+//!    between slip-size histograms.
+//! 4. **Conclude**: typed evidence per finding ([`evidence`]), each finding's size in the final
+//!    model with its interval and the [`Measure`] it improved, the [`Figures`] of the final
+//!    model every output quotes, Table 1 rows before and after on the held-out blocks, the
+//!    windows before and after, the final model, an [`Outcome`] and [`Note`]s (look-alikes the
+//!    data cannot separate). The sentences are written by `report::diagnose`.
 //!
 //! Diagnosis is a client of identification ([`crate::fit`]): its parameters are
 //! [`crate::fit::params::ParamDef`]s, its cost is [`crate::fit::cost::Problem`], its search
@@ -35,7 +39,9 @@ pub mod locate;
 mod refit;
 mod rounds;
 mod scorer;
+pub mod size;
 mod stickslip;
+pub mod tuning;
 
 use serde::Serialize;
 
@@ -48,6 +54,8 @@ use locate::Window;
 pub use refit::{NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
 use rounds::{Data, Search};
 use scorer::{Errors, Scorer};
+pub use size::Size;
+pub use tuning::{Tuning, Worth};
 
 /// Slowest sampling diagnosis accepts, s.
 pub const MAX_SAMPLE_PERIOD_S: f64 = 2.0;
@@ -81,6 +89,58 @@ pub struct Finding {
     /// floor it removes, and the number of blocks it helps beyond noise (see `judge`); `None`
     /// for effects named from their evidence rather than the free-run error.
     pub support: Option<Support>,
+    /// Its size in engineering units, in the final model, with its interval.
+    pub size: Size,
+    /// The measure in which adding it improved the model.
+    pub measure: Measure,
+    /// The knobs of `params`.
+    #[serde(skip)]
+    pub knobs: Vec<composed::Knob>,
+}
+
+/// How a finding showed the fit improve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Measure {
+    /// The free-run squared error on the held-out blocks, %², before and after.
+    HeldoutSse { before: f64, after: f64 },
+    /// The distance between the slip-size histograms of the model and of the recording,
+    /// summed over 10 s pieces (in slips), before and after: over the held-out pieces, or over
+    /// the whole recording. What free-run error cannot judge (a limit cycle's phase), this can.
+    SlipDistance {
+        heldout: bool,
+        before: f64,
+        after: f64,
+    },
+}
+
+/// An effect the recording shows beyond chance, too small to be worth maintenance (by its size
+/// or by the share of the held-out error it removes): reported, never a finding.
+#[derive(Debug, Clone, Serialize)]
+pub struct Trace {
+    pub effect: Effect,
+    /// Its size with its interval.
+    pub size: Size,
+    /// Share of the held-out error it would remove.
+    pub heldout_share: f64,
+    pub params: serde_json::Map<String, serde_json::Value>,
+    #[serde(skip)]
+    pub spec: ModelSpec,
+}
+
+/// The figures of the final model every output quotes under these names (report, JSON, fleet,
+/// Python): one value per quantity.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Figures {
+    /// Dead time T_d, s.
+    pub dead_time_s: f64,
+    /// Friction band (lost motion on a reversal), %: the model's band, or its crossing time
+    /// converted to the band it means in this recording ([`size::friction_band`]); 0 without
+    /// either.
+    pub friction_band_pct: f64,
+    /// Stroke-speed limit opening and closing at half travel, %/s.
+    pub opening_speed_pct_per_s: f64,
+    pub closing_speed_pct_per_s: f64,
 }
 
 /// How strongly the held-out blocks support a finding.
@@ -144,7 +204,9 @@ pub enum Outcome {
     Noise,
     /// Nothing found, although `windows` stand above the noise floor.
     NotSignificant { windows: usize },
-    /// The model was missing these effects; the held-out SSE before and after adding them.
+    /// The model was missing these effects; the held-out SSE before and after adding those
+    /// judged by it (stiction judged by its slips improves the slip distance instead, see its
+    /// finding's [`Measure`]).
     Missing {
         effects: Vec<Effect>,
         heldout_sse_before: f64,
@@ -161,6 +223,10 @@ pub struct Diagnosis {
     pub noise_floor_pct: f64,
     pub mismatch_windows: Vec<Window>,
     pub findings: Vec<Finding>,
+    /// Effects shown beyond chance but not worth maintenance.
+    pub traces: Vec<Trace>,
+    /// The final model's figures, as every output quotes them.
+    pub figures: Figures,
     #[serde(rename = "final")]
     pub final_model: Final,
     pub outcome: Outcome,
@@ -199,10 +265,21 @@ pub enum DiagnoseError {
 }
 
 /// Runs the whole diagnosis of a recording, starting from the user's model `base` or, without
-/// one, a fitted FOPDT. `progress(done, total)` is called as the rounds finish.
+/// one, a fitted FOPDT, with the default [`Tuning`]. `progress(done, total)` is called as the
+/// rounds finish.
 pub fn diagnose(
     rec: &RecordingView,
     base: Option<&ModelSpec>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_with(rec, base, &Tuning::default(), progress)
+}
+
+/// [`diagnose`] with the thresholds of `tuning`.
+pub fn diagnose_with(
+    rec: &RecordingView,
+    base: Option<&ModelSpec>,
+    tuning: &Tuning,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Diagnosis, DiagnoseError> {
     if rec.vp.len() != rec.op.len() || rec.vp.is_empty() {
@@ -244,6 +321,7 @@ pub fn diagnose(
         facts: &facts,
         sigma,
         windows: &mismatch_windows,
+        tuning,
     };
     let start = composed::compose(&base_spec, dt);
     let mut search = Search::new(data, start, corr_len, td_max);
@@ -266,7 +344,8 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     let held_noise = search.held_noise();
     let Search {
         current,
-        findings,
+        mut findings,
+        mut traces,
         notes,
         by_slips,
         ..
@@ -276,6 +355,21 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     } else {
         current
     };
+    let sized = (data.facts, rec.op);
+    for f in findings.iter_mut() {
+        // A stick-slip finding judged by its slips is sized by the measured slips.
+        if matches!(f.measure, Measure::HeldoutSse { .. }) {
+            let now = size::size(f.effect, &final_spec, data.facts, rec.op, data.tuning);
+            f.size = size::interval(now, f.effect, &final_spec, scorer, sized);
+            f.params = rounds::params(&final_spec, f.knobs.iter().copied());
+            f.facts
+                .in_final(f.effect, &final_spec, data.facts, data.sigma);
+        }
+    }
+    for t in traces.iter_mut() {
+        t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
+    }
+    let figures = figures(&final_spec, data.facts, rec.op);
     let sim_after = scorer.simulate(&final_spec);
     let residual_after: Vec<f64> = rec.vp.iter().zip(&sim_after).map(|(m, s)| m - s).collect();
     let windows_after = locate::windows(rec, &residual_after, data.sigma);
@@ -286,10 +380,15 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     });
     let final_errors = scorer.errors(&final_spec);
     let effects: Vec<Effect> = findings.iter().map(|f| f.effect).collect();
+    // The held-out SSE the effects judged by it brought the model to.
+    let smooth_held = match findings.last() {
+        Some(stiction) if by_slips => stiction.heldout_sse_before,
+        _ => final_errors.held,
+    };
     let outcome = outcome(
         &effects,
         &base_errors,
-        &final_errors,
+        smooth_held,
         held_noise,
         data.windows,
         by_slips,
@@ -311,6 +410,8 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
             spec: final_spec,
         },
         findings,
+        traces,
+        figures,
         outcome,
         notes,
         windows_after,
@@ -321,11 +422,23 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     }
 }
 
-/// The outcome: what was missing, or whether the residual is noise.
+/// The figures of the final model `spec` (see [`Figures`]).
+fn figures(spec: &ModelSpec, facts: &facts::Facts, op: &[f64]) -> Figures {
+    use composed::Knob;
+    Figures {
+        dead_time_s: composed::get(spec, Knob::DeadTime),
+        friction_band_pct: size::friction_band(spec, facts, op),
+        opening_speed_pct_per_s: composed::get(spec, Knob::Slew) / composed::half_open(spec),
+        closing_speed_pct_per_s: composed::get(spec, Knob::ClosingSlew) / composed::half_open(spec),
+    }
+}
+
+/// The outcome: what was missing, or whether the residual is noise. `smooth_held` is the
+/// held-out SSE after the effects judged by it.
 fn outcome(
     effects: &[Effect],
     base: &Errors,
-    fin: &Errors,
+    smooth_held: f64,
     held_noise: f64,
     windows: &[Window],
     by_slips: bool,
@@ -334,7 +447,7 @@ fn outcome(
         return Outcome::Missing {
             effects: effects.to_vec(),
             heldout_sse_before: base.held,
-            heldout_sse_after: fin.held,
+            heldout_sse_after: smooth_held,
             by_slips,
         };
     }

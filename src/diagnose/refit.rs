@@ -76,18 +76,33 @@ fn build(spec: &ModelSpec, free: &[Free], u: &[f64]) -> ModelSpec {
     s
 }
 
-/// Refits the `free` knobs of `spec` to the fit blocks from their `init` values with a simplex
-/// of edge `step` for at most `iters` iterations; returns the refitted spec and its errors over
-/// the whole recording.
+/// Which fit error a refit minimises.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Stage {
+    /// Every other fit block: the short survey of a candidate's starts.
+    Survey,
+    /// Every fit block.
+    Fit,
+}
+
+/// Refits the `free` knobs of `spec` to the fit blocks (of `stage`) from their `init` values
+/// with a simplex of edge `step` for at most `iters` iterations; returns the refitted spec and
+/// its errors over the whole recording.
 pub(crate) fn refit(
     scorer: &Scorer,
     spec: &ModelSpec,
     free: &[Free],
-    step: f64,
-    iters: u64,
+    (step, iters): (f64, u64),
+    stage: Stage,
 ) -> (ModelSpec, Errors) {
     let u0: Vec<f64> = free.iter().map(|f| f.def.to_unit(f.init)).collect();
-    let cost = |u: &[f64]| scorer.fit_error(&build(spec, free, u));
+    let cost = |u: &[f64]| {
+        let s = build(spec, free, u);
+        match stage {
+            Stage::Survey => scorer.survey_error(&s),
+            Stage::Fit => scorer.fit_error(&s),
+        }
+    };
     let local = search::nelder_mead(&cost, &u0, step, iters);
     let best = build(spec, free, &local.best.u);
     let errors = scorer.errors(&best);
@@ -95,9 +110,9 @@ pub(crate) fn refit(
 }
 
 /// Refits a candidate from several starts by successive halving: every start gets a short
-/// search, and only the best one (by the fit error of the whole simulation) is searched
-/// further, from where it ended with a smaller simplex. Most starts of a multi-modal candidate
-/// are plainly worse after a few dozen iterations.
+/// search on every other fit block, and only the best one (by the fit error of the whole
+/// simulation) is searched further on all of them, from where it ended with a smaller simplex.
+/// Most starts of a multi-modal candidate are plainly worse after a few dozen iterations.
 pub(crate) fn refit_from(
     scorer: &Scorer,
     spec: &ModelSpec,
@@ -105,7 +120,16 @@ pub(crate) fn refit_from(
 ) -> (ModelSpec, Errors) {
     let surveyed = starts
         .par_iter()
-        .map(|free| (free, refit(scorer, spec, free, REFIT_STEP, SURVEY_ITERS)))
+        .map(|free| {
+            let surveyed = refit(
+                scorer,
+                spec,
+                free,
+                (REFIT_STEP, SURVEY_ITERS),
+                Stage::Survey,
+            );
+            (free, surveyed)
+        })
         .min_by(|a, b| a.1 .1.fit.total_cmp(&b.1 .1.fit));
     let Some((free, (best, errors))) = surveyed else {
         return (spec.clone(), scorer.errors(spec));
@@ -114,8 +138,8 @@ pub(crate) fn refit_from(
         scorer,
         &best,
         &starting_at(free, &best),
-        REFIT_STEP / 2.0,
-        REFINE_ITERS,
+        (REFIT_STEP / 2.0, REFINE_ITERS),
+        Stage::Fit,
     );
     if refined_errors.fit <= errors.fit {
         (refined, refined_errors)
@@ -183,7 +207,7 @@ pub(crate) fn fit_baseline(scorer: &Scorer, facts: &Facts) -> ModelSpec {
     let starts = [free, [free[0], free[1], slew.from(FASTEST_PCT_PER_S)]];
     starts
         .par_iter()
-        .map(|f| refit(scorer, &start, f, REFIT_STEP, BASELINE_ITERS))
+        .map(|f| refit(scorer, &start, f, (REFIT_STEP, BASELINE_ITERS), Stage::Fit))
         .min_by(|a, b| a.1.fit.total_cmp(&b.1.fit))
         .map(|(s, _)| s)
         .unwrap_or(start)

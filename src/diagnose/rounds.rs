@@ -12,6 +12,9 @@
 //! ([`super::stickslip`]); a finding there ends the search, since free-run error cannot judge
 //! anything after a limit cycle of its own phase.
 //!
+//! A candidate that explains the recording beyond chance but is too small to be worth
+//! maintenance is kept aside as a trace (the last round's, for effects never found).
+//!
 //! Not here: the candidates ([`super::candidates`]), the tests ([`super::judge`]) or the
 //! evidence ([`super::evidence`]).
 
@@ -22,12 +25,14 @@ use super::candidates::{self, MAX_DEAD_TIME_S, MAX_WINDUP_PCT};
 use super::composed::{self, Effect, Knob};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{bic_change, Judge, Trial, MIN_LATTICE_PCT};
+use super::judge::{bic_change, Judge, Trial};
 use super::locate::Window;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
 use super::scorer::{Errors, Scorer};
+use super::size::{self, Size};
 use super::stickslip;
-use super::{Finding, Note, Support};
+use super::tuning::Tuning;
+use super::{Finding, Measure, Note, Support, Trace};
 use crate::metrics::stats;
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
@@ -63,6 +68,7 @@ pub(crate) struct Data<'a> {
     pub sigma: f64,
     /// Where the baseline missed (quoted in the evidence).
     pub windows: &'a [Window],
+    pub tuning: &'a Tuning,
 }
 
 /// The growing model and what was found so far.
@@ -78,6 +84,8 @@ pub(crate) struct Search<'a> {
     /// Bound of the dead time of effects other than `dead_time`, s.
     td_max: f64,
     pub findings: Vec<Finding>,
+    /// Effects shown beyond chance but too small to be worth maintenance.
+    pub traces: Vec<Trace>,
     pub notes: Vec<Note>,
     /// Set when stiction was kept by the slips of V_P rather than by the free-run error.
     pub by_slips: bool,
@@ -97,6 +105,7 @@ impl<'a> Search<'a> {
             corr_len,
             td_max,
             findings: Vec::new(),
+            traces: Vec::new(),
             notes: Vec::new(),
             by_slips: false,
             freed: Vec::new(),
@@ -133,11 +142,18 @@ impl<'a> Search<'a> {
                     held_after = t.errors.held,
                     t_stat = t.t_stat,
                     excess_share = t.excess_share,
+                    heldout_share = t.heldout_share,
                     delta_bic = t.delta_bic,
+                    size = t.size.value,
+                    worth = t.size.worth,
+                    plausible = t.plausible,
                     material = t.material,
                     params = %fitted,
                     "candidate"
                 );
+                if t.trace() {
+                    self.trace(t);
+                }
             }
             let Some(winner) = self.winner(&best) else {
                 self.stick_slip();
@@ -156,6 +172,8 @@ impl<'a> Search<'a> {
             let alternatives = self.look_alikes(winner, &best);
             self.keep(winner, &alternatives, round > 0);
         }
+        let found: Vec<Effect> = self.findings.iter().map(|f| f.effect).collect();
+        self.traces.retain(|t| !found.contains(&t.effect));
         if self.findings.is_empty() && self.data.facts.reversals < 10 {
             self.notes.push(Note::FewReversals {
                 reversals: self.data.facts.reversals,
@@ -169,7 +187,8 @@ impl<'a> Search<'a> {
     /// models that read like the sensor.
     fn sensor_lattice(&mut self) {
         let q = self.data.facts.lattice_pct;
-        if q < MIN_LATTICE_PCT || composed::get(&self.current, Knob::Quantum) > 0.0 {
+        let least = self.data.tuning.worth.lattice_pct * self.data.tuning.materiality;
+        if q < least || composed::get(&self.current, Knob::Quantum) > 0.0 {
             return;
         }
         let mut spec = self.current.clone();
@@ -187,6 +206,7 @@ impl<'a> Search<'a> {
             effect: Effect::Quantization,
             facts,
             params: params(&spec, [Knob::Quantum].into_iter()),
+            knobs: vec![Knob::Quantum],
             alternatives: Vec::new(),
             heldout_sse_before: self.cur.held,
             heldout_sse_after: errors.held,
@@ -198,6 +218,11 @@ impl<'a> Search<'a> {
                 self.corr_len,
             ),
             support: None,
+            size: self.size_of(Effect::Quantization, &spec),
+            measure: Measure::HeldoutSse {
+                before: self.cur.held,
+                after: errors.held,
+            },
         });
         self.current = spec;
         self.cur = errors;
@@ -226,6 +251,7 @@ impl<'a> Search<'a> {
         let judge = Judge {
             scorer: self.data.scorer,
             facts: self.data.facts,
+            tuning: self.data.tuning,
             sigma: self.data.sigma,
             held_noise: self.held_noise,
             current_sim: &current_sim,
@@ -255,7 +281,7 @@ impl<'a> Search<'a> {
         }
         let cal = best
             .iter()
-            .find(|t| t.effect == Effect::Calibration && !t.material && t.significant())?;
+            .find(|t| t.effect == Effect::Calibration && !t.material && t.significant)?;
         let winner_held = self.winner(best).map_or(self.cur.held, |w| w.errors.held);
         (cal.errors.held < winner_held).then(|| (*cal).clone())
     }
@@ -342,6 +368,7 @@ impl<'a> Search<'a> {
                 self.data.sigma,
             ),
             params: params(&winner.spec, winner.free.iter().map(|f| f.knob)),
+            knobs: winner.free.iter().map(|f| f.knob).collect(),
             alternatives: alternatives.iter().map(|a| a.0).collect(),
             heldout_sse_before: self.cur.held,
             heldout_sse_after: winner.errors.held,
@@ -350,6 +377,11 @@ impl<'a> Search<'a> {
                 excess_share: winner.excess_share,
                 blocks_helped: winner.t_stat,
             }),
+            size: winner.size,
+            measure: Measure::HeldoutSse {
+                before: self.cur.held,
+                after: winner.errors.held,
+            },
         });
         self.free(&winner.free);
         self.current = winner.spec.clone();
@@ -478,16 +510,38 @@ impl<'a> Search<'a> {
             &self.current,
             self.data.facts,
             self.data.sigma,
+            self.data.tuning,
         )
         .filter(|c| c.passes()) else {
             return;
         };
+        let tuning = self.data.tuning;
+        let (value, low, high) = c.slip_size(self.data.scorer);
+        let size = Size {
+            name: "slip_pct",
+            unit: "%",
+            value,
+            low,
+            high,
+            worth: value / tuning.worth.slip_pct.max(1.5 * self.data.sigma),
+        };
+        if size.worth < tuning.materiality {
+            self.traces.push(Trace {
+                effect: Effect::Stiction,
+                size,
+                heldout_share: 0.0,
+                params: params(&c.spec, c.knobs.iter().copied()),
+                spec: c.spec.clone(),
+            });
+            return;
+        }
         let errors = self.data.scorer.errors(&c.spec);
         let k_new = c.knobs.iter().filter(|&&k| k != Knob::Gain).count();
         self.findings.push(Finding {
             effect: Effect::Stiction,
             facts: Evidence::of_slips(&c, self.data.facts, self.data.windows, self.data.scorer.dt),
             params: params(&c.spec, c.knobs.iter().copied()),
+            knobs: c.knobs.clone(),
             alternatives: Vec::new(),
             heldout_sse_before: self.cur.held,
             heldout_sse_after: errors.held,
@@ -499,6 +553,8 @@ impl<'a> Search<'a> {
                 self.corr_len,
             ),
             support: None,
+            size,
+            measure: c.distance(),
         });
         self.notes.push(Note::JudgedBySlips {
             heldout_sse_before: self.cur.held,
@@ -506,6 +562,29 @@ impl<'a> Search<'a> {
         });
         self.current = c.spec;
         self.by_slips = true;
+    }
+}
+
+impl Search<'_> {
+    /// The size of `effect` in `spec` (no interval yet).
+    fn size_of(&self, effect: Effect, spec: &ModelSpec) -> Size {
+        let d = &self.data;
+        size::size(effect, spec, d.facts, d.rec.op, d.tuning)
+    }
+
+    /// Keeps the trace `t` (replacing an earlier one of its effect).
+    fn trace(&mut self, t: &Trial) {
+        let trace = Trace {
+            effect: t.effect,
+            size: t.size,
+            heldout_share: t.heldout_share,
+            params: params(&t.spec, t.free.iter().map(|f| f.knob)),
+            spec: t.spec.clone(),
+        };
+        match self.traces.iter_mut().find(|x| x.effect == t.effect) {
+            Some(x) => *x = trace,
+            None => self.traces.push(trace),
+        }
     }
 }
 
@@ -529,7 +608,7 @@ fn best_per_effect(trials: &[Trial]) -> Vec<&Trial> {
 }
 
 /// The values of `knobs` in `spec`, by label, rounded to four decimals as reported.
-fn params(spec: &ModelSpec, knobs: impl Iterator<Item = Knob>) -> Map<String, Value> {
+pub(crate) fn params(spec: &ModelSpec, knobs: impl Iterator<Item = Knob>) -> Map<String, Value> {
     knobs
         .map(|k| {
             let v = composed::get(spec, k);
@@ -554,7 +633,18 @@ mod tests {
             free: vec![],
             t_stat: 10.0,
             excess_share: 0.9,
+            heldout_share: 0.5,
             delta_bic: -100.0,
+            size: Size {
+                name: "x",
+                unit: "%",
+                value: 1.0,
+                low: 1.0,
+                high: 1.0,
+                worth: 1.0,
+            },
+            significant: true,
+            plausible: material,
             material,
         }
     }

@@ -7,7 +7,9 @@
 //! fit blocks of a *restarted* problem: each fit block simulated on its own from the measured
 //! position [`WARM_UP_S`] before it, so the held-out blocks between them are never simulated
 //! while fitting (half the work). Judging simulates the whole recording once and splits its
-//! error by block.
+//! error by block. On a long recording refits see at most [`MAX_FIT_SAMPLES`] (the start of
+//! every fit block), and the short survey of each start every other fit block: the cost of a
+//! refit stops growing with the length of the recording, while judging still sees all of it.
 //!
 //! Not here: what is refitted or how it is judged ([`super::refit`], [`super::judge`]).
 
@@ -20,6 +22,10 @@ use crate::recording::RecordingView;
 /// than the longest dead time a diagnosis fits (3 s). Hysteresis that outlives it (a pin left
 /// off-centre) costs the fit a little, never the judgement, which simulates the whole recording.
 pub const WARM_UP_S: f64 = 10.0;
+/// Most samples a refit is scored on (the first part of each fit block): fifteen minutes at
+/// 100 Hz give as many; a longer recording adds to what is judged, not to what each refit
+/// simulates.
+pub const MAX_FIT_SAMPLES: usize = 45_000;
 
 /// The data a refit scores against: O_P, V_P and the alternating fit / held-out blocks.
 pub(crate) struct Scorer<'a> {
@@ -36,8 +42,11 @@ pub(crate) struct Scorer<'a> {
     pub n_blocks: usize,
     fit_mask: Vec<bool>,
     held_mask: Vec<bool>,
-    /// The fit blocks, each simulated from the measurement [`WARM_UP_S`] before it.
+    /// The fit blocks (at most [`MAX_FIT_SAMPLES`]), each simulated from the measurement
+    /// [`WARM_UP_S`] before it.
     fit: Problem,
+    /// Every other one of them, for the short survey of a refit's starts.
+    survey: Problem,
 }
 
 /// Fit and held-out error of one simulation, %².
@@ -61,6 +70,17 @@ impl<'a> Scorer<'a> {
             *h &= measured;
         }
         let warm = (WARM_UP_S / dt) as usize;
+        let n_fit_blocks = n.div_ceil(block_len).div_ceil(2).max(1);
+        let per_block = (MAX_FIT_SAMPLES / n_fit_blocks).max(1);
+        let capped: Vec<bool> = (fit_mask.iter().enumerate())
+            .map(|(k, &f)| f && k % block_len < per_block)
+            .collect();
+        let every_other: Vec<bool> = (capped.iter().enumerate())
+            .map(|(k, &f)| f && (k / block_len).is_multiple_of(4))
+            .collect();
+        let problem = |mask: &[bool]| {
+            Problem::restarted(rec.op, rec.vp, mask, dt, warm).restarting_at(rec.restarts)
+        };
         Scorer {
             op: rec.op,
             vp: rec.vp,
@@ -69,8 +89,8 @@ impl<'a> Scorer<'a> {
             block_len,
             skip,
             n_blocks: n.div_ceil(block_len),
-            fit: Problem::restarted(rec.op, rec.vp, &fit_mask, dt, warm)
-                .restarting_at(rec.restarts),
+            fit: problem(&capped),
+            survey: problem(&every_other),
             fit_mask,
             held_mask,
         }
@@ -89,6 +109,12 @@ impl<'a> Scorer<'a> {
     /// Fit error alone, what refits minimise (the fit blocks simulated one by one).
     pub fn fit_error(&self, spec: &ModelSpec) -> f64 {
         self.fit.sse(spec)
+    }
+
+    /// The fit error on every other fit block, what the short survey of a refit's starts
+    /// minimises.
+    pub fn survey_error(&self, spec: &ModelSpec) -> f64 {
+        self.survey.sse(spec)
     }
 
     /// Fit and held-out error of `spec` simulated over the whole recording (infinite when it
@@ -134,6 +160,17 @@ impl<'a> Scorer<'a> {
         out
     }
 
+    /// The squared error of a simulated V_P `sim` in each held-out block, %².
+    pub fn held_blocks(&self, sim: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.n_blocks.div_ceil(2)];
+        for (k, (&m, y)) in self.vp.iter().zip(sim).enumerate() {
+            if self.held_mask[k] {
+                out[k / self.block_len / 2] += (m - y) * (m - y);
+            }
+        }
+        out
+    }
+
     /// The free-run V_P of `spec` over the whole recording, from rest at the first measured
     /// sample (and again at each restart).
     pub fn simulate(&self, spec: &ModelSpec) -> Vec<f64> {
@@ -151,9 +188,9 @@ impl<'a> Scorer<'a> {
         }
     }
 
-    /// Number of fitted samples.
+    /// Number of samples in the fit blocks (what [`Scorer::errors`] sums as `fit`).
     pub fn n_fit(&self) -> usize {
-        self.fit.n_scored()
+        self.fit_mask.iter().filter(|&&f| f).count()
     }
 
     /// Number of held-out samples.

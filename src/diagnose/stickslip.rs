@@ -44,8 +44,9 @@ use rayon::prelude::*;
 
 use super::composed::{self, Knob};
 use super::facts::{self, Facts, Slip};
-use super::judge::{MIN_FRICTION_BAND_PCT, MIN_SLIP_PCT};
 use super::scorer::Scorer;
+use super::tuning::Tuning;
+use super::Measure;
 use crate::metrics::stats;
 use crate::model::ModelSpec;
 
@@ -64,7 +65,7 @@ const EVIDENT_PER_MIN: f64 = 15.0;
 /// A slip at least this many times the slip threshold is evident: noise alone (five sigmas of
 /// the compared means at the threshold) practically never makes one, and the slips a healthy
 /// valve's small mismatch with its model makes lie just above the threshold. It must also be
-/// larger than a healthy stem's friction band ([`MIN_FRICTION_BAND_PCT`]), whose lost motion
+/// larger than a healthy stem's friction band ([`super::tuning::Worth::friction_band_pct`]), whose lost motion
 /// a stem can make up in one quick move.
 const EVIDENT_FACTOR: f64 = 1.5;
 /// Fewest evident slips the current model must miss over the whole recording, and how many
@@ -248,16 +249,71 @@ pub(crate) struct Candidate {
     pub slips_after: Vec<Slip>,
     /// Named by the number of slips the current model misses rather than by the match.
     pub by_count: bool,
+    /// Summed histogram distance over every piece of the recording, before and after.
+    pub distance_all: (f64, f64),
 }
 
 impl Candidate {
-    /// Slips like the valve on the held-out blocks, and big enough to matter (0.1 %).
+    /// Slips like the valve on the held-out blocks (or are far too many for a smooth valve),
+    /// big enough to matter (0.1 %), and bring the slip histograms closer to the measured ones.
     pub fn passes(&self) -> bool {
         let size = [Knob::Breakaway, Knob::Stickband]
             .iter()
             .map(|&k| composed::get(&self.spec, k))
             .fold(0.0, f64::max);
-        (self.held.slips_alike() || self.by_count) && size >= 0.1
+        let Measure::SlipDistance { before, after, .. } = self.distance() else {
+            return false;
+        };
+        (self.held.slips_alike() || self.by_count) && size >= 0.1 && after < before
+    }
+
+    /// The measure it improves ([`Measure::SlipDistance`]): on the held-out pieces when it
+    /// does there, else over the whole recording (a valve that hunts at some openings only
+    /// may slip mostly in the fit blocks).
+    pub fn distance(&self) -> Measure {
+        let (before, after) = (self.held.distance_before, self.held.distance_after);
+        if after < before {
+            Measure::SlipDistance {
+                heldout: true,
+                before,
+                after,
+            }
+        } else {
+            Measure::SlipDistance {
+                heldout: false,
+                before: self.distance_all.0,
+                after: self.distance_all.1,
+            }
+        }
+    }
+
+    /// Median size of the measured slips, %, with its 90 % interval over resamples of the
+    /// scorer's blocks (a block bootstrap).
+    pub fn slip_size(&self, scorer: &Scorer) -> (f64, f64, f64) {
+        use rand::{Rng, SeedableRng};
+        let mut per_block: Vec<Vec<f64>> = vec![Vec::new(); scorer.n_blocks];
+        for s in &self.slips_measured {
+            if let Some(b) = per_block.get_mut(s.k / scorer.block_len) {
+                b.push(s.size_pct.abs());
+            }
+        }
+        let mut all: Vec<f64> = per_block.concat();
+        let median = stats::quantile(&mut all, 0.5);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x511b5);
+        let n = per_block.len();
+        let mut medians: Vec<f64> = (0..400)
+            .filter_map(|_| {
+                let mut x: Vec<f64> = (0..n)
+                    .flat_map(|_| per_block[rng.gen_range(0..n)].iter().copied())
+                    .collect();
+                (!x.is_empty()).then(|| stats::quantile(&mut x, 0.5))
+            })
+            .collect();
+        let (lo, hi) = (
+            stats::quantile(&mut medians, 0.05),
+            stats::quantile(&mut medians, 0.95),
+        );
+        (median, lo.min(median), hi.max(median))
     }
 }
 
@@ -358,6 +414,7 @@ pub(crate) fn fit(
     current: &ModelSpec,
     facts: &Facts,
     sigma: f64,
+    tuning: &Tuning,
 ) -> Option<Candidate> {
     let scale = &facts.slip_scale;
     let threshold = scale.threshold_pct;
@@ -365,7 +422,7 @@ pub(crate) fn fit(
     let reference = scorer.simulate(current);
     let measured_slips = facts::slips(&reference, scorer.vp, scale);
     let measured = histograms(&measured_slips, threshold, &pieces);
-    let sensor = Sensor::new(scorer.vp.len(), sigma, facts.lattice_pct);
+    let sensor = Sensor::new(scorer.vp, sigma, facts.lattice_pct);
     let run = |spec: &ModelSpec| {
         let y = scorer.simulate(spec);
         let slips = facts::slips(&reference, &sensor.read(&y), scale);
@@ -388,7 +445,7 @@ pub(crate) fn fit(
         "slips of V_P"
     );
     let least = (EVIDENT_FACTOR * threshold)
-        .max(MIN_FRICTION_BAND_PCT)
+        .max(tuning.worth.friction_band_pct)
         .max(1.5 * sigma);
     let rest = Rest {
         span: scale.span,
@@ -443,9 +500,11 @@ pub(crate) fn fit(
     let per_min = EVIDENT_PER_MIN * scorer.n_fit() as f64 * scorer.dt / 60.0;
     let by_count = by_evidence
         || (missed.0.min(missed.1) >= per_min
-            && size >= MIN_SLIP_PCT.max(1.5 * sigma)
+            && size >= tuning.worth.slip_pct.max(1.5 * sigma)
             && held.distance_after < held.distance_before);
+    let sum = |d: &[f64]| d.iter().sum::<f64>();
     let candidate = Candidate {
+        distance_all: (sum(&before), sum(&after)),
         held,
         by_count,
         spec,
@@ -464,21 +523,28 @@ pub(crate) fn fit(
 }
 
 /// The recording's sensor, for simulations: seeded Gaussian noise of the noise floor, then the
-/// sensor lattice.
+/// sensor lattice, and no reading where the recording has none (so a simulation's slips are
+/// counted on the same rows as the measured ones).
 struct Sensor {
     noise: Vec<f64>,
     lattice: f64,
 }
 
 impl Sensor {
-    fn new(n: usize, sigma: f64, lattice: f64) -> Self {
+    /// The sensor of the measured V_P `vp` (NaN where missing).
+    fn new(vp: &[f64], sigma: f64, lattice: f64) -> Self {
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51_1b5);
-        let noise = (0..n)
-            .map(|_| {
+        let noise = vp
+            .iter()
+            .map(|v| {
                 let e: f64 = StandardNormal.sample(&mut rng);
-                sigma * e
+                if v.is_finite() {
+                    sigma * e
+                } else {
+                    f64::NAN
+                }
             })
             .collect();
         Sensor { noise, lattice }
@@ -561,6 +627,7 @@ mod tests {
             slips_before: vec![],
             slips_after: vec![],
             by_count,
+            distance_all: (1000.0, 700.0),
         };
         // Slipping as often and as much, and a third of the distance gone: named.
         assert!(candidate(held(450, 300.0), false).passes());
@@ -569,5 +636,22 @@ mod tests {
         assert!(!candidate(held(100, 400.0), false).passes());
         // ...but named when the current model misses slips by the hundred (`by_count`).
         assert!(candidate(held(100, 400.0), true).passes());
+        // Only when it brings the histograms closer somewhere: the held-out pieces, or else
+        // the whole recording.
+        assert!(matches!(
+            candidate(held(100, 400.0), true).distance(),
+            Measure::SlipDistance { heldout: true, .. }
+        ));
+        let worse = candidate(held(100, 600.0), true);
+        assert!(matches!(
+            worse.distance(),
+            Measure::SlipDistance { heldout: false, after, .. } if after == 700.0
+        ));
+        assert!(worse.passes());
+        let nowhere = Candidate {
+            distance_all: (1000.0, 1100.0),
+            ..candidate(held(100, 600.0), true)
+        };
+        assert!(!nowhere.passes());
     }
 }

@@ -9,6 +9,8 @@
 //! - [`steps`]: the step-delay analysis of Section 4.1 and pin-cart II's polynomial.
 //! - [`windows`]: windows to score (given or unsaturated) and the blocked held-out split.
 //! - [`figures`]: maintenance figures (T63/T86, dead band, speeds) measured on a fitted model.
+//! - [`determined`]: which fitted parameters the recording does not pin down (at a bound of
+//!   their box, or the error flat along them).
 //!
 //! [`identify`] runs them all: for each model (in parallel) it surveys the box on a decimated
 //! copy of the fit blocks, polishes the best distinct points with Nelder-Mead, sweeps each axis
@@ -21,6 +23,7 @@
 //! Not here: printing, files and plots (`cli::identify`, [`crate::report`]).
 
 pub mod cost;
+pub mod determined;
 pub mod figures;
 pub mod params;
 pub mod search;
@@ -180,6 +183,8 @@ pub struct ModelFit {
     pub sim: Vec<f64>,
     /// Maintenance figures of the fitted model.
     pub figures: figures::Figures,
+    /// Fitted parameters the recording does not pin down.
+    pub undetermined: Vec<determined::Undetermined>,
 }
 
 impl ModelFit {
@@ -432,6 +437,18 @@ fn fit_model(sh: &Shared, kind: ModelKind, seed: u64) -> ModelFit {
     let sim = cost::simulate(&spec, rec);
     let scores = metrics::scores_masked(vp, &sim, op, dt, sh.scored);
     let d = layout.len();
+    let residual: Vec<f64> = (0..vp.len())
+        .map(|k| {
+            if sh.scored[k] {
+                vp[k] - sim[k]
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    let n_eff = scores.n as f64 / crate::metrics::stats::correlation_length(&residual);
+    let undetermined =
+        determined::undetermined(&layout, &layout.vector(&spec), &sh.all, scores.sse, n_eff);
     ModelFit {
         kind,
         n_params: d,
@@ -443,6 +460,7 @@ fn fit_model(sh: &Shared, kind: ModelKind, seed: u64) -> ModelFit {
         heldout,
         evals: evals + refine_evals,
         sim,
+        undetermined,
     }
 }
 

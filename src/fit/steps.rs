@@ -183,9 +183,15 @@ pub fn analyse_recording(
     Ok(analyse(rec, opts))
 }
 
+/// Longest run of rows without V_P a step's answer may contain: a lost reply now and then
+/// (one to three rows) moves a measured delay by at most that much; a longer gap could hide
+/// when V_P moved.
+const MAX_MISSING_ROWS: usize = 3;
+
 /// Analyses the steps of a recording's O_P and the answers in its V_P. A step counts only when
-/// V_P was measured from the sample before the jump to the end of the hold, and neither the jump
-/// nor the hold spans a restart (a long gap).
+/// V_P was measured on the sample before the jump, no more than [`MAX_MISSING_ROWS`] in a row
+/// are missing from then to the end of the hold, and neither the jump nor the hold spans a
+/// restart (a long gap).
 pub fn analyse(rec: &RecordingView, opts: &StepOptions) -> StepAnalysis {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
     let n = op.len().min(vp.len());
@@ -214,13 +220,13 @@ pub fn analyse(rec: &RecordingView, opts: &StepOptions) -> StepAnalysis {
         while end < segment_end && (op[end] - op[a]).abs() <= op_tol {
             end += 1;
         }
-        let measured = vp[a - 1..end].iter().all(|v| v.is_finite());
+        let measured = vp[a - 1].is_finite() && longest_missing(&vp[a..end]) <= MAX_MISSING_ROWS;
         if size.abs() >= opts.min_size_pct && end - a >= min_hold && measured {
             let v0 = vp[a - 1];
             let moved = |share: f64| {
                 let need = (share * size.abs()).max(4.0 * sigma);
                 (a..end)
-                    .find(|&j| (vp[j] - v0) * dir >= need)
+                    .find(|&j| vp[j].is_finite() && (vp[j] - v0) * dir >= need)
                     .map(|j| (j - a) as f64 * dt)
             };
             steps.push(Step {
@@ -276,6 +282,16 @@ pub fn analyse(rec: &RecordingView, opts: &StepOptions) -> StepAnalysis {
         pincart2,
         noise_pct: sigma,
     }
+}
+
+/// The longest run of rows without a measured value (NaN) in `x`.
+fn longest_missing(x: &[f64]) -> usize {
+    let (mut run, mut longest) = (0, 0);
+    for v in x {
+        run = if v.is_finite() { 0 } else { run + 1 };
+        longest = longest.max(run);
+    }
+    longest
 }
 
 /// Least-squares `a x² + b x + c` through `(x, y)` points; `None` with fewer than five points
@@ -397,5 +413,26 @@ mod tests {
         }
         // The first movement has no direction to compare with.
         assert_eq!(a.steps[0].reversal, None);
+        // Lost replies (one row in every 50, three in a row every 700) keep every step, each
+        // delay within the three rows a burst can hide; a gap of five rows drops its step.
+        let lost = |k: usize| k % 50 == 11 || (350..353).contains(&(k % 700));
+        let mut holed: Vec<f64> = (vp.iter().enumerate())
+            .map(|(k, &v)| if lost(k) { f64::NAN } else { v })
+            .collect();
+        holed[4005..4010].fill(f64::NAN);
+        let view = |vp| RecordingView {
+            t: &[],
+            op: &op,
+            vp,
+            restarts: &[],
+            dt,
+        };
+        let h = analyse(&view(&holed), &StepOptions::default());
+        assert_eq!(h.steps.len(), a.steps.len() - 1);
+        for (x, y) in a.steps.iter().filter(|s| s.index != 4000).zip(&h.steps) {
+            assert_eq!(x.index, y.index);
+            let (dx, dy) = (x.delay_s.unwrap(), y.delay_s.unwrap());
+            assert!((0.0..=0.03 + 1e-9).contains(&(dy - dx)), "{dx} {dy}");
+        }
     }
 }

@@ -2,7 +2,8 @@
 //! band, stroke speeds, findings) and the fleet ranked by an attention score ([`Fleet`]).
 //!
 //! The figures come from the diagnosis: the step delays it measured in the recording, and the
-//! maintenance tests of [`crate::fit::figures`] run on its final model. The attention score
+//! figures of its final model ([`crate::diagnose::Figures`]), the same numbers its report,
+//! JSON and the Python package quote under the same names. The attention score
 //! adds, to the number of findings, how far each figure lies beyond what a healthy valve shows
 //! ([`Limits`]): `max(0, value / limit - 1)`, and for the stroke speed `limit / speed - 1`.
 
@@ -10,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Job;
 use crate::diagnose::{Diagnosis, NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
-use crate::fit::{figures, steps::Population};
+use crate::fit::steps::Population;
 use crate::recording::Recording;
 
 /// What the ranking takes as healthy.
@@ -20,7 +21,7 @@ pub struct Limits {
     pub dead_time_s: f64,
     /// Mean delay of a step against the previous movement, s.
     pub reversal_delay_s: f64,
-    /// O_P travel a slow reversal needs before V_P follows, %.
+    /// Friction band (lost motion on a reversal), %.
     pub friction_band_pct: f64,
     /// Slowest stroke speed of a healthy valve, %/s (as diagnosis's baseline allows).
     pub stroke_speed_pct_per_s: f64,
@@ -48,18 +49,22 @@ pub struct ValveSummary {
     pub duration_s: f64,
     /// Why the valve could not be read, diagnosed or written (then the figures are empty).
     pub error: Option<String>,
-    /// Dead time of the final model, s.
+    /// Dead time of the final model, s (see [`crate::diagnose::Figures`]).
     pub dead_time_s: Option<f64>,
     /// Mean measured delay of steps against the previous movement, and in the same direction, s.
     pub reversal_delay_s: Option<f64>,
     pub same_direction_delay_s: Option<f64>,
-    /// O_P travel a slow reversal of the final model needs before V_P follows, %.
+    /// Friction band of the final model (lost motion on a reversal), %.
     pub friction_band_pct: Option<f64>,
-    /// Largest travel speed of the final model opening and closing, %/s.
+    /// Stroke-speed limit of the final model at half travel, opening and closing, %/s.
     pub stroke_speed_open_pct_per_s: Option<f64>,
     pub stroke_speed_close_pct_per_s: Option<f64>,
     /// The effects diagnosis found, in order.
     pub findings: Vec<String>,
+    /// The size of each finding with its 90 % interval, in the same order
+    /// (`friction band 1.40 % (1.10-1.80)`).
+    #[serde(default)]
+    pub sizes: Vec<String>,
     pub verdict: Option<String>,
     pub heldout_sse_before: Option<f64>,
     pub heldout_sse_after: Option<f64>,
@@ -90,6 +95,7 @@ impl ValveSummary {
             stroke_speed_open_pct_per_s: None,
             stroke_speed_close_pct_per_s: None,
             findings: Vec::new(),
+            sizes: Vec::new(),
             verdict: None,
             heldout_sse_before: None,
             heldout_sse_after: None,
@@ -100,7 +106,7 @@ impl ValveSummary {
 
     /// The summary of a diagnosed valve.
     pub fn of(job: &Job, rec: &Recording, d: &Diagnosis) -> Self {
-        let f = figures::measure(&d.final_model.spec, rec.sample_period);
+        let f = &d.figures;
         let delays = |rev: bool| {
             let x: Vec<f64> = d
                 .steps
@@ -118,11 +124,14 @@ impl ValveSummary {
             dead_time_s: finite(f.dead_time_s),
             reversal_delay_s: delays(true),
             same_direction_delay_s: delays(false),
-            friction_band_pct: finite(f.dead_band_pct),
-            stroke_speed_open_pct_per_s: finite(f.max_speed_open_pct_per_s),
-            stroke_speed_close_pct_per_s: finite(f.max_speed_close_pct_per_s),
+            friction_band_pct: finite(f.friction_band_pct),
+            stroke_speed_open_pct_per_s: finite(f.opening_speed_pct_per_s),
+            stroke_speed_close_pct_per_s: finite(f.closing_speed_pct_per_s),
             findings: d.findings.iter().map(|f| f.effect.name().into()).collect(),
-            verdict: Some(crate::report::diagnose::verdict(&d.outcome)),
+            sizes: (d.findings.iter())
+                .map(|f| crate::report::verdict::size(&f.size))
+                .collect(),
+            verdict: Some(crate::report::diagnose::verdict(d)),
             heldout_sse_before: finite(d.baseline.heldout_sse),
             heldout_sse_after: finite(d.final_model.heldout_sse),
             ..ValveSummary::failed(job, String::new())
@@ -163,7 +172,7 @@ pub struct Fleet {
 }
 
 /// The columns of `summary.csv`, in order.
-const CSV_HEADER: [&str; 16] = [
+const CSV_HEADER: [&str; 17] = [
     "rank",
     "valve",
     "attention",
@@ -180,6 +189,7 @@ const CSV_HEADER: [&str; 16] = [
     "source",
     "report",
     "error",
+    "sizes",
 ];
 
 impl Fleet {
@@ -230,6 +240,7 @@ impl Fleet {
                 v.source.clone(),
                 v.report.clone().unwrap_or_default(),
                 v.error.clone().unwrap_or_default(),
+                v.sizes.join(";"),
             ]);
         }
         String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
@@ -291,7 +302,7 @@ mod tests {
             lines[1]
         );
         assert!(
-            lines[4].ends_with("x.csv:1: no column `op_pct`"),
+            lines[4].ends_with("x.csv:1: no column `op_pct`,"),
             "{}",
             lines[4]
         );

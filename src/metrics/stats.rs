@@ -84,15 +84,21 @@ pub fn noise_sd(x: &[f64], order: Differences) -> f64 {
 
 /// Number of samples over which `r` stays correlated, from its lag-1 autocorrelation ρ:
 /// `(1 + ρ) / (1 - ρ)` (1 for white noise; ρ is clamped to 0-0.999). Information criteria count
-/// a residual's independent samples as its length over this.
+/// a residual's independent samples as its length over this. Missing samples (NaN) are left
+/// out, and so are the pairs that touch one.
 pub fn correlation_length(r: &[f64]) -> f64 {
-    let m = r.iter().sum::<f64>() / r.len().max(1) as f64;
-    let var: f64 = r.iter().map(|x| (x - m).powi(2)).sum();
+    let measured = || r.iter().filter(|x| x.is_finite());
+    let n = measured().count().max(1) as f64;
+    let m = measured().sum::<f64>() / n;
+    let var = measured().map(|x| (x - m).powi(2)).sum::<f64>() / n;
     if var <= 0.0 {
         return 1.0;
     }
-    let c1: f64 = r.windows(2).map(|w| (w[0] - m) * (w[1] - m)).sum();
-    let rho = (c1 / var).clamp(0.0, 0.999);
+    let (c1, pairs): (f64, f64) = (r.windows(2))
+        .map(|w| (w[0] - m) * (w[1] - m))
+        .filter(|c| c.is_finite())
+        .fold((0.0, 0.0), |(s, k), c| (s + c, k + 1.0));
+    let rho = (c1 / pairs.max(1.0) / var).clamp(0.0, 0.999);
     (1.0 + rho) / (1.0 - rho)
 }
 
@@ -164,5 +170,10 @@ pub(crate) mod tests {
         let l = correlation_length(&ar);
         assert!((l - 19.0).abs() < 2.0, "{l}");
         assert_eq!(correlation_length(&[3.0; 10]), 1.0);
+        // Missing samples change next to nothing.
+        let mut holed = ar.clone();
+        holed.iter_mut().step_by(10).for_each(|v| *v = f64::NAN);
+        let h = correlation_length(&holed);
+        assert!((h - l).abs() < 0.05 * l, "{h} {l}");
     }
 }

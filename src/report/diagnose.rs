@@ -11,10 +11,12 @@ use std::fmt::Write;
 use serde_json::Value;
 
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
+pub use super::verdict::verdict;
+use super::verdict::{figures, measure, size, trace};
 use super::{esc, page, row};
 use crate::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
 use crate::diagnose::locate::{Context, Window};
-use crate::diagnose::{Diagnosis, Effect, Finding, Note, Outcome};
+use crate::diagnose::{Diagnosis, Effect, Finding, Note};
 use crate::metrics;
 use crate::recording::RecordingView;
 
@@ -272,44 +274,6 @@ pub fn evidence(f: &Finding) -> String {
     }
 }
 
-/// The verdict: what was missing and what adding it did, or that nothing was.
-pub fn verdict(outcome: &Outcome) -> String {
-    match outcome {
-        Outcome::Noise => {
-            "Nothing significant is missing: the residual is consistent with measurement noise."
-                .into()
-        }
-        Outcome::NotSignificant { windows } => format!(
-            "Nothing significant is missing from the vocabulary: {windows} windows stand above the noise floor, but no effect \
-             improves the held-out fit by more than chance."
-        ),
-        Outcome::Missing {
-            effects,
-            heldout_sse_before: before,
-            heldout_sse_after: after,
-            by_slips,
-        } => {
-            let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
-            let (change, share) = if after < before {
-                ("lowers", format!("{:.0} % less", 100.0 * (1.0 - after / before)))
-            } else {
-                ("raises", format!("{:.0} % more", 100.0 * (after / before - 1.0)))
-            };
-            format!(
-                "The model was missing {}. Adding {} {change} the held-out SSE from {before:.1} to {after:.1} %² ({share}).{}",
-                names.join(", "),
-                if names.len() == 1 { "it" } else { "them" },
-                if *by_slips {
-                    " Stiction was judged by the slips of V_P on the held-out blocks: free-run SSE cannot judge a \
-                     stick-slip limit cycle, whose phase O_P does not set."
-                } else {
-                    ""
-                }
-            )
-        }
-    }
-}
-
 /// A note as a sentence.
 pub fn note(n: &Note) -> String {
     match *n {
@@ -373,7 +337,7 @@ pub fn json(d: &Diagnosis) -> Value {
             j["context"] = Value::String(context(w));
         }
     }
-    v["verdict"] = Value::String(verdict(&d.outcome));
+    v["verdict"] = Value::String(verdict(d));
     v
 }
 
@@ -427,17 +391,20 @@ pub fn text(d: &Diagnosis) -> String {
             let names: Vec<&str> = f.alternatives.iter().map(|e| e.name()).collect();
             let _ = writeln!(o, "  or, as well: {} (see the notes)", names.join(", "));
         }
+        let _ = writeln!(o, "  size: {} (90 % interval)", size(&f.size));
         let _ = writeln!(o, "  evidence: {}", evidence(f));
         let _ = writeln!(o, "  parameters: {}", Value::Object(f.params.clone()));
         let _ = writeln!(
             o,
-            "  held-out SSE {:.2} -> {:.2} %² ({:+.1} %), delta BIC {:.0}",
-            f.heldout_sse_before,
-            f.heldout_sse_after,
-            100.0 * (f.heldout_sse_after / f.heldout_sse_before - 1.0),
+            "  improved: {}, delta BIC {:.0}",
+            measure(&f.measure),
             f.delta_bic
         );
     }
+    for t in &d.traces {
+        let _ = writeln!(o, "\ntrace (not worth maintenance): {}", trace(t));
+    }
+    let _ = writeln!(o, "\nfinal model: {}", figures(&d.figures));
     if let Some(h) = &d.heldout {
         let _ = writeln!(o, "\nTable 1 on the held-out blocks:");
         let _ = writeln!(o, "{}", metrics::table1_header());
@@ -455,7 +422,7 @@ pub fn text(d: &Diagnosis) -> String {
     for n in &d.notes {
         let _ = writeln!(o, "note: {}", note(n));
     }
-    let _ = writeln!(o, "\nverdict: {}", verdict(&d.outcome));
+    let _ = writeln!(o, "\nverdict: {}", verdict(d));
     o
 }
 
@@ -464,11 +431,12 @@ pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
     let mut h = String::new();
     let _ = write!(
         h,
-        "<p class=\"verdict\">{}</p><p>Baseline: <b>{}</b>. Noise floor of V_P: {:.3} % (standard deviation). Final model: <b>{}</b>.</p>",
-        esc(&verdict(&d.outcome)),
+        "<p class=\"verdict\">{}</p><p>Baseline: <b>{}</b>. Noise floor of V_P: {:.3} % (standard deviation). Final model: <b>{}</b>: {}.</p>",
+        esc(&verdict(d)),
         esc(&d.baseline.model),
         d.noise_floor_pct,
-        esc(&d.final_model.model)
+        esc(&d.final_model.model),
+        esc(&figures(&d.figures))
     );
     for n in &d.notes {
         let _ = write!(h, "<p><i>Note: {}</i></p>", esc(&note(n)));
@@ -506,14 +474,21 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
         };
         let _ = write!(
             h,
-            "<h3>{}{alternatives}</h3><p>{}</p><p>Parameters: <code>{}</code><br>Held-out SSE {:.2} → {:.2} %², ΔBIC {:.0}</p>",
+            "<h3>{}{alternatives}</h3><p><b>{}</b> (90 % interval)</p><p>{}</p><p>Parameters: <code>{}</code><br>Improved: {}, ΔBIC {:.0}</p>",
             f.effect.name(),
+            esc(&size(&f.size)),
             esc(&evidence(f)),
             esc(&Value::Object(f.params.clone()).to_string()),
-            f.heldout_sse_before,
-            f.heldout_sse_after,
+            esc(&measure(&f.measure)),
             f.delta_bic
         );
+    }
+    if !d.traces.is_empty() {
+        h.push_str("<h2>Traces (not worth maintenance)</h2><ul>");
+        for t in &d.traces {
+            let _ = write!(h, "<li>{}</li>", esc(&trace(t)));
+        }
+        h.push_str("</ul>");
     }
     if let Some(c) = &d.heldout {
         let _ = write!(

@@ -27,7 +27,13 @@ fn valve_row(h: &mut String, rank: usize, v: &ValveSummary, f: &Fleet) {
     let findings = if v.findings.is_empty() {
         "none".to_string()
     } else {
-        v.findings.join(", ")
+        let sized = (v.findings.iter().enumerate())
+            .map(|(i, f)| match v.sizes.get(i) {
+                Some(size) => format!("{f}: {size}"),
+                None => f.clone(),
+            })
+            .collect::<Vec<_>>();
+        sized.join(", ")
     };
     let _ = write!(
         h,
@@ -52,7 +58,7 @@ pub fn html(f: &Fleet) -> String {
         "<p>{} valves diagnosed, {} could not be. Ranked by attention: the number of findings plus how far each figure lies beyond a healthy valve's (dead time {} s, reversal delay {} s, friction band {} %, stroke speed at least {} %/s; beyond in bold). Summaries: <a href=\"summary.csv\">summary.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>",
         f.diagnosed, f.failed, l.dead_time_s, l.reversal_delay_s, l.friction_band_pct, l.stroke_speed_pct_per_s
     );
-    h.push_str("<table><tr><th>rank</th><th>valve</th><th>attention</th><th>findings</th><th>dead time, s</th><th>reversal delay, s</th><th>friction band, %</th><th>opening speed, %/s</th><th>closing speed, %/s</th><th>verdict</th></tr>");
+    h.push_str("<table><tr><th>rank</th><th>valve</th><th>attention</th><th>findings</th><th>dead time, s</th><th>reversal delay, s</th><th>friction band, %</th><th>stroke speed at half travel opening, %/s</th><th>closing, %/s</th><th>verdict</th></tr>");
     let ok = f.valves.iter().filter(|v| v.error.is_none());
     for (i, v) in ok.enumerate() {
         valve_row(&mut h, i + 1, v, f);

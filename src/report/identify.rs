@@ -14,6 +14,7 @@ use plotters::style::RGBColor;
 
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 use super::{esc, page, row};
+use crate::fit::determined::Why;
 use crate::fit::steps::StepAnalysis;
 use crate::fit::{Identification, ModelFit};
 use crate::metrics;
@@ -83,6 +84,24 @@ pub fn worst_windows(
         }
     }
     out
+}
+
+/// The fitted parameters the recording does not pin down, or a dash.
+fn undetermined_text(r: &ModelFit) -> String {
+    let p: Vec<String> = (r.undetermined.iter())
+        .map(|u| {
+            let why = match u.why {
+                Why::AtBound => "at a bound of its range",
+                Why::Flat => "the error is flat along it",
+            };
+            format!("{} = {} ({why})", u.name, fmt_param(u.value))
+        })
+        .collect();
+    if p.is_empty() {
+        "-".into()
+    } else {
+        p.join(", ")
+    }
 }
 
 fn params_text(r: &ModelFit) -> String {
@@ -157,14 +176,15 @@ fn tables_html(h: &mut String, id: &Identification) {
             r.bic
         );
     }
-    h.push_str("</table><h2>Table 2: fitted parameters</h2><table><tr><th>model</th><th>parameters</th><th>count</th></tr>");
+    h.push_str("</table><h2>Table 2: fitted parameters</h2><table><tr><th>model</th><th>parameters</th><th>count</th><th>not determined by the recording</th></tr>");
     for r in &id.rows {
         let _ = write!(
             h,
-            "<tr><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td class=\"l\">{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
             r.kind.display_name(),
             esc(&params_text(r)),
-            r.n_params
+            r.n_params,
+            esc(&undetermined_text(r))
         );
     }
     h.push_str("</table>");
@@ -489,6 +509,14 @@ fn parameters_text(id: &Identification) -> String {
                 p.join(", ")
             }
         );
+        if !r.undetermined.is_empty() {
+            let _ = writeln!(
+                o,
+                "{:<27} not determined by the recording: {}",
+                "",
+                undetermined_text(r)
+            );
+        }
     }
     let _ = writeln!(
         o,

@@ -15,6 +15,7 @@ pub mod diagnose;
 pub mod fleet;
 pub mod identify;
 pub mod plot;
+pub mod verdict;
 
 use std::fmt::Write;
 use std::path::{Path, PathBuf};

@@ -32,6 +32,7 @@ pub struct LevelLoop {
     integral: f64,
     drift_pct: f64,
     inflow_pct: f64,
+    level_noise_pct: f64,
 }
 
 impl LevelLoop {
@@ -43,6 +44,16 @@ impl LevelLoop {
             integral: 0.0,
             drift_pct: 0.0,
             inflow_pct: NOMINAL_OPENING_PCT,
+            level_noise_pct: LEVEL_NOISE_PCT,
+        }
+    }
+
+    /// The same loop with a level sensor of noise `level_noise_pct` (standard deviation, %),
+    /// which the controller passes on to its output `KP` times.
+    pub fn with_level_noise(self, level_noise_pct: f64) -> Self {
+        LevelLoop {
+            level_noise_pct,
+            ..self
         }
     }
 
@@ -55,7 +66,7 @@ impl LevelLoop {
             + self.drift_pct
             + 4.0 * (t_s * std::f64::consts::TAU / 120.0).sin();
         let noise: f64 = StandardNormal.sample(rng);
-        let measured = self.level_pct + LEVEL_NOISE_PCT * noise;
+        let measured = self.level_pct + self.level_noise_pct * noise;
         let e = measured - self.setpoint_pct;
         self.integral += e * dt / TI_S;
         (NOMINAL_OPENING_PCT + KP * (e + self.integral)).clamp(0.0, 100.0)

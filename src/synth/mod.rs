@@ -7,10 +7,12 @@
 //! so O_P moves gently and reverses often, the way a valve sees normal operation. The
 //! open-loop excitations live in [`excite`]. A physical valve (`model = "physical"`) has its
 //! own sensor with its own noise (`[physical] sensor_noise_pct`, seeded by its `noise_seed`),
-//! so no noise is added to it here. Nothing here reads or writes files.
+//! so no noise is added to it here. [`logged`] turns a recording into what the daemon's log
+//! would hold of it (per mille, lost replies). Nothing here reads or writes files.
 
 pub mod excite;
 pub mod level;
+pub mod logged;
 pub mod physical;
 
 use rand::SeedableRng;
@@ -42,6 +44,12 @@ pub enum Excitation {
     RandomSteps,
     /// A PI level loop around `level_pct` (gentle, continuous moves with many small reversals).
     ClosedLoop { level_pct: f64 },
+    /// The same loop with a level sensor of `level_noise_pct` (the default loop's is 0.15 %):
+    /// the controller's output as noisy as that makes it.
+    NoisyLoop {
+        level_pct: f64,
+        level_noise_pct: f64,
+    },
     /// Steps of 0.2-2 % held 2-10 s around a level wandering near `around_pct`, with reversals.
     SmallSteps { around_pct: f64 },
     /// Slow (0.2-2 %/s) and fast (5-30 %/s) ramps between random levels, with holds.
@@ -56,6 +64,7 @@ impl Excitation {
         match self {
             Excitation::RandomSteps => "random_steps",
             Excitation::ClosedLoop { .. } => "closed_loop",
+            Excitation::NoisyLoop { .. } => "noisy_loop",
             Excitation::SmallSteps { .. } => "small_steps",
             Excitation::Ramps => "ramps",
             Excitation::Mixed { .. } => "mixed",
@@ -84,7 +93,16 @@ pub fn generate(
     let mut rec = Columns::with_capacity(n);
     let mut open = match excitation {
         Excitation::ClosedLoop { level_pct } => {
-            closed_loop(&mut valve, level_pct, n, dt, &noise, &mut rng, &mut rec);
+            let plant = LevelLoop::new(level_pct);
+            closed_loop(&mut valve, plant, n, dt, &noise, &mut rng, &mut rec);
+            return Ok(Recording::from_vectors(rec.t, rec.op, rec.vp)?);
+        }
+        Excitation::NoisyLoop {
+            level_pct,
+            level_noise_pct,
+        } => {
+            let plant = LevelLoop::new(level_pct).with_level_noise(level_noise_pct);
+            closed_loop(&mut valve, plant, n, dt, &noise, &mut rng, &mut rec);
             return Ok(Recording::from_vectors(rec.t, rec.op, rec.vp)?);
         }
         Excitation::RandomSteps => OpenLoop::random_steps(seed),
@@ -125,17 +143,16 @@ impl Columns {
     }
 }
 
-/// The PI level loop ([`LevelLoop`]) through `valve`, V_P recorded with `noise`.
+/// The PI level loop `plant` through `valve`, V_P recorded with `noise`.
 fn closed_loop(
     valve: &mut Valve,
-    level_pct: f64,
+    mut plant: LevelLoop,
     n: usize,
     dt: f64,
     noise: &Normal<f64>,
     rng: &mut ChaCha8Rng,
     rec: &mut Columns,
 ) {
-    let mut plant = LevelLoop::new(level_pct);
     valve.reset(level::NOMINAL_OPENING_PCT, level::NOMINAL_OPENING_PCT);
     for k in 0..n {
         let tk = k as f64 * dt;
@@ -157,6 +174,10 @@ mod tests {
         for ex in [
             Excitation::RandomSteps,
             Excitation::ClosedLoop { level_pct: 50.0 },
+            Excitation::NoisyLoop {
+                level_pct: 50.0,
+                level_noise_pct: 0.4,
+            },
             Excitation::SmallSteps { around_pct: 40.0 },
             Excitation::Ramps,
             Excitation::Mixed { low_pct: 30.0 },

@@ -1,0 +1,201 @@
+//! A diagnosis's conclusion in words: the verdict (what was missing, its size with its
+//! interval, and the measure in which adding it improved the fit), the sizes of findings and
+//! traces, and the figures of the final model.
+//!
+//! Not here: the evidence of each finding or the notes (`report::diagnose`).
+
+use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Size, Trace};
+
+/// What a size's name means to a person, and the unit it is printed in.
+fn label(name: &str) -> (&'static str, &'static str) {
+    match name {
+        "dead_time_s" => ("dead time", " s"),
+        "friction_band_pct" => ("friction band", " %"),
+        "open_vs_closed" => ("fully open slower than closed by", " times"),
+        "crossing_open_s" => ("crossing time fully open", " s"),
+        "stroke_speed_pct_per_s" => ("stroke speed at half travel", " %/s"),
+        "speed_ratio" => ("one direction faster than the other by", " times"),
+        "min_speed_pct_per_s" => ("minimum speed", " %/s"),
+        "slip_pct" => ("slip", " %"),
+        "deadband_pct" => ("deadband", " %"),
+        "stop_pct" => ("travel stop at", " %"),
+        "lattice_pct" => ("sensor lattice", " %"),
+        "reading_error_pct" => ("reading error", " %"),
+        _ => ("size", ""),
+    }
+}
+
+/// A number with three significant figures (at least two decimals below 1).
+pub fn num(x: f64) -> String {
+    let a = x.abs();
+    let decimals = if a >= 100.0 {
+        0
+    } else if a >= 10.0 {
+        1
+    } else if a >= 0.1 || a == 0.0 {
+        2
+    } else {
+        3
+    };
+    format!("{x:.decimals$}")
+}
+
+/// A size with its interval: `friction band 1.40 % (1.10-1.80)`.
+pub fn size(s: &Size) -> String {
+    let (what, unit) = label(s.name);
+    if s.low < s.high {
+        format!(
+            "{what} {}{unit} ({}-{})",
+            num(s.value),
+            num(s.low),
+            num(s.high)
+        )
+    } else {
+        format!("{what} {}{unit}", num(s.value))
+    }
+}
+
+/// The measure a finding improved, in words.
+pub fn measure(m: &Measure) -> String {
+    match *m {
+        Measure::HeldoutSse { before, after } => format!(
+            "held-out SSE {} -> {} %² ({:.0} % less)",
+            num(before),
+            num(after),
+            100.0 * (1.0 - after / before.max(1e-12))
+        ),
+        Measure::SlipDistance {
+            heldout,
+            before,
+            after,
+        } => format!(
+            "distance between the model's and the recording's slip-size histograms ({}) {} -> {} slips",
+            if heldout {
+                "held-out pieces"
+            } else {
+                "whole recording"
+            },
+            num(before),
+            num(after)
+        ),
+    }
+}
+
+/// A trace in words: its effect, size and share of the held-out error.
+pub fn trace(t: &Trace) -> String {
+    format!(
+        "{} ({}, {:.0} % of the held-out error)",
+        t.effect.name(),
+        size(&t.size),
+        100.0 * t.heldout_share
+    )
+}
+
+/// The figures of the final model in words.
+pub fn figures(f: &Figures) -> String {
+    format!(
+        "dead time {} s, friction band {} %, stroke speed at half travel {} %/s opening and {} %/s closing",
+        num(f.dead_time_s),
+        num(f.friction_band_pct),
+        num(f.opening_speed_pct_per_s),
+        num(f.closing_speed_pct_per_s)
+    )
+}
+
+/// `s` with its first letter in upper case.
+fn capitalised(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+}
+
+/// The verdict: what was missing, how large, and what adding it improved (never a model made
+/// worse: stick-slip is judged in the slip distance), or that nothing worth maintenance was
+/// missing, with the traces below it.
+pub fn verdict(d: &Diagnosis) -> String {
+    let traces = if d.traces.is_empty() {
+        String::new()
+    } else {
+        let list: Vec<String> = d.traces.iter().map(trace).collect();
+        format!(
+            " Below what is worth maintenance (traces): {}.",
+            list.join("; ")
+        )
+    };
+    match &d.outcome {
+        Outcome::Noise => format!(
+            "Nothing significant is missing: the residual is consistent with measurement noise.{traces}"
+        ),
+        Outcome::NotSignificant { windows } => format!(
+            "Nothing worth maintenance is missing from the vocabulary: {windows} windows stand above the noise floor, but no \
+             effect improves the held-out fit by more than chance and by a size worth maintenance.{traces}"
+        ),
+        Outcome::Missing {
+            heldout_sse_before: before,
+            heldout_sse_after: after,
+            ..
+        } => {
+            let named: Vec<String> = (d.findings.iter())
+                .map(|f| format!("{} ({})", f.effect.name(), size(&f.size)))
+                .collect();
+            let by_sse: Vec<&str> = (d.findings.iter())
+                .filter(|f| matches!(f.measure, Measure::HeldoutSse { .. }))
+                .map(|f| f.effect.name())
+                .collect();
+            let mut out = format!("The model was missing {}.", named.join(", "));
+            if !by_sse.is_empty() && after < before {
+                out += &format!(
+                    " Adding {} lowers the held-out SSE from {} to {} %² ({:.0} % less).",
+                    by_sse.join(", "),
+                    num(*before),
+                    num(*after),
+                    100.0 * (1.0 - after / before)
+                );
+            }
+            for f in &d.findings {
+                if let m @ Measure::SlipDistance { .. } = &f.measure {
+                    out += &format!(
+                        " {} was judged by the slips of V_P: adding it lowers the {} (free-run SSE cannot judge a \
+                         stick-slip limit cycle, whose phase O_P does not set).",
+                        capitalised(f.effect.name()),
+                        measure(m)
+                    );
+                }
+            }
+            out + &traces
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_read_with_their_intervals() {
+        let s = Size {
+            name: "friction_band_pct",
+            unit: "%",
+            value: 1.4,
+            low: 1.1,
+            high: 1.8,
+            worth: 4.7,
+        };
+        assert_eq!(size(&s), "friction band 1.40 % (1.10-1.80)");
+        let exact = Size {
+            low: 1.4,
+            high: 1.4,
+            ..s
+        };
+        assert_eq!(size(&exact), "friction band 1.40 %");
+        assert_eq!(num(0.05), "0.050");
+        assert_eq!(num(123.4), "123");
+        assert_eq!(
+            measure(&Measure::HeldoutSse {
+                before: 200.0,
+                after: 50.0
+            }),
+            "held-out SSE 200 -> 50.0 %² (75 % less)"
+        );
+    }
+}
