@@ -2,22 +2,11 @@
 //! mapped register read once and shown raw and scaled, nothing written unless `--write-test`,
 //! an unmapped address shown as exception 02 with what to check, one-line errors otherwise.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 mod common;
 
-use common::sim::{SimDevice, BIN, RTU_CONFIG};
-
-fn probe(cfg: &Path, extra: &[&str]) -> Output {
-    Command::new(BIN)
-        .args(["probe", "--config"])
-        .arg(cfg)
-        .args(extra)
-        .env_remove("RUST_LOG")
-        .output()
-        .unwrap()
-}
+use common::sim::{probe, SimDevice, RTU_CONFIG};
 
 fn text(out: &Output) -> (String, String) {
     (

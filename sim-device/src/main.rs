@@ -1,8 +1,12 @@
-//! sim-device: a fake Bürkert-style valve positioner that speaks real Modbus TCP and RTU.
+//! sim-device: a fake valve positioner (Bürkert-style, or a device profile's) that speaks real
+//! Modbus TCP and RTU.
 //!
-//! It serves the register map of `valve-bridge`'s `[valve.registers]` table (`--config`; without
-//! it the map of the shipped `config/sim-device-*.toml`: per-mille `u16` set-point in holding
-//! register 0, `i16` position in 1, status word in 2) from a [`RegisterBank`], over Modbus TCP
+//! It serves the register map of `valve-bridge`'s `[valve.registers]` table (`--config`, over the
+//! config's `profile` if it names one), of a shipped device profile (`--profile NAME`: its map,
+//! its further registers read as 0, and only its function codes, others answered with exception
+//! 01), or without either the map of the shipped `config/sim-device-*.toml` (per-mille `u16`
+//! set-point in holding register 0, `i16` position in 1, status word in 2), from a
+//! [`RegisterBank`], over Modbus TCP
 //! (`--tcp ADDR`), on a pseudo-terminal it opens itself (`--pty`) or on a serial device
 //! (`--serial PATH`). Its valve is a model from `config/models/` (pin-cart II by default) stepped
 //! at 100 Hz in real time from the last accepted set-point, optionally wearing over hours (a
@@ -43,7 +47,8 @@ use serde::Deserialize;
 use tokio::net::TcpListener;
 use tokio_serial::{SerialPort, SerialStream};
 use valve_bridge::modbus::link::{Parity, RtuLink};
-use valve_bridge::modbus::map::RegisterMap;
+use valve_bridge::modbus::map::{RegisterKeys, RegisterMap};
+use valve_bridge::modbus::profile::{self, Profile};
 use valve_bridge::modbus::serial;
 use valve_bridge::model::DriftSpec;
 use valve_bridge::net::{Health, Limits};
@@ -51,7 +56,7 @@ use valve_bridge::toml_file;
 
 use faults::{FaultConfig, Faults};
 use rtu::{LineSpeed, RtuDevice};
-use units::{Banks, Defaults, Unit, UnitArg};
+use units::{Banks, Defaults, Served, Unit, UnitArg};
 
 /// A fake valve positioner speaking Modbus TCP and RTU.
 #[derive(Parser, Debug)]
@@ -82,6 +87,10 @@ struct Args {
     /// [valve.modbus-rtu] slave_id / [valve.modbus-tcp] unit_id the RTU address.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// A shipped register profile of a real device (config/profiles/NAME.toml) to serve: its
+    /// map, its further registers and only its function codes.
+    #[arg(long, value_name = "NAME", conflicts_with = "config")]
+    profile: Option<String>,
     /// A unit served: its RTU slave address / TCP unit id, `ID`, or with a model and settings
     /// of its own, `ID=MODEL[,KEY=VALUE...]` (keys: noise_pct and the drift options' names
     /// with `_`, e.g. `2=pincart2,friction_band_drift_pct_per_h=2`). Repeat for several valves
@@ -178,7 +187,9 @@ struct ConfigFile {
 #[derive(Debug, Default, Deserialize)]
 struct ValveSection {
     #[serde(default)]
-    registers: RegisterMap,
+    profile: Option<String>,
+    #[serde(default)]
+    registers: RegisterKeys,
     #[serde(default, rename = "modbus-rtu")]
     rtu: LinkIds,
     #[serde(default, rename = "modbus-tcp")]
@@ -191,16 +202,32 @@ struct LinkIds {
     unit_id: Option<u8>,
 }
 
-/// The map and the RTU address from `--config`, checked with errors naming file, line and key.
-fn load_config(path: &Path) -> anyhow::Result<(RegisterMap, Option<u8>)> {
+/// The registers and the RTU address from `--config` (its `[valve.registers]` over its
+/// `profile`, if any), checked with errors naming file, line and key.
+fn load_config(path: &Path) -> anyhow::Result<(Served, Option<u8>)> {
     let (file, text): (ConfigFile, String) = toml_file::load(path)?;
-    file.valve
-        .registers
-        .check_in(&text, path, "valve.registers")?;
-    Ok((
-        file.valve.registers,
-        file.valve.rtu.slave_id.or(file.valve.tcp.unit_id),
-    ))
+    let v = file.valve;
+    let section = "valve.registers";
+    let served = match &v.profile {
+        None => {
+            let map = RegisterMap::from(v.registers);
+            map.check_in(&text, path, section)?;
+            Served::map(map)
+        }
+        Some(name) => {
+            let p = shipped_profile(name)?;
+            Served::profile(p.under(&v.registers, &text, path, section, 0)?, &p)
+        }
+    };
+    Ok((served, v.rtu.slave_id.or(v.tcp.unit_id)))
+}
+
+/// The shipped profile `name`, or what the shipped ones are.
+fn shipped_profile(name: &str) -> anyhow::Result<Profile> {
+    match profile::find(name) {
+        Some(found) => Ok(found?),
+        None => bail!("{}", profile::unknown(name)),
+    }
 }
 
 fn main() -> std::process::ExitCode {
@@ -283,11 +310,17 @@ fn line(args: &Args, port: &str) -> RtuLink {
 
 async fn run(args: Args) -> anyhow::Result<()> {
     check(&args)?;
-    let (map, config_unit) = match &args.config {
-        Some(path) => load_config(path)?,
-        None => (RegisterMap::device_default(), None),
+    let (served, config_unit) = match (&args.config, &args.profile) {
+        (Some(path), _) => load_config(path)?,
+        (None, Some(name)) => {
+            let p = shipped_profile(name)?;
+            tracing::info!("sim-device: profile {name}: {}", p.about.device);
+            (Served::profile(p.map, &p), None)
+        }
+        (None, None) => (Served::map(RegisterMap::device_default()), None),
     };
-    let units = units_of(&args, map, config_unit)?;
+    let map = served.map;
+    let units = units_of(&args, &served, config_unit)?;
     let banks = Banks::of(&units);
     let faults = Arc::new(Faults::new(FaultConfig {
         delay: Duration::from_millis(args.delay_ms),
@@ -374,8 +407,8 @@ async fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// The units of the command line (`--unit`, else one at the address of `--config`, else 1),
-/// each serving `map`; two units at one address are refused.
-fn units_of(args: &Args, map: RegisterMap, config_unit: Option<u8>) -> anyhow::Result<Vec<Unit>> {
+/// each serving `served`; two units at one address are refused.
+fn units_of(args: &Args, served: &Served, config_unit: Option<u8>) -> anyhow::Result<Vec<Unit>> {
     let defaults = Defaults {
         model: args.model.clone(),
         noise_pct: args.noise_pct,
@@ -405,7 +438,7 @@ fn units_of(args: &Args, map: RegisterMap, config_unit: Option<u8>) -> anyhow::R
                 a.id
             );
         }
-        units.push(Unit::new(a, &defaults, map)?);
+        units.push(Unit::new(a, &defaults, served)?);
     }
     Ok(units)
 }

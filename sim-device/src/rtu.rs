@@ -174,7 +174,7 @@ impl RtuDevice {
 mod tests {
     use super::*;
     use crate::faults::FaultConfig;
-    use crate::units::{parse_unit, Defaults, Unit};
+    use crate::units::{parse_unit, Defaults, Served, Unit};
     use valve_bridge::modbus::map::RegisterMap;
     use valve_bridge::model::DriftSpec;
 
@@ -189,7 +189,7 @@ mod tests {
         let units: Vec<Unit> = (ids.iter())
             .map(|id| {
                 let arg = parse_unit(&id.to_string()).unwrap();
-                Unit::new(&arg, &defaults, RegisterMap::default()).unwrap()
+                Unit::new(&arg, &defaults, &Served::map(RegisterMap::default())).unwrap()
             })
             .collect();
         let banks = Banks::of(&units);

@@ -20,7 +20,8 @@ use anyhow::{bail, Context as _};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use valve_bridge::modbus::map::RegisterMap;
+use valve_bridge::modbus::map::{RegisterMap, Table};
+use valve_bridge::modbus::profile::Profile;
 use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
 use valve_bridge::model::{self, Drift, DriftSpec, ModelKind, ModelSpec, Valve};
 
@@ -101,6 +102,36 @@ const KEYS: [&str; 5] = [
     "friction_band_drift_max_pct",
 ];
 
+/// The registers every unit serves: a map, and (from a device profile) further registers, read
+/// as 0, and the only function codes answered (empty: all).
+#[derive(Debug, Clone, Default)]
+pub struct Served {
+    pub map: RegisterMap,
+    pub others: Vec<(Table, u16)>,
+    pub functions: Vec<u8>,
+}
+
+impl Served {
+    /// Just `map`.
+    pub fn map(map: RegisterMap) -> Served {
+        Served {
+            map,
+            ..Served::default()
+        }
+    }
+
+    /// `map` (the profile's, or a config's over it) with `profile`'s registers and functions.
+    pub fn profile(map: RegisterMap, profile: &Profile) -> Served {
+        Served {
+            map,
+            others: (profile.others.iter())
+                .map(|o| (o.table, o.address))
+                .collect(),
+            functions: profile.about.functions.clone(),
+        }
+    }
+}
+
 /// What every unit gets unless it says otherwise (the command line's options).
 #[derive(Debug, Clone)]
 pub struct Defaults {
@@ -121,8 +152,8 @@ pub struct Unit {
 }
 
 impl Unit {
-    /// The unit `arg` describes, serving `map`, with `defaults` for what it does not set.
-    pub fn new(arg: &UnitArg, defaults: &Defaults, map: RegisterMap) -> anyhow::Result<Unit> {
+    /// The unit `arg` describes, serving `served`, with `defaults` for what it does not set.
+    pub fn new(arg: &UnitArg, defaults: &Defaults, served: &Served) -> anyhow::Result<Unit> {
         let name = arg.model.as_deref().unwrap_or(&defaults.model);
         let spec = load_model(name).with_context(|| format!("unit {}: model `{name}`", arg.id))?;
         let mut noise_pct = defaults.noise_pct;
@@ -147,7 +178,10 @@ impl Unit {
         let drift = Drift::new(&drift, &valve).with_context(|| format!("unit {}", arg.id))?;
         Ok(Unit {
             id: arg.id,
-            bank: Arc::new(RegisterBank::new(map, 0.0, 100.0, OutOfRange::KeepAndFlag)),
+            bank: Arc::new(
+                RegisterBank::new(served.map, 0.0, 100.0, OutOfRange::KeepAndFlag)
+                    .serving(&served.others, &served.functions),
+            ),
             noise: (noise_pct > 0.0)
                 .then(|| Normal::new(0.0, noise_pct))
                 .transpose()?,
@@ -280,14 +314,13 @@ mod tests {
             seed: 1,
         };
         let arg = parse_unit("4=fopdt,friction_band_drift_pct_per_h=1").unwrap();
-        let e = Unit::new(&arg, &d, RegisterMap::device_default())
-            .err()
-            .unwrap();
+        let served = Served::map(RegisterMap::device_default());
+        let e = Unit::new(&arg, &d, &served).err().unwrap();
         assert!(format!("{e:#}").contains("only a pin-cart model"), "{e:#}");
         assert!(Unit::new(
             &parse_unit("4=pincart1,friction_band_drift_pct_per_h=1").unwrap(),
             &d,
-            RegisterMap::device_default()
+            &served
         )
         .is_ok());
     }

@@ -9,13 +9,14 @@ use anyhow::{bail, Context as _};
 use valve_bridge::daemon::config::ValveKind;
 use valve_bridge::daemon::Config;
 use valve_bridge::modbus::client::{Link, ModbusValve};
-use valve_bridge::modbus::probe;
+use valve_bridge::modbus::{probe, profile};
 
 /// Arguments of `valve-bridge probe`.
 #[derive(clap::Args)]
 pub struct Args {
     /// Daemon config (TOML) with `[valve] kind = "modbus-tcp"` or `"modbus-rtu"`: its link and
-    /// its `[valve.registers]` are probed.
+    /// its register map (`[valve.registers]`, over its `profile`) are probed; a profile's
+    /// registers show their manual names and numbers, and its further registers are read too.
     #[arg(long, value_name = "FILE")]
     config: PathBuf,
     /// Also write this set-point once (%), then read every register again. Nothing is written
@@ -57,6 +58,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             names.join(", ")
         );
     };
+    let profile = match valve.profile.as_deref().map(profile::find) {
+        Some(Some(found)) => Some(found?),
+        // The config's checks refused an unknown name already.
+        Some(None) | None => None,
+    };
     let link = match valve.kind {
         ValveKind::ModbusTcp => valve.tcp.clone().map(Link::Tcp),
         ValveKind::ModbusRtu => valve.rtu.clone().map(Link::Rtu),
@@ -78,7 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         valve.set_timeout(Duration::from_secs_f64(args.timeout_ms / 1000.0));
         valve.connect_now().await?;
-        anyhow::Ok(probe::probe(&mut valve, args.write_test).await)
+        anyhow::Ok(probe::probe(&mut valve, args.write_test, profile.as_ref()).await)
     })?;
     out!("{report}")?;
     match report.failures() {

@@ -13,14 +13,17 @@
 //! status   = { table = "holding", address = 2, setpoint_error_bit = 0 }   # optional
 //! word_order = "big"   # 32-bit formats: "big" = high word first, "little" = low word first
 //! fc23 = false         # one Read/Write Multiple Registers transaction per cycle
+//! fc6 = false          # write the set-point with Write Single Register (FC 6), not FC 16
 //! position_valid_pct = [-10.0, 110.0]   # a position outside is no reading (an error row)
 //! ```
 //!
 //! A position outside `position_valid_pct` is not data: transmitters report "no value" with
 //! codes such as -32768 (i16) or 65535 (u16), which would read as -3276.8 % or 6553.5 %.
 //!
-//! Percent = raw × scale + offset. This module converts and checks; it does no I/O and knows
-//! nothing of function codes beyond which table a register lives in.
+//! Percent = raw × scale + offset. A key left out takes the default above (or, under a device
+//! profile, the profile's value: [`crate::modbus::profile`]). This module converts and checks; it
+//! does no I/O and knows nothing of function codes beyond which table a register lives in and
+//! which write function the set-point takes.
 
 use std::path::Path;
 
@@ -152,32 +155,75 @@ impl StatusRegister {
     }
 }
 
-/// The register map of one positioner (see the module documentation).
+/// The register map of one positioner (see the module documentation). Read from TOML through
+/// [`RegisterKeys`]: a key left out keeps its [`Default`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "RegisterKeys")]
 pub struct RegisterMap {
     /// Where O_P is written (holding table).
-    #[serde(default = "default_setpoint")]
     pub setpoint: Register,
     /// Where V_P is read.
-    #[serde(default = "default_position")]
     pub position: Register,
     /// Optional mode/status register, read each cycle when present.
-    #[serde(default)]
     pub status: Option<StatusRegister>,
     /// Word order of 32-bit formats.
-    #[serde(default)]
     pub word_order: WordOrder,
     /// Use one Read/Write Multiple Registers (FC 23) transaction per cycle.
-    #[serde(default)]
     pub fc23: bool,
+    /// Write the set-point with Write Single Register (FC 6) instead of Write Multiple Registers
+    /// (FC 16), for devices that know only FC 3 and 6.
+    pub fc6: bool,
     /// The positions a reading can have, %: one outside is an error, not a V_P.
-    #[serde(default = "default_position_valid")]
     pub position_valid_pct: [f64; 2],
 }
 
-fn default_position_valid() -> [f64; 2] {
-    [-10.0, 110.0]
+/// The keys of a `[valve.registers]` table as written: each one given or not. Laid over a base
+/// map ([`RegisterKeys::over`]): the default map, or a device profile's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegisterKeys {
+    pub setpoint: Option<Register>,
+    pub position: Option<Register>,
+    pub status: Option<StatusRegister>,
+    pub word_order: Option<WordOrder>,
+    pub fc23: Option<bool>,
+    pub fc6: Option<bool>,
+    pub position_valid_pct: Option<[f64; 2]>,
+}
+
+impl RegisterKeys {
+    /// `base` with every given key replaced as a whole (a register is given whole).
+    pub fn over(&self, base: RegisterMap) -> RegisterMap {
+        RegisterMap {
+            setpoint: self.setpoint.unwrap_or(base.setpoint),
+            position: self.position.unwrap_or(base.position),
+            status: self.status.or(base.status),
+            word_order: self.word_order.unwrap_or(base.word_order),
+            fc23: self.fc23.unwrap_or(base.fc23),
+            fc6: self.fc6.unwrap_or(base.fc6),
+            position_valid_pct: self.position_valid_pct.unwrap_or(base.position_valid_pct),
+        }
+    }
+
+    /// True when the key `top` (`setpoint`, `fc23`, ...) is given.
+    pub fn gives(&self, top: &str) -> bool {
+        match top {
+            "setpoint" => self.setpoint.is_some(),
+            "position" => self.position.is_some(),
+            "status" => self.status.is_some(),
+            "word_order" => self.word_order.is_some(),
+            "fc23" => self.fc23.is_some(),
+            "fc6" => self.fc6.is_some(),
+            "position_valid_pct" => self.position_valid_pct.is_some(),
+            _ => false,
+        }
+    }
+}
+
+impl From<RegisterKeys> for RegisterMap {
+    fn from(keys: RegisterKeys) -> RegisterMap {
+        keys.over(RegisterMap::default())
+    }
 }
 
 fn default_setpoint() -> Register {
@@ -208,7 +254,8 @@ impl Default for RegisterMap {
             status: None,
             word_order: WordOrder::Big,
             fc23: false,
-            position_valid_pct: default_position_valid(),
+            fc6: false,
+            position_valid_pct: [-10.0, 110.0],
         }
     }
 }
@@ -409,6 +456,9 @@ impl RegisterMap {
         if self.setpoint.table != Table::Holding {
             bad("setpoint.table", "\"input\" is not allowed: input registers are read-only; the set-point must be a holding register".into());
         }
+        if self.fc6 && (self.fc23 || self.setpoint.format.width() != 1) {
+            bad("fc6", format!("true needs a one-register set-point (u16 or i16, not {}) and fc23 = false: FC 6 writes one register", self.setpoint.format));
+        }
         if self.fc23 && self.position.table != Table::Holding {
             bad("fc23", "true needs position.table = \"holding\": FC 23 reads holding registers only (or set fc23 = false)".into());
         }
@@ -449,23 +499,38 @@ impl RegisterMap {
     /// Checks a map read from `text` (file `path`) under `[section]`, e.g. `valve.registers`:
     /// the error names the file, the line and the full dotted key.
     pub fn check_in(&self, text: &str, path: &Path, section: &str) -> Result<(), TomlError> {
-        let Err(v) = self.validate() else {
-            return Ok(());
-        };
+        match self.validate() {
+            Ok(()) => Ok(()),
+            Err(v) => Err(v.located(text, path, section)),
+        }
+    }
+}
+
+impl MapViolation {
+    /// The key of the map section it is about (`setpoint` for `setpoint.address`).
+    pub fn top_key(&self) -> &str {
+        self.key.split_once('.').map_or(&self.key, |(top, _)| top)
+    }
+
+    /// This violation of a map read from `text` (file `path`) under `[section]`, at the line
+    /// that sets its key (else the section's header, else line 1).
+    pub fn located(self, text: &str, path: &Path, section: &str) -> TomlError {
         // Keys are `name.sub` (an inline table `name = { sub = .. }` or a `[section.name]` table) or `name`.
-        let (top, sub) = v.key.split_once('.').unwrap_or((&v.key, ""));
+        let (top, sub) = self.key.split_once('.').unwrap_or((&self.key, ""));
         let line = toml_file::line_of(text, Some(section), top)
             .or_else(|| toml_file::line_of(text, Some(&format!("{section}.{top}")), sub))
             .or_else(|| toml_file::line_of(text, Some(section), ""))
             .unwrap_or(1);
-        Err(TomlError::Invalid {
+        TomlError::Invalid {
             path: path.to_path_buf(),
             line,
-            key: format!("{section}.{}", v.key),
-            message: v.message,
-        })
+            key: format!("{section}.{}", self.key),
+            message: self.message,
+        }
     }
+}
 
+impl RegisterMap {
     /// The set-point as register words.
     pub fn encode_setpoint(&self, pct: f64) -> Result<Vec<u16>, ValueError> {
         self.setpoint.encode("set-point", pct, self.word_order)

@@ -3,6 +3,7 @@
 //!
 //! - [`map`]: where the set-point, the position and the status live and how words convert to %
 //!   (Bürkert-style per-mille by default; addresses are configuration).
+//! - [`profile`]: the shipped register profiles of real devices (`config/profiles/*.toml`).
 //! - [`link`]: the `[valve.modbus-tcp]` / `[valve.modbus-rtu]` settings.
 //! - [`plan`]: the transactions of one cycle (FC 23, or FC 16 plus a read) and their RTU sizes.
 //! - [`budget`]: a cycle's wire time on a serial line, and the verdict on the loop rate.
@@ -28,6 +29,7 @@ pub mod link;
 pub mod map;
 pub mod plan;
 pub mod probe;
+pub mod profile;
 pub mod serial;
 pub mod server;
 pub mod tcp_server;

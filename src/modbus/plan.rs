@@ -2,7 +2,7 @@
 //!
 //! A cycle writes the set-point and reads the position (and the status register when the map has
 //! one): either one Read/Write Multiple Registers transaction (FC 23) or a Write Multiple
-//! Registers (FC 16) followed by a read (FC 3 or FC 4). The position and a status register in the
+//! Registers (FC 16; Write Single Register, FC 6, with `fc6`) followed by a read (FC 3 or FC 4). The position and a status register in the
 //! same table within [`MAX_JOINED_SPAN`] registers are read together. The plan also knows the RTU
 //! frame sizes of each transaction, which the bus budget uses. Nothing here does I/O.
 
@@ -16,6 +16,8 @@ pub const MAX_JOINED_SPAN: u16 = 16;
 pub enum Transaction {
     /// FC 16: write `count` holding registers from `address`.
     Write { address: u16, count: u16 },
+    /// FC 6: write the one holding register at `address`.
+    WriteSingle { address: u16 },
     /// FC 3 (holding) or FC 4 (input): read `count` registers from `address`.
     Read {
         table: Table,
@@ -37,6 +39,7 @@ impl Transaction {
     pub fn function_code(&self) -> u8 {
         match self {
             Transaction::Write { .. } => 16,
+            Transaction::WriteSingle { .. } => 6,
             Transaction::Read {
                 table: Table::Holding,
                 ..
@@ -52,8 +55,8 @@ impl Transaction {
     /// RTU request frame size in bytes (address, PDU, CRC).
     pub fn rtu_request_bytes(&self) -> usize {
         match *self {
-            // addr, fc, start(2), qty(2), crc(2)
-            Transaction::Read { .. } => 8,
+            // addr, fc, start(2), qty(2), crc(2); FC 6: addr, fc, address(2), value(2), crc(2)
+            Transaction::Read { .. } | Transaction::WriteSingle { .. } => 8,
             // addr, fc, start(2), qty(2), byte count, data, crc(2)
             Transaction::Write { count, .. } => 9 + 2 * usize::from(count),
             // addr, fc, read start(2), read qty(2), write start(2), write qty(2), byte count, data, crc(2)
@@ -66,8 +69,8 @@ impl Transaction {
         match *self {
             // addr, fc, byte count, data, crc(2)
             Transaction::Read { count, .. } => 5 + 2 * usize::from(count),
-            // addr, fc, start(2), qty(2), crc(2)
-            Transaction::Write { .. } => 8,
+            // addr, fc, start(2), qty(2), crc(2); FC 6 echoes its request
+            Transaction::Write { .. } | Transaction::WriteSingle { .. } => 8,
             Transaction::ReadWrite { read_count, .. } => 5 + 2 * usize::from(read_count),
         }
     }
@@ -141,7 +144,11 @@ impl Plan {
             }
         };
         let mut transactions = Vec::with_capacity(3);
-        if !map.fc23 {
+        if map.fc6 {
+            transactions.push(Transaction::WriteSingle {
+                address: map.setpoint.address,
+            });
+        } else if !map.fc23 {
             transactions.push(Transaction::Write {
                 address: map.setpoint.address,
                 count: map.setpoint.format.width(),
@@ -247,6 +254,20 @@ mod tests {
         assert_eq!(p.transactions[0].rtu_response_bytes(), 8);
         assert_eq!(p.transactions[1].rtu_request_bytes(), 8);
         assert_eq!(p.transactions[1].rtu_response_bytes(), 7);
+    }
+
+    #[test]
+    fn fc6_writes_one_register() {
+        let map = RegisterMap {
+            fc6: true,
+            ..RegisterMap::default()
+        };
+        let p = Plan::new(&map);
+        assert_eq!(p.transactions[0], Transaction::WriteSingle { address: 0 });
+        assert_eq!(p.transactions[0].function_code(), 6);
+        assert_eq!(p.transactions[0].rtu_request_bytes(), 8);
+        assert_eq!(p.transactions[0].rtu_response_bytes(), 8);
+        assert_eq!(p.position.transaction, 1);
     }
 
     #[test]

@@ -4,7 +4,10 @@
 //! own client, and writes only when asked (`--write-test PCT`: the set-point once, then every
 //! register again). Each row of the [`Report`] holds the register's place and format, the raw
 //! words and what they mean in %, the round trip, or the fault in words (for an exception:
-//! its code, its name and what to check). The report prints as a table.
+//! its code, its name and what to check). With a device profile ([`super::profile`]) each row
+//! also carries the manual's name and number of the register, and the profile's further
+//! registers (override, command, ...) are read too, their values named. The report prints as a
+//! table.
 //!
 //! Not here: connecting (the caller opens the [`ModbusValve`]), the loop, the bus budget verdict.
 
@@ -13,12 +16,15 @@ use std::time::Instant;
 
 use super::client::{Fault, ModbusValve};
 use super::map::{Format, Register, StatusRegister, Table};
+use super::profile::Profile;
 
 /// One register read.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Row {
-    /// `set-point`, `position` or `status`.
+    /// `set-point`, `position` or `status`; `other` for a profile's further register.
     pub name: &'static str,
+    /// The manual's name and number of the register (with a profile).
+    pub manual: Option<(String, u32)>,
     /// Its table.
     pub table: Table,
     /// Its first address, 0-based as on the wire.
@@ -60,6 +66,8 @@ pub struct Report {
     pub before: Vec<Row>,
     /// The write test and the registers read after it.
     pub write: Option<(WriteTest, Vec<Row>)>,
+    /// The profile's name and what it says of itself, if the map is a profile's.
+    pub profile: Option<(String, String)>,
 }
 
 impl Report {
@@ -76,10 +84,14 @@ impl Report {
     }
 }
 
-/// Reads every register of `valve`'s map, and with `write_test` writes that set-point once and
-/// reads them all again.
-pub async fn probe(valve: &mut ModbusValve, write_test: Option<f64>) -> Report {
-    let before = read_all(valve).await;
+/// Reads every register of `valve`'s map (and of `profile`, the profile the map is from), and
+/// with `write_test` writes that set-point once and reads them all again.
+pub async fn probe(
+    valve: &mut ModbusValve,
+    write_test: Option<f64>,
+    profile: Option<&Profile>,
+) -> Report {
+    let before = read_all(valve, profile).await;
     let write = match write_test {
         Some(pct) => {
             let result = valve.write_setpoint(pct).await.map_err(|f| fault(&f));
@@ -87,7 +99,7 @@ pub async fn probe(valve: &mut ModbusValve, write_test: Option<f64>) -> Report {
                 asked_pct: pct,
                 result,
             };
-            Some((test, read_all(valve).await))
+            Some((test, read_all(valve, profile).await))
         }
         None => None,
     };
@@ -96,14 +108,36 @@ pub async fn probe(valve: &mut ModbusValve, write_test: Option<f64>) -> Report {
         timeout_ms: valve.timeout().as_secs_f64() * 1e3,
         before,
         write,
+        profile: profile.map(|p| (p.name.to_string(), describe(p))),
     }
 }
 
-/// One row per mapped register.
-async fn read_all(valve: &mut ModbusValve) -> Vec<Row> {
+/// What a profile says of itself, in one line.
+fn describe(p: &Profile) -> String {
+    let numbers = match p.about.first_number {
+        0 => "the manual's numbers are the addresses".to_string(),
+        n => format!("manual no. = address + {n}"),
+    };
+    let kind = if p.about.example {
+        "EXAMPLE map, not a device's documented one"
+    } else {
+        "source"
+    };
+    format!("{} ({kind}: {}; {numbers})", p.about.device, p.about.source)
+}
+
+/// One row per mapped register, then one per further register of the profile.
+async fn read_all(valve: &mut ModbusValve, profile: Option<&Profile>) -> Vec<Row> {
     let map = *valve.map();
+    let manual = |name: Option<&String>, address: u16| {
+        profile.map(|p| (name.cloned().unwrap_or_default(), p.number(address)))
+    };
+    let names = profile.map(|p| p.names.clone()).unwrap_or_default();
     let mut rows = Vec::with_capacity(3);
-    for (name, reg) in [("set-point", map.setpoint), ("position", map.position)] {
+    for (name, reg, called) in [
+        ("set-point", map.setpoint, names.setpoint.as_ref()),
+        ("position", map.position, names.position.as_ref()),
+    ] {
         let (result, ms) = timed(valve, reg.table, reg.address, reg.format.width()).await;
         let result = result.map(|words| {
             let meaning = percent(&reg, &words, map.word_order);
@@ -111,6 +145,7 @@ async fn read_all(valve: &mut ModbusValve) -> Vec<Row> {
         });
         rows.push(Row {
             name,
+            manual: manual(called, reg.address),
             table: reg.table,
             address: reg.address,
             format: reg.format,
@@ -126,8 +161,26 @@ async fn read_all(valve: &mut ModbusValve) -> Vec<Row> {
         });
         rows.push(Row {
             name: "status",
+            manual: manual(names.status.as_ref(), st.address),
             table: st.table,
             address: st.address,
+            format: Format::U16,
+            result,
+            ms,
+        });
+    }
+    for other in profile.map(|p| p.others.as_slice()).unwrap_or_default() {
+        let (result, ms) = timed(valve, other.table, other.address, 1).await;
+        let result = result.map(|words| {
+            let w = words.first().copied().unwrap_or(0);
+            let meaning = other.meaning(w).unwrap_or("").to_string();
+            Value { words, meaning }
+        });
+        rows.push(Row {
+            name: "other",
+            manual: manual(Some(&other.name), other.address),
+            table: other.table,
+            address: other.address,
             format: Format::U16,
             result,
             ms,
@@ -187,15 +240,34 @@ fn words(w: &[u16]) -> String {
 }
 
 fn table(f: &mut fmt::Formatter<'_>, rows: &[Row]) -> fmt::Result {
+    let width = (rows.iter())
+        .filter_map(|r| r.manual.as_ref().map(|(n, _)| n.chars().count()))
+        .max();
+    let manual = |name: &str, no: &str| match width {
+        Some(w) => format!(" {name:<w$} {no:>4}"),
+        None => String::new(),
+    };
     writeln!(
         f,
-        "  {:<10} {:<8} {:>7}  {:<6} {:<16} {:<18} {:>8}",
-        "register", "table", "address", "format", "raw", "value", "time"
+        "  {:<10}{} {:<8} {:>7}  {:<6} {:<16} {:<18} {:>8}",
+        "register",
+        manual("manual name", "no."),
+        "table",
+        "address",
+        "format",
+        "raw",
+        "value",
+        "time"
     )?;
     for r in rows {
+        let (name, no) = match &r.manual {
+            Some((n, no)) => (n.as_str(), no.to_string()),
+            None => ("", String::new()),
+        };
         let head = format!(
-            "  {:<10} {:<8} {:>7}  {:<6}",
+            "  {:<10}{} {:<8} {:>7}  {:<6}",
             r.name,
+            manual(name, &no),
             r.table.to_string(),
             r.address,
             r.format.to_string()
@@ -221,6 +293,9 @@ impl fmt::Display for Report {
             "probe: {} (each request within {:.0} ms; addresses 0-based, as on the wire)",
             self.link, self.timeout_ms
         )?;
+        if let Some((name, about)) = &self.profile {
+            writeln!(f, "profile {name}: {about}")?;
+        }
         table(f, &self.before)?;
         match &self.write {
             None => writeln!(f, "nothing written (--write-test PCT writes one set-point)"),

@@ -56,6 +56,10 @@ pub struct RegisterBank {
     min_pct: f64,
     max_pct: f64,
     policy: OutOfRange,
+    /// Further registers served (as 0, read-only), a device profile's.
+    others: Vec<(Table, u16)>,
+    /// The function codes answered (others: exception 01); empty: every one the bank knows.
+    functions: Vec<u8>,
     state: Mutex<State>,
 }
 
@@ -67,6 +71,8 @@ impl RegisterBank {
             min_pct,
             max_pct,
             policy,
+            others: Vec::new(),
+            functions: Vec::new(),
             state: Mutex::new(State {
                 setpoint_pct: min_pct.max(0.0).min(max_pct),
                 position_pct: 0.0,
@@ -100,6 +106,14 @@ impl RegisterBank {
             Ok(st) => st.setpoint_pct = pct,
             Err(poisoned) => poisoned.into_inner().setpoint_pct = pct,
         }
+        self
+    }
+
+    /// The same bank also serving `others` (each one register, read as 0, not writable) and
+    /// answering only `functions` (empty: all it knows), as a device profile describes.
+    pub fn serving(mut self, others: &[(Table, u16)], functions: &[u8]) -> Self {
+        self.others = others.to_vec();
+        self.functions = functions.to_vec();
         self
     }
 
@@ -142,6 +156,10 @@ impl RegisterBank {
 
     /// Answers one request.
     pub fn handle(&self, req: &Request<'_>) -> Result<Response, ExceptionCode> {
+        let fc = req.function_code().value();
+        if !self.functions.is_empty() && !self.functions.contains(&fc) {
+            return Err(ExceptionCode::IllegalFunction);
+        }
         match req {
             Request::ReadHoldingRegisters(a, n) => self
                 .read(Table::Holding, *a, *n, MAX_READ)
@@ -205,6 +223,9 @@ impl RegisterBank {
         if let Some(s) = m.status.filter(|s| s.table == table) {
             let a = u32::from(s.address);
             values.push((a..a + 1, vec![st.status]));
+        }
+        for &(_, a) in self.others.iter().filter(|(t, _)| *t == table) {
+            values.push((u32::from(a)..u32::from(a) + 1, vec![0]));
         }
         let start = u32::from(start);
         (start..start + u32::from(count))
@@ -308,6 +329,35 @@ mod tests {
         assert_eq!(write(&b, 420), Ok(Response::WriteMultipleRegisters(0, 1)));
         assert_eq!(write(&b, 65535), Err(ExceptionCode::IllegalDataValue));
         assert_eq!(b.setpoint_pct(), 42.0, "kept");
+    }
+
+    #[test]
+    fn a_profile_s_registers_and_functions_are_served() {
+        let b = RegisterBank::new(RegisterMap::default(), 0.0, 100.0, OutOfRange::KeepAndFlag)
+            .serving(&[(Table::Holding, 3), (Table::Input, 0)], &[3, 4, 6]);
+        assert_eq!(
+            b.handle(&Request::WriteSingleRegister(0, 420)),
+            Ok(Response::WriteSingleRegister(0, 420))
+        );
+        assert_eq!(write(&b, 420), Err(ExceptionCode::IllegalFunction));
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(0, 4)),
+            Err(ExceptionCode::IllegalDataAddress),
+            "register 2 is neither mapped nor the profile's"
+        );
+        assert_eq!(
+            b.handle(&Request::ReadHoldingRegisters(3, 1)),
+            Ok(Response::ReadHoldingRegisters(vec![0]))
+        );
+        assert_eq!(
+            b.handle(&Request::ReadInputRegisters(0, 1)),
+            Ok(Response::ReadInputRegisters(vec![0]))
+        );
+        assert_eq!(
+            b.handle(&Request::WriteSingleRegister(3, 1)),
+            Err(ExceptionCode::IllegalDataAddress),
+            "not writable"
+        );
     }
 
     #[test]

@@ -157,6 +157,17 @@ pub fn config(dir: &Path, shipped: &str, edits: &[(&str, &str)], source: &str) -
     path
 }
 
+/// `valve-bridge probe --config CFG EXTRA...` with the default log level, run to the end.
+pub fn probe(cfg: &Path, extra: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(["probe", "--config"])
+        .arg(cfg)
+        .args(extra)
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap()
+}
+
 /// `valve-bridge run` with the default log level (`RUST_LOG` unset).
 pub fn run_cmd(cfg: &Path, log_dir: &Path, duration_s: f64) -> Command {
     let mut cmd = Command::new(BIN);

@@ -403,3 +403,63 @@ fn compensation_is_per_valve_and_checked_at_its_lines() {
     ));
     assert!(e.contains("kick"), "{e}");
 }
+
+#[test]
+fn a_profile_supplies_the_map_and_the_config_overrides_it_key_by_key() {
+    let link = "kind = \"modbus-rtu\"\n[valve.modbus-rtu]\nport = \"/dev/ttyS7\"\nbaud = 38400\nslave_id = 1\n";
+    let c = Config::from_toml(
+        &format!("[loop]\nrate_hz = 10.0\n[valve]\nprofile = \"belimo-uk24mod\"\n{link}"),
+        Path::new("c.toml"),
+    )
+    .unwrap();
+    let map = c.valves[0].registers;
+    assert_eq!((map.setpoint.address, map.position.address), (0, 3));
+    assert!(map.fc6 && (map.setpoint.scale - 0.01).abs() < 1e-12);
+    // MP2 of the gateway: the registers given replace the profile's whole; the rest stays.
+    let c = Config::from_toml(
+        &format!("[loop]\nrate_hz = 10.0\n[valve]\nprofile = \"belimo-uk24mod\"\n{link}[valve.registers]\nsetpoint = {{ address = 20, format = \"u16\", scale = 0.01 }}\nposition = {{ address = 23, format = \"u16\", scale = 0.01 }}\n"),
+        Path::new("c.toml"),
+    )
+    .unwrap();
+    let map = c.valves[0].registers;
+    assert_eq!((map.setpoint.address, map.position.address), (20, 23));
+    assert!(map.fc6 && map.position_valid_pct == [0.0, 100.0]);
+    // Without a profile, the default map as before.
+    let c = Config::from_toml(&format!("[valve]\n{link}"), Path::new("c.toml")).unwrap();
+    assert_eq!(
+        c.valves[0].registers,
+        crate::modbus::map::RegisterMap::default()
+    );
+}
+
+#[test]
+fn profile_errors_name_file_line_key_and_the_shipped_profiles() {
+    let e = err("[loop]\nrate_hz = 10.0\n[valve]\nkind = \"modbus-tcp\"\nprofile = \"belimo-uk24\"\n[valve.modbus-tcp]\naddress = \"127.0.0.1:5502\"\n");
+    assert_eq!(
+        e,
+        "c.toml:5: valve.profile: no profile `belimo-uk24`: the shipped profiles (config/profiles/) are belimo-uk24mod, belimo-vav-compact-mod, burkert-mfc-float, burkert-style-example"
+    );
+    // In the second of two [[valve]] tables, at its line in the file.
+    let two = "[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\nprofile = \"nope\"\n";
+    assert!(
+        err(two).starts_with("c.toml:5: valve.profile: no profile `nope`"),
+        "{}",
+        err(two)
+    );
+    // A key of the config that does not fit the profile's map: the config's line.
+    let e = err(
+        "[valve]\nprofile = \"burkert-mfc-float\"\n[valve.registers]\nfc23 = false\nfc6 = true\n",
+    );
+    assert!(
+        e.starts_with("c.toml:5: valve.registers.fc6: true needs a one-register set-point")
+            && e.ends_with("(over profile `burkert-mfc-float`)"),
+        "{e}"
+    );
+    // A bad value in [valve.registers] is still named at its line.
+    let e =
+        err("[valve]\nprofile = \"belimo-uk24mod\"\n[valve.registers]\nword_order = \"middle\"\n");
+    assert!(
+        e.starts_with("c.toml:4: valve.registers.word_order: unknown variant `middle`"),
+        "{e}"
+    );
+}

@@ -1,5 +1,5 @@
 //! `[valve]`: which backend drives the valve and the settings of each kind (`[valve.emulated]`,
-//! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]`), with their checks; several
+//! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]` over a `profile`), with their checks; several
 //! valves are `[[valve]]` tables, each named, each with these sub-tables and optionally a
 //! `[valve.source]` and a `[valve.compensation]` of its own.
 //!
@@ -13,7 +13,8 @@ use serde::Deserialize;
 use super::{Check, LoopConfig, SourceConfig};
 use crate::compensate::{CompensateError, CompensationConfig, Compensator};
 use crate::modbus::link::{RtuLink, TcpLink};
-use crate::modbus::map::RegisterMap;
+use crate::modbus::map::{RegisterKeys, RegisterMap};
+use crate::modbus::profile;
 use crate::model::{bundled, DriftSpec, ModelError, ModelKind, ModelSpec};
 use crate::toml_file::{self, TomlError};
 
@@ -42,8 +43,16 @@ pub struct ValveConfig {
     /// `[valve.modbus-rtu]`.
     #[serde(rename = "modbus-rtu")]
     pub rtu: Option<RtuLink>,
-    /// `[valve.registers]`: the positioner's register map (Modbus kinds).
+    /// A shipped register profile of a real device (`config/profiles/NAME.toml`), the map
+    /// under `[valve.registers]` (Modbus kinds).
     #[serde(default)]
+    pub profile: Option<String>,
+    /// `[valve.registers]` as written: each key given replaces the profile's (or the default).
+    #[serde(default, rename = "registers")]
+    register_keys: RegisterKeys,
+    /// The positioner's register map: `[valve.registers]` over the profile's map, or over the
+    /// default one (set by the checks).
+    #[serde(skip)]
     pub registers: RegisterMap,
     /// A model file whose answer to each window's O_P is the health baseline (default: the
     /// first window with enough steps).
@@ -249,8 +258,9 @@ impl ValveConfig {
         self.name.as_deref().unwrap_or(UNNAMED)
     }
 
-    /// The checks of `[valve]` and its sub-tables, for a loop of `[loop]` `timing`.
-    fn check_in(&self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
+    /// The checks of `[valve]` and its sub-tables, for a loop of `[loop]` `timing`; resolves
+    /// the register map.
+    fn check_in(&mut self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
         self.emulated.check_in(c)?;
         if let Some(file) = &self.health_baseline_model {
             if let Err(err) = ModelSpec::load(file) {
@@ -264,9 +274,7 @@ impl ValveConfig {
         if let Some(comp) = &self.compensation {
             check_compensation(comp, c, timing)?;
         }
-        self.registers
-            .check_in(c.text, c.path, "valve.registers")
-            .map_err(|e| c.shift(e))?;
+        self.registers = self.register_map(c)?;
         let (table, settings) = match self.kind {
             ValveKind::Emulated => return Ok(()),
             ValveKind::ModbusTcp => (
@@ -310,6 +318,25 @@ impl ValveConfig {
                 ),
             )),
             _ => Ok(()),
+        }
+    }
+}
+
+impl ValveConfig {
+    /// `[valve.registers]` over the profile's map (or the default map), checked.
+    fn register_map(&self, c: &Check<'_>) -> Result<RegisterMap, TomlError> {
+        let section = "valve.registers";
+        let Some(name) = &self.profile else {
+            let map = RegisterMap::from(self.register_keys);
+            map.check_in(c.text, c.path, section)
+                .map_err(|e| c.shift(e))?;
+            return Ok(map);
+        };
+        match profile::find(name) {
+            None => Err(c.bad("valve", "profile", profile::unknown(name))),
+            Some(found) => {
+                found?.under(&self.register_keys, c.text, c.path, section, c.line_offset)
+            }
         }
     }
 }

@@ -384,6 +384,14 @@ async fn call(
             .write_multiple_registers(address, setpoint)
             .await?
             .map(|()| Vec::new())),
+        Transaction::WriteSingle { address } => {
+            // The plan gives FC 6 only to a one-register set-point.
+            let word = setpoint.first().copied().unwrap_or(0);
+            Ok(ctx
+                .write_single_register(address, word)
+                .await?
+                .map(|()| Vec::new()))
+        }
         Transaction::Read {
             table: Table::Holding,
             address,

@@ -386,9 +386,12 @@ impl ModbusValve {
         if !conn.is_connected() {
             conn.reconnect(&self.link, deadline).await?;
         }
-        let t = Transaction::Write {
-            address: self.map.setpoint.address,
-            count: words.len() as u16,
+        let t = match self.plan.transactions.first() {
+            Some(&single @ Transaction::WriteSingle { .. }) => single,
+            _ => Transaction::Write {
+                address: self.map.setpoint.address,
+                count: words.len() as u16,
+            },
         };
         conn.exchange(&self.link, self.timeout, t, &words, deadline)
             .await?;
@@ -401,7 +404,7 @@ impl ModbusValve {
     fn decode(&self, replies: &[Vec<u16>], op_pct: f64, sent: f64) -> Result<Reading, Fault> {
         for (t, words) in self.plan.transactions.iter().zip(replies) {
             let want = match *t {
-                Transaction::Write { .. } => 0,
+                Transaction::Write { .. } | Transaction::WriteSingle { .. } => 0,
                 Transaction::Read { count, .. } => count,
                 Transaction::ReadWrite { read_count, .. } => read_count,
             };

@@ -163,8 +163,11 @@ impl Framer {
                     readback,
                 })
             }
-            16 => {
-                let (address, data) = (word(2), &r[7..7 + usize::from(r[6])]);
+            6 | 16 => {
+                let (address, data) = match fc {
+                    6 => (word(2), &r[4..6]),
+                    _ => (word(2), &r[7..7 + usize::from(r[6])]),
+                };
                 self.remember(unit, address, data);
                 Some(Expect {
                     unit,
@@ -490,6 +493,27 @@ mod tests {
         // An exception to the request is its answer.
         let exc = frame(&[1, 0x83, 2]);
         assert_eq!(exchange(&mut f, &read, &[&exc], &state), exc);
+    }
+
+    #[test]
+    fn an_fc6_write_is_read_back_like_fc16() {
+        let state = WireState::default();
+        let mut f = Framer::new();
+        // FC 6 of set-point 7 at 0 (its reply echoes it), then FC 3 of registers 0-1.
+        let write = frame(&[1, 6, 0, 0, 0, 7]);
+        assert_eq!(exchange(&mut f, &write, &[&write], &state), write);
+        let read = frame(&[1, 3, 0, 0, 0, 2]);
+        let reply = frame(&[1, 3, 4, 0, 7, 1, 0xF4]);
+        assert_eq!(exchange(&mut f, &read, &[&reply], &state), reply);
+        // A late reply of an earlier cycle reads another set-point: dropped as stale.
+        let _ = exchange(&mut f, &frame(&[1, 6, 0, 0, 0, 9]), &[], &state);
+        let stale = frame(&[1, 3, 4, 0, 7, 1, 0xF0]);
+        let current = frame(&[1, 3, 4, 0, 9, 1, 0xF4]);
+        assert_eq!(
+            exchange(&mut f, &read, &[&stale, &current], &state),
+            current
+        );
+        assert_eq!(state.stale_replies(), 1);
     }
 
     #[test]
