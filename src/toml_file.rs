@@ -54,9 +54,36 @@ pub fn parse<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlErro
             path: path.to_path_buf(),
             line,
             key,
-            message: e.message().replace('\n', " "),
+            message: reason(e.message(), &text[offset..]),
         }
     })
+}
+
+/// The parser's message on one line; where it gives none (a control character, which TOML
+/// allows nowhere, not even in a comment), what the character is and what to do.
+fn reason(message: &str, from_error: &str) -> String {
+    let message = message.trim().replace('\n', " ");
+    if !message.is_empty() {
+        return message;
+    }
+    match from_error.chars().next() {
+        Some(c) if c.is_control() => format!(
+            "control character U+{:04X} is not allowed in TOML, not even in a comment: remove it",
+            u32::from(c)
+        ),
+        _ => "not valid TOML here".into(),
+    }
+}
+
+/// `line` trimmed, or `""` for a comment line, so a commented-out `key = value` is never
+/// taken for the key.
+fn code_of(line: &str) -> &str {
+    let line = line.trim();
+    if line.starts_with('#') {
+        ""
+    } else {
+        line
+    }
 }
 
 /// An error about `table.key` in `text`, located at the line that sets it (or line 1).
@@ -85,7 +112,7 @@ pub fn invalid(
 pub fn line_of(text: &str, table: Option<&str>, key: &str) -> Option<usize> {
     let mut current: Option<String> = None;
     for (i, raw) in text.lines().enumerate() {
-        let line = raw.trim();
+        let line = code_of(raw);
         if let Some(name) = header(line) {
             if key.is_empty() && Some(name.as_str()) == table {
                 return Some(i + 1);
@@ -108,7 +135,7 @@ pub fn line_of(text: &str, table: Option<&str>, key: &str) -> Option<usize> {
 fn key_at(text: &str, line: usize) -> Option<String> {
     let mut table: Option<String> = None;
     for (i, raw) in text.lines().enumerate() {
-        let l = raw.trim();
+        let l = code_of(raw);
         if let Some(name) = header(l) {
             table = Some(name);
         }
@@ -160,6 +187,29 @@ mod tests {
         name: String,
         loop_: Option<Inner>,
         inner: Inner,
+    }
+
+    #[test]
+    fn a_control_character_in_a_comment_is_named() {
+        let text = "name = \"x\"\n# bad \u{0} byte\n[inner]\nrate_hz = 1.0\n";
+        let err = parse::<Outer>(text, Path::new("c.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("c.toml:2: "), "{err}");
+        assert!(err.contains("control character U+0000"), "{err}");
+    }
+
+    #[test]
+    fn a_comment_is_never_a_key() {
+        let text = "# name = \"x\" is what this needs\n[inner]\nrate_hz = 1.0\n";
+        let err = parse::<Outer>(text, Path::new("c.toml"))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(err, "c.toml:1: (file): missing field `name`");
+        assert_eq!(
+            line_of("# rate_hz = 2\nrate_hz = 1", None, "rate_hz"),
+            Some(2)
+        );
     }
 
     #[test]
