@@ -1,9 +1,13 @@
 //! A log directory reads back as written: a run of exactly `rotate_after_s` leaves no file that
 //! holds only the stop row, and a directory with several valves' logs and their `health-*.csv`
-//! is read one valve at a time (`--valve`), the health files left out.
+//! is read one valve at a time (`--valve`), the health files left out; rotated files are
+//! gzipped and read as they are.
 
+use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Output};
+
+use valve_bridge::recording::gzip;
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 
@@ -73,12 +77,16 @@ fn a_log_directory_reads_back_one_valve_at_a_time() {
         .collect();
     names.sort();
     assert_eq!(names.len(), 6, "{names:?}");
+    // Each valve's first file was compressed when the log rotated; the last stays plain.
+    let compressed = names.iter().filter(|n| n.ends_with(".csv.gz")).count();
+    assert_eq!(compressed, 2, "{names:?}");
     for n in names.iter().filter(|n| n.starts_with("vb-")) {
-        let rows = std::fs::read_to_string(logs.join(n))
+        let mut body = String::new();
+        gzip::open(&logs.join(n))
             .unwrap()
-            .lines()
-            .count()
-            - 1;
+            .read_to_string(&mut body)
+            .unwrap();
+        let rows = body.lines().count() - 1;
         assert!(rows >= 3000, "{n}: {rows} rows");
     }
     // Several valves: the reader asks which.

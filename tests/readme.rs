@@ -19,7 +19,7 @@
 //!   summary. A block with a `while` loop feeding the daemon's Modbus server must end without
 //!   a watchdog trip (the loop is there to hold the set-point);
 //! - `cargo test`/`bench`/`build`/`install`, `pip`, `maturin`, `pytest`, `apt-get`, `sudo`,
-//!   `systemctl` and `journalctl` are not run (listed, with the reason); ```python blocks are
+//!   `systemctl`, `journalctl`, `python3 -m venv` and `.`/`source` are not run (listed, with the reason); ```python blocks are
 //!   text here and run by `python/tests/test_readme.py`;
 //! - a block whose first command is none of the above is text (the model diagram, say); an
 //!   unknown program later in a command block fails the test, so a new kind of command gets a
@@ -175,6 +175,9 @@ fn how(cmd: &Cmd) -> How {
         ["cargo", "bench", ..] => How::NotRun("a benchmark (minutes; run by hand)"),
         ["cargo", "build" | "install" | "fmt" | "clippy", ..] => How::NotRun("a build step"),
         ["pip" | "pip3" | "apt-get" | "apt", ..] => How::NotRun("installs packages"),
+        ["python3", "-m", "venv", ..] | ["." | "source", ..] => {
+            How::NotRun("makes or enters a virtual environment")
+        }
         ["maturin", ..] => How::NotRun("builds the Python package (minutes; .ci/run builds it)"),
         ["pytest", ..] => How::NotRun("the Python tests (.ci/run runs them)"),
         ["sudo", ..] => How::NotRun("needs root and systemd"),

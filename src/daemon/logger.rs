@@ -1,12 +1,14 @@
 //! The sample log: CSV files in the recording format, written by their own thread.
 //!
-//! The loop sends each [`Sample`] down an unbounded channel and never waits on the disk. The
+//! The loop sends each [`Sample`] down a bounded channel ([`QUEUE_ROWS`]). The
 //! logger thread writes the rows through a buffered CSV writer, flushes (and syncs) at least every
 //! `flush_interval_ms`, and rotates to a new file by size or by covered loop time. Each file
 //! starts with the header and is named by the time of its first row, `vb-YYYYMMDDTHHMMSSZ.csv`
 //! (UTC; `-1`, `-2`, ... added if that name is taken; `vb-NAME-...` for a named valve). Each
 //! valve has its own logger. A crash loses at most the last flush
-//! interval, and a file cut mid-line still loads with the recording reader.
+//! interval, and a file cut mid-line still loads with the recording reader. With `[log]
+//! compress` (the default) a file is gzipped on a thread of its own once the log has moved on to
+//! the next ([`crate::recording::gzip`]: `NAME.csv.gz`, read as it is by every reader).
 //!
 //! Columns: `t_s,op_pct,vp_pct,status,lateness_us,latency_us,op_sent_pct,utc,op_controller_pct`
 //! (the first six as they always were, then each later one added at the end, so readers of
@@ -23,7 +25,9 @@
 //!   register's scaling and rounding, e.g. 45.67 % as 457 per mille = 45.7 %); empty when the
 //!   write was not acknowledged.
 //! - `utc`: the slot's scheduled time as UTC wall-clock time, ms (`2026-11-23T19:27:09.045Z`):
-//!   the wall clock read when the loop started plus `t_s`, so it never jumps with the clock.
+//!   the wall clock read when the loop started plus `t_s`, so it never jumps with the clock. On
+//!   the virtual clock (`--as-fast-as-possible`) that is the run's start plus simulated time,
+//!   so a long run's later rows and file names lie in the future.
 //! - `op_controller_pct`: the O_P the source (the process controller) asked for, before
 //!   compensation; equal to `op_pct` without `[valve.compensation]` and in stop-action rows.
 //!
@@ -48,6 +52,7 @@ use time::OffsetDateTime;
 
 use super::config::LogConfig;
 use super::DaemonError;
+use crate::recording::gzip;
 
 /// The header of every log file.
 pub const HEADER: [&str; 9] = [
@@ -263,6 +268,10 @@ struct Files {
     max_span_s: f64,
     current: Option<OpenFile>,
     report: LogReport,
+    /// Compress each file once it is closed for a newer one (`[log] compress`).
+    compress: bool,
+    /// Compressions under way: the file's index in `report.files` and its thread.
+    compressing: Vec<(usize, JoinHandle<io::Result<PathBuf>>)>,
 }
 
 impl Files {
@@ -312,7 +321,11 @@ impl Files {
             }
         };
         if full {
+            let closed = self.current.as_ref().map(|f| f.path.clone());
             self.close()?;
+            if let Some(path) = closed {
+                self.compress_later(path);
+            }
             self.open(s.t_s)?;
         }
         if let Some(f) = &mut self.current {
@@ -348,6 +361,40 @@ impl Files {
         self.flush()?;
         self.current = None;
         Ok(())
+    }
+
+    /// Compresses the closed file `path` (the last of `report.files`) on a thread of its own,
+    /// so the queue keeps draining; a file that cannot be compressed is kept as it is.
+    fn compress_later(&mut self, path: PathBuf) {
+        if !self.compress {
+            return;
+        }
+        let index = self.report.files.len() - 1;
+        let spawned = std::thread::Builder::new()
+            .name("vb-gzip".into())
+            .spawn(move || gzip::compress(&path));
+        match spawned {
+            Ok(handle) => self.compressing.push((index, handle)),
+            Err(e) => tracing::warn!("cannot start compressing a log file ({e}); it stays plain"),
+        }
+    }
+
+    /// Waits for the compressions under way and names the files as they now are.
+    fn finish_compressing(&mut self) {
+        for (index, handle) in self.compressing.drain(..) {
+            let plain = &mut self.report.files[index];
+            match handle.join() {
+                Ok(Ok(gz)) => *plain = gz,
+                Ok(Err(e)) => tracing::warn!(
+                    "could not compress {} ({e}); it is kept as it is",
+                    plain.display()
+                ),
+                Err(_) => tracing::warn!(
+                    "compressing {} failed; it is kept as it is",
+                    plain.display()
+                ),
+            }
+        }
     }
 }
 
@@ -392,6 +439,8 @@ impl Logger {
             max_span_s: cfg.rotate_after_s,
             current: None,
             report: LogReport::default(),
+            compress: cfg.compress,
+            compressing: Vec::new(),
         };
         files.open(0.0)?;
         let flush_every = Duration::from_millis(cfg.flush_interval_ms);
@@ -445,6 +494,7 @@ fn write_all(
             }
         }
         if done {
+            files.finish_compressing();
             return match failed {
                 Some(e) => Err(e),
                 None => Ok(files.report),
@@ -481,6 +531,7 @@ mod tests {
             rotate_size_mb: 100.0,
             rotate_after_s: 1.0,
             flush_interval_ms: 10,
+            compress: false,
         };
         let logger = Logger::start(
             &cfg,
@@ -528,6 +579,45 @@ mod tests {
                 && name.len() == "vb-20261122T101500Z.csv".len(),
             "{name}"
         );
+    }
+
+    #[test]
+    fn rotated_files_are_compressed_and_read_back_as_one_recording() {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = LogConfig {
+            rotate_after_s: 1.0,
+            ..LogConfig::default()
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let logger = Logger::start(&cfg, dir.path(), Some("level"), None, stop).unwrap();
+        for k in 0..250u32 {
+            let vp = Some(f64::from(k) / 10.0);
+            let row = sample(f64::from(k) / 100.0, Status::Ok, vp);
+            logger.tx.send(row).unwrap();
+        }
+        drop(logger.tx);
+        let report = logger.handle.join().unwrap().unwrap();
+        let names: Vec<String> = report
+            .files
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names.len(), 3, "{names:?}");
+        assert!(names[0].ends_with(".csv.gz") && names[1].ends_with(".csv.gz"));
+        assert!(
+            names[2].ends_with(".csv"),
+            "the file being written stays plain"
+        );
+        for f in &report.files {
+            assert!(f.exists(), "{}", f.display());
+        }
+        let mut on_disk: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(on_disk.len(), 3, "no plain twin or part left: {on_disk:?}");
+        on_disk.clear();
+        let opts = crate::recording::ReadOptions::default();
+        let rec = crate::recording::read_all(&[dir.path().to_path_buf()], &opts).unwrap();
+        assert_eq!(rec.vp.len(), 250);
+        assert_eq!(rec.vp[123], 12.3);
     }
 
     #[test]

@@ -120,7 +120,7 @@ fn safe(name: &str) -> String {
         .collect()
 }
 
-/// The valves of `dir`: every `*.csv` file (sorted by name) as one valve, or with `map` every
+/// The valves of `dir`: every `*.csv` (or `*.csv.gz`) file (sorted by name) as one valve, or with `map` every
 /// tag of the map in every file (named by the tag, or `stem.tag` when there are several files).
 pub fn jobs(dir: &Path, map: Option<&ValveMap>) -> Result<Vec<Job>, FleetError> {
     let list = |source| FleetError::List {
@@ -130,11 +130,8 @@ pub fn jobs(dir: &Path, map: Option<&ValveMap>) -> Result<Vec<Job>, FleetError> 
     let mut files: Vec<PathBuf> = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(list)? {
         let path = entry.map_err(list)?.path();
-        if path.is_file()
-            && path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
-        {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        if path.is_file() && crate::recording::gzip::is_recording_name(&name) {
             files.push(path);
         }
     }
@@ -142,7 +139,10 @@ pub fn jobs(dir: &Path, map: Option<&ValveMap>) -> Result<Vec<Job>, FleetError> 
         return Err(FleetError::Empty(dir.to_path_buf()));
     }
     files.sort();
-    let stem = |p: &Path| safe(&p.file_stem().unwrap_or_default().to_string_lossy());
+    let stem = |p: &Path| {
+        let name = p.file_name().unwrap_or_default().to_string_lossy();
+        safe(crate::recording::gzip::stem(&name))
+    };
     let Some(map) = map else {
         return Ok(files
             .iter()

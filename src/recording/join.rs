@@ -5,7 +5,8 @@
 //! not overlap; the times between them are handled as any gap ([`super::grid`]). Warnings of each
 //! file are prefixed with its name. A directory stands for its `.csv` files: when it holds the
 //! daemon's logs (`vb-STAMP.csv`, `vb-NAME-STAMP.csv`), those of one valve (`--valve NAME` when
-//! there are several), and never the daemon's `health*.csv`; the files read are logged. A file
+//! there are several), and never the daemon's `health*.csv`; the files read are logged. Logs the
+//! daemon compressed (`.csv.gz`) are read as they are. A file
 //! of a set may
 //! hold a single row (the last of a rotated set often does) or none (skipped, with a warning);
 //! the set as a whole needs two.
@@ -13,6 +14,7 @@
 use std::path::{Path, PathBuf};
 
 use super::grid::Rows;
+use super::gzip;
 use super::read::{read_rows, MIN_ROWS};
 use super::{ReadOptions, Recording, RecordingError};
 
@@ -24,7 +26,7 @@ pub fn read_all(paths: &[PathBuf], opts: &ReadOptions) -> Result<Recording, Reco
     let mut warnings = Vec::new();
     for f in &files {
         let label = f.display().to_string();
-        let file = std::fs::File::open(f).map_err(|source| RecordingError::Io {
+        let file = super::gzip::open(f).map_err(|source| RecordingError::Io {
             file: label.clone(),
             action: "cannot read",
             source,
@@ -79,7 +81,7 @@ fn expand(paths: &[PathBuf], valve: Option<&str>) -> Result<Vec<PathBuf>, Record
             );
         }
         csv.sort();
-        let chosen = one_valve(&label, csv, valve)?;
+        let chosen = one_valve(&label, without_half_compressed(&label, csv), valve)?;
         if chosen.is_empty() {
             return Err(RecordingError::NoFiles { dir: label });
         }
@@ -142,10 +144,13 @@ fn one_valve(
     Ok(chosen)
 }
 
-/// The valve a daemon log file is named for (`vb-NAME-STAMP.csv`; "" for `vb-STAMP.csv`), or
-/// None for any other name. STAMP is `YYYYMMDDTHHMMSSZ`, with `-N` when the name was taken.
+/// The valve a daemon log file is named for (`vb-NAME-STAMP.csv`, compressed or not; "" for
+/// `vb-STAMP.csv`), or None for any other name. STAMP is `YYYYMMDDTHHMMSSZ`, with `-N` when the name was taken.
 fn log_valve(name: &str) -> Option<&str> {
-    let rest = name.strip_prefix("vb-")?.strip_suffix(".csv")?;
+    if !gzip::is_recording_name(name) {
+        return None;
+    }
+    let rest = gzip::stem(name).strip_prefix("vb-")?;
     let stamp_at = |i: usize| {
         let s = rest.as_bytes().get(i..i + 16)?;
         let digits = |r: std::ops::Range<usize>| s[r].iter().all(u8::is_ascii_digit);
@@ -170,7 +175,27 @@ fn file_name(f: &Path) -> &str {
 }
 
 fn is_csv(f: &Path) -> bool {
-    f.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+    gzip::is_recording_name(file_name(f))
+}
+
+/// `files` (sorted) without a `NAME.csv.gz` whose `NAME.csv` is there too: a compression cut
+/// short by a crash leaves both, and the plain one is certainly whole.
+fn without_half_compressed(dir: &str, files: Vec<PathBuf>) -> Vec<PathBuf> {
+    let names: Vec<String> = files.iter().map(|f| file_name(f).to_string()).collect();
+    let twin = |name: &str| {
+        name.len() > 3
+            && name[name.len() - 3..].eq_ignore_ascii_case(".gz")
+            && names.iter().any(|n| n == &name[..name.len() - 3])
+    };
+    let (twins, kept): (Vec<PathBuf>, Vec<PathBuf>) =
+        files.into_iter().partition(|f| twin(file_name(f)));
+    for t in &twins {
+        tracing::warn!(
+            "{dir}: left out {} (its plain .csv is there too)",
+            file_name(t)
+        );
+    }
+    kept
 }
 
 /// The rows of all parts in time order, checked for overlaps.
@@ -239,6 +264,7 @@ mod tests {
         assert_eq!(log_valve("vb-20261125T101500Z.csv"), Some(""));
         assert_eq!(log_valve("vb-20261125T101500Z-2.csv"), Some(""));
         assert_eq!(log_valve("vb-level-20261125T101500Z.csv"), Some("level"));
+        assert_eq!(log_valve("vb-level-20261125T101500Z.csv.gz"), Some("level"));
         assert_eq!(
             log_valve("vb-my-valve_2-20261125T101500Z-1.csv"),
             Some("my-valve_2")

@@ -15,6 +15,7 @@
 //!   (`vp=`), scaling (`--scale`). See [`ReadOptions`].
 //! - [`write()`] / [`write_columns`]: save columns with shortest round-trip number formatting, so
 //!   reading back gives the identical `f64` values.
+//! - [`gzip`]: the daemon's compressed logs (`.csv.gz`), read as they are by every reader.
 //! - [`resample_zoh`]: hold a piecewise-constant signal (O_P) onto another sample period.
 //!
 //! Not here: interpolation of missing V_P (a missing value is dropped or refused, never
@@ -25,6 +26,7 @@ mod cells;
 mod columns;
 mod error;
 pub mod grid;
+pub mod gzip;
 mod join;
 mod read;
 mod resample;

@@ -53,7 +53,7 @@ impl Default for ReadOptions {
 /// Reads and checks the recording at `path`.
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<Recording, RecordingError> {
     let label = path.display().to_string();
-    let file = std::fs::File::open(path).map_err(|source| RecordingError::Io {
+    let file = super::gzip::open(path).map_err(|source| RecordingError::Io {
         file: label.clone(),
         action: "cannot read",
         source,

@@ -194,6 +194,9 @@ pub struct LogConfig {
     pub rotate_after_s: f64,
     /// Flush at least this often, ms (10-1000).
     pub flush_interval_ms: u64,
+    /// Gzip each file once the log has rotated to the next (`NAME.csv.gz`); the file being
+    /// written stays plain CSV.
+    pub compress: bool,
 }
 
 impl Default for LogConfig {
@@ -203,6 +206,7 @@ impl Default for LogConfig {
             rotate_size_mb: 100.0,
             rotate_after_s: 3600.0,
             flush_interval_ms: 1000,
+            compress: true,
         }
     }
 }
