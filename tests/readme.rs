@@ -18,7 +18,7 @@
 //!   block's end they get SIGTERM, last started first, and a daemon must exit 0 with its
 //!   summary. A block with a `while` loop feeding the daemon's Modbus server must end without
 //!   a watchdog trip (the loop is there to hold the set-point);
-//! - `cargo test`/`bench`/`build`/`install`, `pip`, `maturin`, `pytest`, `apt-get`, `sudo`,
+//! - `cargo test`/`bench`/`build`/`install`, `cargo run --example` (README's generator), `pip`, `maturin`, `pytest`, `apt-get`, `sudo`,
 //!   `systemctl` and `journalctl` are not run (listed, with the reason); ```python blocks are
 //!   text here and run by `python/tests/test_readme.py`;
 //! - a block whose first command is none of the above is text (the model diagram, say); an
@@ -164,6 +164,9 @@ fn how(cmd: &Cmd) -> How {
         ["valve-bridge", ..] => How::Foreground,
         ["sim-device", ..] | ["while", ..] => How::Background,
         ["mbpoll" | "curl" | "python3" | "for", ..] => How::Foreground,
+        ["cargo", "run", "--example", ..] => {
+            How::NotRun("rewrites README itself (the tests compare its figures)")
+        }
         ["cargo", "run", ..] => match mapped(&cmd.text) {
             Some(m) => how(&Cmd {
                 text: m,

@@ -133,6 +133,11 @@ impl<'a> Dataset<'a> {
         h
     }
 
+    /// The dataset ([`Self::html`]) and its chart over all of its samples.
+    pub fn html_and_chart(&self, title: &str, y_label: &str, x_label: &str) -> String {
+        self.html() + &self.chart(title, y_label, x_label, self.range.clone())
+    }
+
     /// A chart of the dataset over the samples `range` (all of it, or a window inside it):
     /// interactive where scripts run, the static SVG of [`plot::lines`] where they do not.
     pub fn chart(&self, title: &str, y_label: &str, x_label: &str, range: Range<usize>) -> String {

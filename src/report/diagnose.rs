@@ -559,13 +559,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
     ];
     let data = Dataset::new("recording", t, &recording, 0..n);
     h.push_str("<h2>Whole recording</h2>");
-    h.push_str(&data.html());
-    h.push_str(&data.chart(
-        "measured and simulated V_P",
-        "position (%)",
-        "time (s)",
-        0..n,
-    ));
+    h.push_str(&data.html_and_chart("measured and simulated V_P", "position (%)", "time (s)"));
     let residual =
         |sim: &[f64]| -> Vec<f64> { rec.vp.iter().zip(sim).map(|(m, s)| m - s).collect() };
     let (before, after) = (residual(&d.sim_before), residual(&d.sim_after));
@@ -582,12 +576,10 @@ fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
         },
     ];
     let res = Dataset::new("residual", t, &residuals, 0..n);
-    h.push_str(&res.html());
-    h.push_str(&res.chart(
+    h.push_str(&res.html_and_chart(
         "residual (measured - simulated)",
         "residual (%)",
         "time (s)",
-        0..n,
     ));
     let mut worst = d.mismatch_windows.clone();
     worst.sort_by(|a, b| b.excess_sse.total_cmp(&a.excess_sse));

@@ -270,12 +270,10 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
     }
     let data = Dataset::new("recording", t, &recording, 0..n);
     h.push_str("<h2>Measured and simulated V_P</h2>");
-    h.push_str(&data.html());
-    h.push_str(&data.chart(
+    h.push_str(&data.html_and_chart(
         "whole recording (free run from the first sample)",
         "position (%)",
         "time (s)",
-        0..n,
     ));
     let best = id
         .rows
@@ -324,8 +322,7 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
         .collect();
     let data = Dataset::new("residual", t, &res_series, 0..n);
     h.push_str("<h2>Residual over time</h2>");
-    h.push_str(&data.html());
-    h.push_str(&data.chart("measured − simulated V_P", "residual (%)", "time (s)", 0..n));
+    h.push_str(&data.html_and_chart("measured − simulated V_P", "residual (%)", "time (s)"));
 }
 
 /// Figs. 5/6 and 7: step responses coloured by initial opening, delay against opening.

@@ -18,6 +18,7 @@ pub mod diagnose;
 pub mod fleet;
 pub mod identify;
 pub mod plot;
+pub mod readme;
 pub mod verdict;
 
 use std::fmt::Write;
