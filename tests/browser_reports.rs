@@ -2,10 +2,11 @@
 //! recording) and fleet's `index.html` with one of its valves' pages, written by the binary and
 //! opened in headless Chromium by `tests/browser/check_reports.py` (Playwright for Python driving
 //! Debian's Chromium). Fails on a console error, a chart that drew nothing, or a drag that does
-//! not zoom (or a double-click that does not reset) a chart's time range.
+//! not zoom (Shift+wheel that does not pan, a double-click that does not reset) a chart's time
+//! range.
 //!
 //! With `VB_SCREENSHOTS=DIR` the pages' screenshots are saved as `DIR/report-{identify,
-//! diagnose,fleet}.png` (README's are made with `VB_SCREENSHOTS=docs`). Without Chromium or
+//! diagnose,fleet,fleet-valve}.png` (README's are made with `VB_SCREENSHOTS=docs`). Without Chromium or
 //! Playwright the test is a visible skip, or a failure under `VB_REQUIRE_TOOLS=1`.
 
 use std::path::Path;

@@ -1,7 +1,8 @@
 """Checks valve-bridge's report pages in headless Chromium (see pages.py); exits 1 naming every
 problem: a console error or uncaught exception, fewer interactive charts than expected, a chart
-that drew nothing, a drag that did not narrow a chart's time range, a double-click that did not
-restore it, hover values that did not show, a static chart without lines.
+that drew nothing, a drag that did not narrow a chart's time range, Shift+wheel that did not
+move the zoomed range later in time, a double-click that did not restore it, hover values that
+did not show, a static chart without lines.
 
     python3 tests/browser/check_reports.py [--screenshots DIR] --page NAME PATH MIN_CHARTS ...
 
@@ -17,7 +18,8 @@ from pages import Browser
 
 
 def check_chart(page, i, problems, where):
-    """Checks chart `i` of `page`: drawn, zooms on a drag, resets on a double-click."""
+    """Checks chart `i` of `page`: drawn, zooms on a drag, pans on Shift+wheel, resets on a
+    double-click, shows values under the cursor."""
     ink = page.ink(i)
     if ink < 0.002:
         problems.append(f"{where}: chart {i} drew nothing ({ink:.4f} of its canvas inked)")
@@ -26,6 +28,12 @@ def check_chart(page, i, problems, where):
     if not (lo < zlo < zhi < hi) or (zhi - zlo) > 0.6 * (hi - lo):
         problems.append(
             f"{where}: chart {i}: dragging across it left its range at [{zlo}, {zhi}] (was [{lo}, {hi}])"
+        )
+    plo, phi = page.pan(i)
+    moved, kept = plo - zlo, (phi - plo) - (zhi - zlo)
+    if not (moved > 0 and abs(kept) <= 1e-6 * max(1.0, zhi - zlo)):
+        problems.append(
+            f"{where}: chart {i}: Shift+wheel left the zoomed range at [{plo}, {phi}] (was [{zlo}, {zhi}])"
         )
     rlo, rhi = page.reset(i)
     if abs(rlo - lo) > 1e-6 * max(1.0, abs(lo)) or abs(rhi - hi) > 1e-6 * max(1.0, abs(hi)):

@@ -108,6 +108,17 @@ class Page:
         mouse.up()
         return self.x_range(i)
 
+    def pan(self, i, notches=2):
+        """Turns the wheel over chart `i` with Shift held (later in time); its range after."""
+        _, box = self._over(i)
+        self.page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        self.page.keyboard.down("Shift")
+        for _ in range(notches):
+            self.page.mouse.wheel(0, 100)
+        self.page.keyboard.up("Shift")
+        self.page.wait_for_timeout(100)
+        return self.x_range(i)
+
     def reset(self, i):
         """Double-clicks chart `i`; its range after."""
         over, _ = self._over(i)

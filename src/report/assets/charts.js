@@ -1,8 +1,8 @@
 // Draws the interactive charts of a valve-bridge report (src/report/chart.rs) with uPlot: each
 // <div class="vb-chart" data-set=ID> reads the series of <script id="vb-data-ID"> (over its
 // data-x0..data-x1 stretch of time when given). Drag across a chart to zoom into that time,
-// double-click to go back; the legend shows the values under the cursor. The drawn charts are
-// window.vbCharts, in page order.
+// turn the wheel with Shift held to pan along it, double-click to go back; the legend shows the
+// values under the cursor. The drawn charts are window.vbCharts, in page order.
 (function () {
   "use strict";
   var sets = {};
@@ -46,9 +46,20 @@
       axes: [{ label: el.dataset.x }, { label: el.dataset.y }],
       series: series
     }, data, el);
+    // Shift+wheel pans by a tenth of the shown time, within the data (a plain wheel still
+    // scrolls the page: uPlot has no pan of its own).
+    chart.over.addEventListener("wheel", function (e) {
+      if (!e.shiftKey) { return; }
+      e.preventDefault();
+      var x = chart.scales.x, xs = chart.data[0];
+      var first = xs[0], last = xs[xs.length - 1], span = x.max - x.min;
+      var step = 0.1 * span * Math.sign(e.deltaY || e.deltaX);
+      var lo = Math.min(Math.max(x.min + step, first), last - span);
+      chart.setScale("x", { min: lo, max: lo + span });
+    }, { passive: false });
     var hint = document.createElement("div");
     hint.className = "vb-hint";
-    hint.textContent = "Drag across the chart to zoom into that time; double-click to see all of it again.";
+    hint.textContent = "Drag across the chart to zoom into that time, Shift+wheel to pan, double-click to see all of it again.";
     el.appendChild(hint);
     return chart;
   }
