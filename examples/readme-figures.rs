@@ -5,6 +5,8 @@
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
 //! optimised in debug builds too, and the tests that check README are debug builds).
+//!
+//! Not here: how the rows are worded (`valve_bridge::report::readme`).
 
 use std::path::Path;
 
