@@ -7,7 +7,7 @@
 //! the checkout (its entries linked), with `valve-bridge` and `sim-device` on PATH as the built
 //! binaries and `cargo run [--release] [-p sim-device] --` meaning them, through `bash -c`; the
 //! paths README gives under `/tmp/` are taken under the scratch directory's `tmp/` (a test
-//! writes in its own directories only), but for the pseudo-terminal links `/tmp/vb-sim-*` that
+//! writes in its own directories only), but for the pseudo-terminal links `/tmp/vb-*` that
 //! the shipped configs name:
 //!
 //! - `valve-bridge`, `sim-device`, `mbpoll`, `curl`, `python3` and `for` loops run to the end
@@ -277,7 +277,7 @@ impl Scratch {
         let tmp = self.dir.path().join("tmp");
         let tmp = format!("{}/", tmp.display());
         text.replace("/tmp/", &tmp)
-            .replace(&format!("{tmp}vb-sim-"), "/tmp/vb-sim-")
+            .replace(&format!("{tmp}vb-"), "/tmp/vb-")
     }
 
     /// `bash -c TEXT` in the scratch directory, in a process group of its own.
