@@ -3,13 +3,15 @@
 //! and the held-out error must drop whenever something is added, except for stick-slip judged
 //! by the slips of V_P (a limit cycle's phase is beyond the free-run error), which must say so.
 //! Every case also as the daemon would log it (per mille, 0.5 % of the rows without V_P in
-//! bursts of 1-3): the same effects must be named.
+//! bursts of 1-3): the same effects must be named. Each case's row of README's table of these
+//! diagnoses must be the one `valve_bridge::report::readme` makes of the diagnosis.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::Value;
 use valve_bridge::recording::{self, ReadOptions};
+use valve_bridge::report::readme;
 use valve_bridge::synth::logged;
 
 /// Share of the rows of a logged case without V_P.
@@ -49,9 +51,21 @@ fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
     (d, want)
 }
 
-/// Diagnoses `case`, checks the shape of the JSON and that the effects named are the truth's.
+/// Diagnoses `case`, checks the shape of the JSON, that the effects named are the truth's and
+/// that README's row of the case is the one generated from this diagnosis.
 fn named(case: &str) -> (Value, Vec<String>) {
     let (d, want) = diagnose(case);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let truth: Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join(format!("tests/data/cases/{case}.truth.json"))).unwrap(),
+    )
+    .unwrap();
+    let row = readme::diagnose_row(case, &truth, &d);
+    let text = std::fs::read_to_string(root.join("README.md")).unwrap();
+    if let Err(e) = readme::check_line(&text, readme::DIAGNOSE_CASES, &format!("| {case} |"), &row)
+    {
+        panic!("{e}");
+    }
     check_named(case, d, want)
 }
 

@@ -1,7 +1,8 @@
 //! `valve-bridge identify` and `steps` on recordings: every shared case file (100 Hz, hidden effects)
 //! and DAMADICS actuator 3 (real plant, 1 Hz, mapped columns). Identification must finish,
 //! beat the modelless reference, write model files that load and reproduce their score, and
-//! write a report with charts.
+//! write a report with charts. README's Table 1 of the paper-like case must be the one
+//! `valve_bridge::report::readme` makes of its identification.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -10,6 +11,7 @@ use serde_json::Value;
 use valve_bridge::metrics;
 use valve_bridge::model::{ModelSpec, Valve};
 use valve_bridge::recording::{self, ReadOptions};
+use valve_bridge::report::readme;
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_valve-bridge"))
@@ -90,6 +92,17 @@ fn every_case_recording_is_identified_and_every_model_beats_modelless() {
             assert!(r["heldout"]["sse"].as_f64().unwrap() < held, "{name}: {r}");
         }
         assert_eq!(rows[5]["params"].as_object().unwrap().len(), 7, "{name}");
+        if name == readme::TABLE1_CASE {
+            // README quotes this Table 1 as generated from this very document.
+            let text =
+                std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md"))
+                    .unwrap();
+            if let Err(e) =
+                readme::check_block(&text, readme::IDENTIFY_TABLE1, &readme::table1(&doc))
+            {
+                panic!("{e}");
+            }
+        }
     }
 }
 

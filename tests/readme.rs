@@ -7,7 +7,7 @@
 //! the checkout (its entries linked), with `valve-bridge` and `sim-device` on PATH as the built
 //! binaries and `cargo run [--release] [-p sim-device] --` meaning them, through `bash -c`; the
 //! paths README gives under `/tmp/` are taken under the scratch directory's `tmp/` (a test
-//! writes in its own directories only), but for the pseudo-terminal links `/tmp/vb-sim-*` that
+//! writes in its own directories only), but for the pseudo-terminal links `/tmp/vb-*` that
 //! the shipped configs name:
 //!
 //! - `valve-bridge`, `sim-device`, `mbpoll`, `curl`, `python3` and `for` loops run to the end
@@ -18,8 +18,9 @@
 //!   block's end they get SIGTERM, last started first, and a daemon must exit 0 with its
 //!   summary. A block with a `while` loop feeding the daemon's Modbus server must end without
 //!   a watchdog trip (the loop is there to hold the set-point);
-//! - `cargo test`/`bench`/`build`/`install`, `pip`, `maturin`, `pytest`, `apt-get`, `sudo`,
-//!   `systemctl`, `journalctl`, `python3 -m venv` and `.`/`source` are not run (listed, with the reason); ```python blocks are
+//! - `cargo test`/`bench`/`build`/`install`, `cargo run --example` (README's generator), `pip`,
+//!   `maturin`, `pytest`, `apt-get`, `sudo`, `systemctl`, `journalctl`, `python3 -m venv` and
+//!   `.`/`source` are not run (listed, with the reason); ```python blocks are
 //!   text here and run by `python/tests/test_readme.py`;
 //! - a block whose first command is none of the above is text (the model diagram, say); an
 //!   unknown program later in a command block fails the test, so a new kind of command gets a
@@ -164,6 +165,9 @@ fn how(cmd: &Cmd) -> How {
         ["valve-bridge", ..] => How::Foreground,
         ["sim-device", ..] | ["while", ..] => How::Background,
         ["mbpoll" | "curl" | "python3" | "for", ..] => How::Foreground,
+        ["cargo", "run", "--example", ..] => {
+            How::NotRun("rewrites README itself (the tests compare its figures)")
+        }
         ["cargo", "run", ..] => match mapped(&cmd.text) {
             Some(m) => how(&Cmd {
                 text: m,
@@ -277,7 +281,7 @@ impl Scratch {
         let tmp = self.dir.path().join("tmp");
         let tmp = format!("{}/", tmp.display());
         text.replace("/tmp/", &tmp)
-            .replace(&format!("{tmp}vb-sim-"), "/tmp/vb-sim-")
+            .replace(&format!("{tmp}vb-"), "/tmp/vb-")
     }
 
     /// `bash -c TEXT` in the scratch directory, in a process group of its own.

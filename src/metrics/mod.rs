@@ -24,7 +24,7 @@ pub use filter::{filtfilt_butter_lowpass, PAPER_FILTER_CUTOFF_HZ, PAPER_FILTER_O
 pub use travel::{travel, Travel, TravelCounter};
 
 /// One row of Table 1.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Scores {
     /// Mean |measured − simulated|, in the data's units (%).
     pub mae: f64,
@@ -188,6 +188,13 @@ pub fn table1_header() -> String {
 /// (MAE filtered of data that could not be filtered, R² of a constant measurement, anything of
 /// no samples) is `n/a`.
 pub fn table1_row(model: &str, s: &Scores) -> String {
+    let [mae, filtered, r2, sse, rel, n] = table1_cells(s);
+    format!("{model:<20} {mae:>8} {filtered:>12} {r2:>8} {sse:>12} {rel:>9} {n:>8}")
+}
+
+/// The figures of a Table 1 row as [`table1_row`] prints them: MAE, MAE filtered, R², SSE,
+/// Rel. SSE, samples.
+pub fn table1_cells(s: &Scores) -> [String; 6] {
     let pct = |x: f64, decimals: usize| {
         if x.is_finite() {
             format!("{x:.decimals$}%")
@@ -200,16 +207,14 @@ pub fn table1_row(model: &str, s: &Scores) -> String {
     } else {
         "n/a".into()
     };
-    format!(
-        "{:<20} {:>8} {:>12} {:>8} {:>12} {:>9} {:>8}",
-        model,
+    [
         pct(s.mae, 3),
         pct(if s.filtered { s.mae_filtered } else { f64::NAN }, 3),
         pct(100.0 * s.r2, 2),
         sse,
         pct(100.0 * s.rel_sse, 2),
-        s.n
-    )
+        s.n.to_string(),
+    ]
 }
 
 #[cfg(test)]

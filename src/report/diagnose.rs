@@ -10,6 +10,8 @@ use std::fmt::Write;
 
 use serde_json::Value;
 
+use super::chart::Dataset;
+use super::identify::fmt_param;
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 pub use super::verdict::verdict;
 use super::verdict::{figures, measure, size, trace};
@@ -319,6 +321,32 @@ pub fn note(n: &Note) -> String {
     }
 }
 
+/// The fitted parameters a finding freed, as `(name, value, unit)`: the names and values of
+/// `params` in the `--json` document.
+fn finding_params(f: &Finding) -> Vec<(&'static str, String, &'static str)> {
+    (f.knobs.iter())
+        .map(|k| {
+            let value = f.params.get(k.label()).and_then(Value::as_f64);
+            (k.label(), value.map_or("-".into(), fmt_param), k.unit())
+        })
+        .collect()
+}
+
+/// A finding's fitted parameters as an HTML table.
+fn params_html(f: &Finding) -> String {
+    let mut h =
+        String::from("<table><tr><th>fitted parameter</th><th>value</th><th>unit</th></tr>");
+    for (name, value, unit) in finding_params(f) {
+        let _ = write!(
+            h,
+            "<tr><td><code>{name}</code></td><td>{value}</td><td class=\"l\">{}</td></tr>",
+            esc(unit)
+        );
+    }
+    h.push_str("</table>");
+    h
+}
+
 /// The `--json` document: the diagnosis as derived, plus the rendered sentences.
 pub fn json(d: &Diagnosis) -> Value {
     let mut v = serde_json::to_value(d).unwrap_or(Value::Null);
@@ -393,7 +421,10 @@ pub fn text(d: &Diagnosis) -> String {
         }
         let _ = writeln!(o, "  size: {} (90 % interval)", size(&f.size));
         let _ = writeln!(o, "  evidence: {}", evidence(f));
-        let _ = writeln!(o, "  parameters: {}", Value::Object(f.params.clone()));
+        let _ = writeln!(o, "  parameters:");
+        for (name, value, unit) in finding_params(f) {
+            let _ = writeln!(o, "    {name:<26} {value:>12} {unit}");
+        }
         let _ = writeln!(
             o,
             "  improved: {}, delta BIC {:.0}",
@@ -474,11 +505,11 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
         };
         let _ = write!(
             h,
-            "<h3>{}{alternatives}</h3><p><b>{}</b> (90 % interval)</p><p>{}</p><p>Parameters: <code>{}</code><br>Improved: {}, ΔBIC {:.0}</p>",
+            "<h3>{}{alternatives}</h3><p><b>{}</b> (90 % interval)</p><p>{}</p>{}<p>Improved: {}, ΔBIC {:.0}</p>",
             f.effect.name(),
             esc(&size(&f.size)),
             esc(&evidence(f)),
-            esc(&Value::Object(f.params.clone()).to_string()),
+            params_html(f),
             esc(&measure(&f.measure)),
             f.delta_bic
         );
@@ -504,69 +535,51 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
 /// The whole recording, the residual, and the worst windows zoomed in.
 fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
     let (t, n) = (rec.t, rec.len());
-    let lines = |title: &str, range: std::ops::Range<usize>| {
-        plot::lines(
-            title,
-            "position (%)",
-            "time (s)",
-            t,
-            &[
-                Series {
-                    name: "O_P",
-                    y: rec.op,
-                    color: EXTRA,
-                },
-                Series {
-                    name: "V_P measured",
-                    y: rec.vp,
-                    color: MEASURED,
-                },
-                Series {
-                    name: "baseline",
-                    y: &d.sim_before,
-                    color: BEFORE,
-                },
-                Series {
-                    name: "final",
-                    y: &d.sim_after,
-                    color: AFTER,
-                },
-            ],
-            range,
-        )
-    };
+    let recording = [
+        Series {
+            name: "O_P",
+            y: rec.op,
+            color: EXTRA,
+        },
+        Series {
+            name: "V_P measured",
+            y: rec.vp,
+            color: MEASURED,
+        },
+        Series {
+            name: "baseline",
+            y: &d.sim_before,
+            color: BEFORE,
+        },
+        Series {
+            name: "final",
+            y: &d.sim_after,
+            color: AFTER,
+        },
+    ];
+    let data = Dataset::new("recording", t, &recording, 0..n);
     h.push_str("<h2>Whole recording</h2>");
-    h.push_str(&lines("measured and simulated V_P", 0..n));
-    let before: Vec<f64> = rec
-        .vp
-        .iter()
-        .zip(&d.sim_before)
-        .map(|(m, s)| m - s)
-        .collect();
-    let after: Vec<f64> = rec
-        .vp
-        .iter()
-        .zip(&d.sim_after)
-        .map(|(m, s)| m - s)
-        .collect();
-    h.push_str(&plot::lines(
+    h.push_str(&data.html_and_chart("measured and simulated V_P", "position (%)", "time (s)"));
+    let residual =
+        |sim: &[f64]| -> Vec<f64> { rec.vp.iter().zip(sim).map(|(m, s)| m - s).collect() };
+    let (before, after) = (residual(&d.sim_before), residual(&d.sim_after));
+    let residuals = [
+        Series {
+            name: "baseline",
+            y: &before,
+            color: BEFORE,
+        },
+        Series {
+            name: "final",
+            y: &after,
+            color: AFTER,
+        },
+    ];
+    let res = Dataset::new("residual", t, &residuals, 0..n);
+    h.push_str(&res.html_and_chart(
         "residual (measured - simulated)",
         "residual (%)",
         "time (s)",
-        t,
-        &[
-            Series {
-                name: "baseline",
-                y: &before,
-                color: BEFORE,
-            },
-            Series {
-                name: "final",
-                y: &after,
-                color: AFTER,
-            },
-        ],
-        0..n,
     ));
     let mut worst = d.mismatch_windows.clone();
     worst.sort_by(|a, b| b.excess_sse.total_cmp(&a.excess_sse));
@@ -580,8 +593,10 @@ fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
     for w in worst.iter().take(4) {
         let a = (((w.start_s - t[0]) / dt - 3.0 / dt).max(0.0) as usize).min(n.saturating_sub(1));
         let b = ((((w.end_s - t[0]) / dt) + 3.0 / dt) as usize).clamp(a + 1, n);
-        h.push_str(&lines(
+        h.push_str(&data.chart(
             &format!("{:.1}-{:.1} s: {}", w.start_s, w.end_s, context(w)),
+            "position (%)",
+            "time (s)",
             a..b,
         ));
     }

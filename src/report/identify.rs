@@ -1,5 +1,5 @@
 //! The identification report: the tables `valve-bridge identify` prints ([`text`]) and one
-//! self-contained HTML page (inline SVG, no server, no external
+//! self-contained HTML page (interactive charts over inline SVG, no server, no external
 //! files) with Table 1 (plus held-out scores and AIC/BIC), Table 2, the maintenance figures and
 //! the plots of the paper: measured against every model over the whole recording and zoomed
 //! into the worst windows (Figs. 8-10), the residuals, the step responses coloured by initial
@@ -12,6 +12,7 @@ use std::fmt::Write;
 
 use plotters::style::RGBColor;
 
+use super::chart::Dataset;
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 use super::{esc, page, row};
 use crate::fit::determined::Why;
@@ -86,35 +87,44 @@ pub fn worst_windows(
     out
 }
 
-/// The fitted parameters the recording does not pin down, or a dash.
-fn undetermined_text(r: &ModelFit) -> String {
-    let p: Vec<String> = (r.undetermined.iter())
-        .map(|u| {
-            let why = match u.why {
-                Why::AtBound => "at a bound of its range",
-                Why::Flat => "the error is flat along it",
-            };
-            format!("{} = {} ({why})", u.name, fmt_param(u.value))
-        })
-        .collect();
-    if p.is_empty() {
-        "-".into()
-    } else {
-        p.join(", ")
-    }
+/// One row of Table 2: a fitted parameter's name, value, unit and, when the recording does not
+/// pin it down, why.
+struct ParamRow {
+    name: &'static str,
+    value: String,
+    unit: &'static str,
+    undetermined: Option<&'static str>,
 }
 
-fn params_text(r: &ModelFit) -> String {
-    let p: Vec<String> = r
-        .params()
-        .iter()
-        .map(|(k, v, u)| format!("{k} = {v:.4} {u}"))
+/// Table 2's rows of a model: its parameters in physical units, then any parameter of the
+/// search the recording does not pin down that has no row of its own.
+fn param_rows(r: &ModelFit) -> Vec<ParamRow> {
+    let why = |name: &str| {
+        (r.undetermined.iter().find(|u| u.name == name)).map(|u| match u.why {
+            Why::AtBound => "not determined: at a bound of its range",
+            Why::Flat => "not determined: the error is flat along it",
+        })
+    };
+    let params = r.params();
+    let mut rows: Vec<ParamRow> = (params.iter())
+        .map(|&(name, v, unit)| ParamRow {
+            name,
+            value: fmt_param(v),
+            unit,
+            undetermined: why(name),
+        })
         .collect();
-    if p.is_empty() {
-        "–".into()
-    } else {
-        p.join(", ")
+    for u in &r.undetermined {
+        if params.iter().all(|p| p.0 != u.name) {
+            rows.push(ParamRow {
+                name: u.name,
+                value: fmt_param(u.value),
+                unit: "",
+                undetermined: why(u.name),
+            });
+        }
     }
+    rows
 }
 
 /// An optional figure with two decimals, or a dash.
@@ -176,16 +186,35 @@ fn tables_html(h: &mut String, id: &Identification) {
             r.bic
         );
     }
-    h.push_str("</table><h2>Table 2: fitted parameters</h2><table><tr><th>model</th><th>parameters</th><th>count</th><th>not determined by the recording</th></tr>");
+    h.push_str("</table><h2>Table 2: fitted parameters</h2><table><tr><th>model</th><th>parameter</th><th>value</th><th>unit</th><th>determined by the recording</th></tr>");
     for r in &id.rows {
-        let _ = write!(
-            h,
-            "<tr><td>{}</td><td class=\"l\">{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
-            r.kind.display_name(),
-            esc(&params_text(r)),
-            r.n_params,
-            esc(&undetermined_text(r))
-        );
+        let rows = param_rows(r);
+        if rows.is_empty() {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td class=\"l\" colspan=\"4\">no parameters</td></tr>",
+                r.kind.display_name()
+            );
+        }
+        for (i, p) in rows.iter().enumerate() {
+            let model = if i == 0 {
+                format!(
+                    "<td rowspan=\"{}\">{}</td>",
+                    rows.len(),
+                    r.kind.display_name()
+                )
+            } else {
+                String::new()
+            };
+            let _ = write!(
+                h,
+                "<tr>{model}<td class=\"l\"><code>{}</code></td><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td></tr>",
+                p.name,
+                p.value,
+                esc(p.unit),
+                p.undetermined.map_or("yes".into(), |w| format!("<b>{w}</b>"))
+            );
+        }
     }
     h.push_str("</table>");
 }
@@ -220,37 +249,31 @@ fn figures_html(h: &mut String, id: &Identification) {
 fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
     let (t, op, vp) = (rec.t, rec.op, rec.vp);
     let n = t.len().min(op.len()).min(vp.len());
-    let series = |with_op: bool| {
-        let mut s = Vec::new();
-        if with_op {
-            s.push(Series {
-                name: "O_P",
-                y: &op[..n],
-                color: RGBColor(190, 190, 190),
-            });
-        }
-        s.push(Series {
+    let mut recording = vec![
+        Series {
+            name: "O_P",
+            y: &op[..n],
+            color: RGBColor(190, 190, 190),
+        },
+        Series {
             name: "V_P measured",
             y: &vp[..n],
             color: MEASURED,
+        },
+    ];
+    for r in id.rows.iter().filter(|r| r.kind != ModelKind::Modelless) {
+        recording.push(Series {
+            name: r.kind.display_name(),
+            y: &r.sim[..n],
+            color: model_color(r.kind),
         });
-        for r in id.rows.iter().filter(|r| r.kind != ModelKind::Modelless) {
-            s.push(Series {
-                name: r.kind.display_name(),
-                y: &r.sim[..n],
-                color: model_color(r.kind),
-            });
-        }
-        s
-    };
+    }
+    let data = Dataset::new("recording", t, &recording, 0..n);
     h.push_str("<h2>Measured and simulated V_P</h2>");
-    h.push_str(&plot::lines(
+    h.push_str(&data.html_and_chart(
         "whole recording (free run from the first sample)",
         "position (%)",
         "time (s)",
-        t,
-        &series(true),
-        0..n,
     ));
     let best = id
         .rows
@@ -270,12 +293,10 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
         for z in zooms {
             let a = z.start.saturating_sub(len / 5);
             let b = (z.end + len / 5).min(n);
-            h.push_str(&plot::lines(
+            h.push_str(&data.chart(
                 &format!("{:.1}–{:.1} s", t[a], t[b - 1]),
                 "position (%)",
                 "time (s)",
-                t,
-                &series(true),
                 a..b,
             ));
         }
@@ -299,15 +320,9 @@ fn curves_html(h: &mut String, rec: &RecordingView, id: &Identification) {
             color: model_color(*k),
         })
         .collect();
+    let data = Dataset::new("residual", t, &res_series, 0..n);
     h.push_str("<h2>Residual over time</h2>");
-    h.push_str(&plot::lines(
-        "measured − simulated V_P",
-        "residual (%)",
-        "time (s)",
-        t,
-        &res_series,
-        0..n,
-    ));
+    h.push_str(&data.html_and_chart("measured − simulated V_P", "residual (%)", "time (s)"));
 }
 
 /// Figs. 5/6 and 7: step responses coloured by initial opening, delay against opening.
@@ -491,30 +506,25 @@ pub fn text(source: &str, duration_s: f64, id: &Identification) -> String {
 fn parameters_text(id: &Identification) -> String {
     let mut o = String::new();
     let _ = writeln!(o, "\nTable 2: fitted parameters");
-    let _ = writeln!(o, "{:<20} {:<6} parameters", "model", "count");
+    let _ = writeln!(
+        o,
+        "{:<20} {:<24} {:>12} {:<6} determined by the recording",
+        "model", "parameter", "value", "unit"
+    );
     for r in &id.rows {
-        let p: Vec<String> = r
-            .params()
-            .iter()
-            .map(|(k, v, u)| format!("{k} = {} {u}", fmt_param(*v)))
-            .collect();
-        let _ = writeln!(
-            o,
-            "{:<20} {:<6} {}",
-            r.kind.display_name(),
-            r.n_params,
-            if p.is_empty() {
-                "-".into()
-            } else {
-                p.join(", ")
-            }
-        );
-        if !r.undetermined.is_empty() {
+        let rows = param_rows(r);
+        if rows.is_empty() {
+            let _ = writeln!(o, "{:<20} -", r.kind.display_name());
+        }
+        for (i, p) in rows.iter().enumerate() {
             let _ = writeln!(
                 o,
-                "{:<27} not determined by the recording: {}",
-                "",
-                undetermined_text(r)
+                "{:<20} {:<24} {:>12} {:<6} {}",
+                if i == 0 { r.kind.display_name() } else { "" },
+                p.name,
+                p.value,
+                p.unit,
+                p.undetermined.unwrap_or("yes")
             );
         }
     }

@@ -1,5 +1,5 @@
-//! Reports people look at: the words, tables and self-contained HTML pages (inline SVG charts,
-//! no server, no external files) of the analysis results.
+//! Reports people look at: the words, tables and self-contained HTML pages (interactive charts
+//! with inline SVG fallbacks, no server, no external files) of the analysis results.
 //!
 //! - [`diagnose`]: a diagnosis's sentences (evidence, verdict, notes), its text, its `--json`
 //!   document and its page (the recording against the model before and after, the residual,
@@ -7,14 +7,18 @@
 //! - [`identify`]: an identification's page (Tables 1 and 2, the paper's Figs. 5-10).
 //! - [`fleet`]: a fleet's page (its valves ranked for maintenance, each linked to its own page).
 //! - [`plot`]: the SVG charts.
+//! - [`chart`]: the interactive time-series charts (uPlot, embedded), the SVG kept for a page
+//!   without scripts.
 //!
 //! The pages share one skeleton ([`page`]); [`write_files`] saves a report's files. This module
 //! only formats results; it computes nothing about the valve.
 
+pub mod chart;
 pub mod diagnose;
 pub mod fleet;
 pub mod identify;
 pub mod plot;
+pub mod readme;
 pub mod verdict;
 
 use std::fmt::Write;
@@ -67,9 +71,10 @@ fn page(heading: &str, body: &str) -> String {
          body{{font-family:sans-serif;max-width:960px;margin:auto;color:#222}}\
          table{{border-collapse:collapse;margin:6px 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
          td:first-child{{text-align:left}}td.l{{text-align:left}}.verdict{{font-size:1.15em;background:#eef;padding:8px}}\
-         </style></head><body><h1>{0}</h1>{1}</body></html>",
+         </style></head><body><h1>{0}</h1>{1}{2}</body></html>",
         esc(heading),
-        body
+        body,
+        chart::assets(body)
     );
     h
 }

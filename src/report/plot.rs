@@ -3,7 +3,11 @@
 //!
 //! Charts come back as SVG text to embed in an HTML page. Long series are thinned to at most
 //! [`MAX_POINTS`] points per line by keeping each bucket's min and max, so spikes survive.
+//! Legends sit in a band below the plotting area, never over the data.
+//!
+//! Not here: the interactive versions of the time series (`super::chart`).
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 /// Most points drawn per line.
@@ -24,13 +28,95 @@ pub const EXTRA: RGBColor = RGBColor(44, 160, 44);
 pub const GREY: RGBColor = RGBColor(150, 150, 150);
 pub const PURPLE: RGBColor = RGBColor(148, 103, 189);
 
-/// Draws the series labels in the one legend style every plot uses.
-fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) {
-    let _ = chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw();
+/// How a legend entry marks its series.
+#[derive(Clone, Copy)]
+enum Mark {
+    Line,
+    Dot,
+}
+
+/// One entry of a legend.
+struct Entry<'a> {
+    name: &'a str,
+    color: RGBColor,
+    mark: Mark,
+}
+
+/// Height of a legend row, px.
+const LEGEND_ROW: i32 = 18;
+/// Width given to each character of a legend label, px: the SVG backend has no font metrics, so
+/// labels are laid out at a generous average width of the 13 px sans-serif font.
+const CHAR_W: i32 = 7;
+
+/// Where each entry of a legend `width` px wide goes (left to right, wrapped) and the legend's
+/// height.
+fn legend_layout(entries: &[Entry], width: i32) -> (Vec<(i32, i32)>, i32) {
+    let (mut x, mut y) = (10, 4);
+    let mut at = Vec::with_capacity(entries.len());
+    for e in entries {
+        let w = 36 + CHAR_W * e.name.chars().count() as i32;
+        if x > 10 && x + w > width {
+            (x, y) = (10, y + LEGEND_ROW);
+        }
+        at.push((x, y));
+        x += w;
+    }
+    let height = if entries.is_empty() {
+        0
+    } else {
+        y + LEGEND_ROW + 4
+    };
+    (at, height)
+}
+
+/// An SVG chart of `size` px with `entries` as a legend in a band below it; `draw` draws the
+/// chart in the area above the band.
+fn with_legend(
+    size: (u32, u32),
+    entries: &[Entry],
+    draw: impl FnOnce(&DrawingArea<SVGBackend, Shift>),
+) -> String {
+    let (at, band) = legend_layout(entries, size.0 as i32);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (size.0, size.1 + band.max(0) as u32))
+            .into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let (chart, legend) = root.split_vertically(size.1);
+        draw(&chart);
+        for (e, &(x, y)) in entries.iter().zip(&at) {
+            let mid = y + LEGEND_ROW / 2;
+            let _ = match e.mark {
+                Mark::Line => legend.draw(&PathElement::new(
+                    vec![(x, mid), (x + 20, mid)],
+                    e.color.stroke_width(2),
+                )),
+                Mark::Dot => legend.draw(&Circle::new((x + 10, mid), 3, e.color.filled())),
+            };
+            let _ = legend.draw(&Text::new(
+                e.name,
+                (x + 26, mid - 7),
+                ("sans-serif", 13).into_font(),
+            ));
+        }
+        let _ = root.present();
+    }
+    svg
+}
+
+/// The indices of the lowest and highest finite value of `y` over the non-empty `range`, in
+/// time order (the first index twice when none is finite).
+pub(crate) fn extremes(y: &[f64], range: std::ops::Range<usize>) -> (usize, usize) {
+    let (mut lo, mut hi) = (range.start, range.start);
+    for k in range {
+        if y[k] < y[lo] || (y[lo].is_nan() && !y[k].is_nan()) {
+            lo = k;
+        }
+        if y[k] > y[hi] || (y[hi].is_nan() && !y[k].is_nan()) {
+            hi = k;
+        }
+    }
+    (lo.min(hi), lo.max(hi))
 }
 
 /// Indices to draw for `range` of a series: all, or each bucket's min and max.
@@ -44,17 +130,9 @@ fn thin(y: &[f64], range: std::ops::Range<usize>) -> Vec<usize> {
     let mut a = range.start;
     while a < range.end {
         let b = (a + bucket).min(range.end);
-        let (mut lo, mut hi) = (a, a);
-        for k in a..b {
-            if y[k] < y[lo] {
-                lo = k;
-            }
-            if y[k] > y[hi] {
-                hi = k;
-            }
-        }
-        out.push(lo.min(hi));
-        out.push(lo.max(hi));
+        let (lo, hi) = extremes(y, a..b);
+        out.push(lo);
+        out.push(hi);
         a = b;
     }
     out
@@ -69,35 +147,39 @@ pub fn lines(
     series: &[Series],
     range: std::ops::Range<usize>,
 ) -> String {
-    let mut svg = String::new();
     if range.is_empty() {
-        return svg;
+        return String::new();
     }
-    {
-        let root = SVGBackend::with_string(&mut svg, (900, 320)).into_drawing_area();
-        let _ = root.fill(&WHITE);
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for s in series {
-            for &v in &s.y[range.clone()] {
-                if v.is_finite() {
-                    lo = lo.min(v);
-                    hi = hi.max(v);
-                }
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for s in series {
+        for &v in s.y.get(range.clone()).unwrap_or_default() {
+            if v.is_finite() {
+                lo = lo.min(v);
+                hi = hi.max(v);
             }
         }
-        if !lo.is_finite() {
-            (lo, hi) = (0.0, 1.0);
-        }
-        let pad = ((hi - lo) * 0.05).max(1e-3);
-        let (t0, t1) = (t[range.start], t[range.end - 1].max(t[range.start] + 1e-9));
-        let chart = ChartBuilder::on(&root)
+    }
+    if !lo.is_finite() {
+        (lo, hi) = (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-3);
+    let (t0, t1) = (t[range.start], t[range.end - 1].max(t[range.start] + 1e-9));
+    let entries: Vec<Entry> = (series.iter())
+        .map(|s| Entry {
+            name: s.name,
+            color: s.color,
+            mark: Mark::Line,
+        })
+        .collect();
+    with_legend((900, 320), &entries, |root| {
+        let chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 16))
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(55)
             .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad));
         let Ok(mut chart) = chart else {
-            return String::new();
+            return;
         };
         let _ = chart
             .configure_mesh()
@@ -105,21 +187,14 @@ pub fn lines(
             .y_desc(y_label)
             .light_line_style(WHITE.mix(0.0))
             .draw();
-        for s in series {
+        for s in series.iter().filter(|s| s.y.len() >= range.end) {
             let idx = thin(s.y, range.clone());
-            let color = s.color;
-            if let Ok(ann) = chart.draw_series(LineSeries::new(
+            let _ = chart.draw_series(LineSeries::new(
                 idx.iter().map(|&k| (t[k], s.y[k])),
-                color.stroke_width(1),
-            )) {
-                ann.label(s.name)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            }
+                s.color.stroke_width(1),
+            ));
         }
-        legend(&mut chart);
-        let _ = root.present();
-    }
-    svg
+    })
 }
 
 /// A named group of (x, y) points of one colour.
@@ -142,24 +217,25 @@ pub fn scatter_lines(
     groups: &[PointGroup],
     curves: &[Curve],
 ) -> String {
-    let mut svg = String::new();
     let pts = || groups.iter().flat_map(|g| g.2.iter());
     if pts().next().is_none() {
-        return svg;
+        return String::new();
     }
-    {
-        let root = SVGBackend::with_string(&mut svg, (600, 360)).into_drawing_area();
-        let _ = root.fill(&WHITE);
-        let fold = |f: fn(&(f64, f64)) -> f64| {
-            pts()
-                .map(f)
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                    (a.min(v), b.max(v))
-                })
-        };
-        let (x0, x1) = fold(|p| p.0);
-        let (y0, y1) = fold(|p| p.1);
-        let chart = ChartBuilder::on(&root)
+    let fold = |f: fn(&(f64, f64)) -> f64| {
+        pts()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
+    };
+    let (x0, x1) = fold(|p| p.0);
+    let (y0, y1) = fold(|p| p.1);
+    let entries: Vec<Entry> = (curves.iter().map(|c| (c.0, c.1, Mark::Line)))
+        .chain(groups.iter().map(|g| (g.0, g.1, Mark::Dot)))
+        .map(|(name, color, mark)| Entry { name, color, mark })
+        .collect();
+    with_legend((600, 360), &entries, |root| {
+        let chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 16))
             .margin(8)
             .x_label_area_size(30)
@@ -169,36 +245,23 @@ pub fn scatter_lines(
                 (y0 - 0.05).min(0.0)..(y1 * 1.1 + 0.05),
             );
         let Ok(mut chart) = chart else {
-            return String::new();
+            return;
         };
         let _ = chart
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
             .draw();
-        for (name, color, points) in curves {
-            let color = *color;
-            if let Ok(ann) = chart.draw_series(LineSeries::new(
+        for (_, color, points) in curves {
+            let _ = chart.draw_series(LineSeries::new(
                 points.iter().copied(),
                 color.stroke_width(2),
-            )) {
-                ann.label(*name)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            }
+            ));
         }
-        for (name, color, points) in groups {
-            let color = *color;
-            if let Ok(ann) =
-                chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
-            {
-                ann.label(*name)
-                    .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
-            }
+        for (_, color, points) in groups {
+            let _ = chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())));
         }
-        legend(&mut chart);
-        let _ = root.present();
-    }
-    svg
+    })
 }
 
 /// Colour of a value 0-1 on a blue (0) to yellow (1) scale, like the paper's Fig. 6.
@@ -232,7 +295,6 @@ pub fn curves(
     curves: &[(RGBColor, Vec<(f64, f64)>)],
     note: &str,
 ) -> String {
-    let mut svg = String::new();
     let pts = || {
         curves
             .iter()
@@ -240,32 +302,38 @@ pub fn curves(
             .filter(|p| p.1.is_finite())
     };
     if pts().next().is_none() {
-        return svg;
+        return String::new();
     }
-    {
-        let root = SVGBackend::with_string(&mut svg, (900, 360)).into_drawing_area();
-        let _ = root.fill(&WHITE);
-        let (mut x0, mut x1, mut y0, mut y1) = (
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for p in pts() {
-            x0 = x0.min(p.0);
-            x1 = x1.max(p.0);
-            y0 = y0.min(p.1);
-            y1 = y1.max(p.1);
-        }
-        let pad = ((y1 - y0) * 0.05).max(1e-3);
-        let chart = ChartBuilder::on(&root)
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in pts() {
+        x0 = x0.min(p.0);
+        x1 = x1.max(p.0);
+        y0 = y0.min(p.1);
+        y1 = y1.max(p.1);
+    }
+    let pad = ((y1 - y0) * 0.05).max(1e-3);
+    let entries: Vec<Entry> = (!note.is_empty())
+        .then_some(Entry {
+            name: note,
+            color: blue_to_yellow(0.5),
+            mark: Mark::Line,
+        })
+        .into_iter()
+        .collect();
+    with_legend((900, 360), &entries, |root| {
+        let chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 16))
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(55)
             .build_cartesian_2d(x0..x1.max(x0 + 1e-9), (y0 - pad)..(y1 + pad));
         let Ok(mut chart) = chart else {
-            return String::new();
+            return;
         };
         let _ = chart
             .configure_mesh()
@@ -273,25 +341,13 @@ pub fn curves(
             .y_desc(y_label)
             .light_line_style(WHITE.mix(0.0))
             .draw();
-        for (i, (color, points)) in curves.iter().enumerate() {
-            let color = *color;
-            if let Ok(ann) = chart.draw_series(LineSeries::new(
+        for (color, points) in curves {
+            let _ = chart.draw_series(LineSeries::new(
                 points.iter().copied(),
                 color.mix(0.8).stroke_width(1),
-            )) {
-                if i == 0 && !note.is_empty() {
-                    ann.label(note).legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 16, y)], blue_to_yellow(0.5))
-                    });
-                }
-            }
+            ));
         }
-        if !note.is_empty() {
-            legend(&mut chart);
-        }
-        let _ = root.present();
-    }
-    svg
+    })
 }
 
 #[cfg(test)]
@@ -306,6 +362,59 @@ mod tests {
         let idx = thin(&y, 0..y.len());
         assert!(idx.len() <= MAX_POINTS + 2);
         assert!(idx.contains(&54_321));
+    }
+
+    /// The y coordinate of the text element reading `label` in `svg`.
+    fn text_y(svg: &str, label: &str) -> f64 {
+        let end = svg.find(&format!(">\n{label}\n</text>")).expect(label);
+        let tag = &svg[svg[..end].rfind("<text").unwrap()..end];
+        let y = &tag[tag.find(" y=\"").unwrap() + 4..];
+        y[..y.find('"').unwrap()].parse().unwrap()
+    }
+
+    #[test]
+    fn legends_are_below_the_plotting_area() {
+        let t: Vec<f64> = (0..500).map(|k| k as f64 * 0.01).collect();
+        let series: Vec<Series> = ["O_P", "V_P measured", "pin-cart II", "FOPDT", "stiction"]
+            .iter()
+            .map(|name| Series {
+                name,
+                y: &t,
+                color: MEASURED,
+            })
+            .collect();
+        let svg = lines("x", "%", "time (s)", &t, &series, 0..500);
+        for s in &series {
+            assert!(text_y(&svg, s.name) > 320.0, "{}", s.name);
+        }
+        let s = scatter_lines(
+            "s",
+            "a",
+            "b",
+            &[("reversal", AFTER, vec![(1.0, 2.0), (3.0, 1.0)])],
+            &[("fit", BEFORE, vec![(1.0, 1.5), (3.0, 1.5)])],
+        );
+        assert!(text_y(&s, "reversal") > 360.0 && text_y(&s, "fit") > 360.0);
+        let c = curves(
+            "c",
+            "t",
+            "y",
+            &[(AFTER, vec![(0.0, 0.0), (1.0, 1.0)])],
+            "note",
+        );
+        assert!(text_y(&c, "note") > 360.0);
+        // Many entries wrap onto further rows, each still below the chart and inside the SVG.
+        let names: Vec<String> = (0..12).map(|k| format!("a long series name {k}")).collect();
+        let many: Vec<Series> = (names.iter())
+            .map(|name| Series {
+                name,
+                y: &t,
+                color: AFTER,
+            })
+            .collect();
+        let svg = lines("x", "%", "time (s)", &t, &many, 0..500);
+        let last = text_y(&svg, &names[11]);
+        assert!(last > text_y(&svg, &names[0]) && last > 320.0);
     }
 
     #[test]

@@ -42,16 +42,17 @@ pub fn num(x: f64) -> String {
 
 /// A size with its interval: `friction band 1.40 % (1.10-1.80)`.
 pub fn size(s: &Size) -> String {
-    let (what, unit) = label(s.name);
-    if s.low < s.high {
-        format!(
-            "{what} {}{unit} ({}-{})",
-            num(s.value),
-            num(s.low),
-            num(s.high)
-        )
+    size_text(s.name, s.value, s.low, s.high)
+}
+
+/// The size named `name` (as in the `--json` document) of `value` within `low`-`high`, as
+/// [`size`] words it.
+pub fn size_text(name: &str, value: f64, low: f64, high: f64) -> String {
+    let (what, unit) = label(name);
+    if low < high {
+        format!("{what} {}{unit} ({}-{})", num(value), num(low), num(high))
     } else {
-        format!("{what} {}{unit}", num(s.value))
+        format!("{what} {}{unit}", num(value))
     }
 }
 

@@ -1,5 +1,5 @@
-//! External programs some integration tests need (mbpoll, pymodbus), and what happens when one
-//! is missing. Shared by the test crates of both packages (included with `#[path]`).
+//! External programs some integration tests need (mbpoll, pymodbus, Chromium with Playwright),
+//! and what happens when one is missing. Shared by the test crates of both packages (included with `#[path]`).
 //!
 //! A test that needs a missing tool cannot run. With `VB_REQUIRE_TOOLS=1` (set by `.ci/run`,
 //! which installs them) that is a failure naming the tool and how to install it. Otherwise the
@@ -14,6 +14,15 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 pub const MBPOLL_INSTALL: &str = "apt-get install mbpoll";
 /// How to install pymodbus with its serial support.
 pub const PYMODBUS_INSTALL: &str = "python3 -m pip install 'pymodbus[serial]>=3.6,<4'";
+
+/// How to install Debian's Chromium.
+pub const CHROMIUM_INSTALL: &str = "apt-get install chromium";
+/// How to install Playwright for Python (pointed at the system's Chromium, no browser download).
+pub const PLAYWRIGHT_INSTALL: &str = "python3 -m pip install 'playwright>=1.40,<2'";
+/// The Chromium the browser tests drive: `VB_CHROMIUM`, else Debian's.
+pub fn chromium() -> String {
+    std::env::var("VB_CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into())
+}
 
 static SKIPPED: AtomicUsize = AtomicUsize::new(0);
 
@@ -44,6 +53,16 @@ pub fn have_pymodbus() -> bool {
         &["-c", "import pymodbus, serial"],
         PYMODBUS_INSTALL,
     )
+}
+
+/// True if Chromium runs and python3 can import Playwright (see [`have`]).
+pub fn have_browser() -> bool {
+    have(&chromium(), &["--version"], CHROMIUM_INSTALL)
+        && have(
+            "python3",
+            &["-c", "import playwright.sync_api"],
+            PLAYWRIGHT_INSTALL,
+        )
 }
 
 /// True when a missing tool must fail the test (`VB_REQUIRE_TOOLS` set and not `0`).

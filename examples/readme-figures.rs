@@ -1,0 +1,70 @@
+//! Generates the deterministic figures README quotes (`valve_bridge::report::readme`): diagnoses
+//! the nine shared recordings and identifies the paper-like one, then prints README's generated
+//! blocks, or with `--write` puts them into README.md. Tests compare README with the same rows
+//! (`tests/diagnose_cases.rs`, `tests/identify_cli.rs`), so a stale figure fails CI.
+//!
+//! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
+//! optimised in debug builds too, and the tests that check README are debug builds).
+//!
+//! Not here: how the rows are worded (`valve_bridge::report::readme`).
+
+use std::path::Path;
+
+use anyhow::Context;
+use valve_bridge::fit::{self, Options};
+use valve_bridge::model::ModelKind;
+use valve_bridge::recording::{self, ReadOptions};
+use valve_bridge::report::{diagnose, readme};
+
+fn main() -> anyhow::Result<()> {
+    let write = std::env::args().skip(1).any(|a| a == "--write");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let cases = root.join("tests/data/cases");
+    let bar = indicatif::ProgressBar::new(readme::CASES.len() as u64 + 1);
+    let mut rows = vec![readme::DIAGNOSE_HEADER.to_string()];
+    for case in readme::CASES {
+        bar.set_message(case);
+        let rec = recording::read(&cases.join(format!("{case}.csv")), &ReadOptions::default())?;
+        let d = valve_bridge::diagnose::diagnose(&rec.view(), None, &|_, _| {})
+            .with_context(|| format!("diagnosing {case}"))?;
+        let truth_path = cases.join(format!("{case}.truth.json"));
+        let truth: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(&truth_path)
+                .with_context(|| format!("reading {}", truth_path.display()))?,
+        )?;
+        rows.push(readme::diagnose_row(case, &truth, &diagnose::json(&d)));
+        bar.inc(1);
+    }
+    let rec = recording::read(
+        &cases.join(format!("{}.csv", readme::TABLE1_CASE)),
+        &ReadOptions::default(),
+    )?;
+    let models = [
+        ModelKind::Fopdt,
+        ModelKind::Stiction,
+        ModelKind::Pincart1,
+        ModelKind::Pincart2,
+    ];
+    let id = fit::identify(&rec.view(), &Options::for_models(&models), &|_, _| {})?;
+    let table1 = readme::table1(&serde_json::to_value(&id)?);
+    bar.finish_and_clear();
+    let blocks = [
+        (readme::DIAGNOSE_CASES, rows.join("\n")),
+        (readme::IDENTIFY_TABLE1, table1),
+    ];
+    if write {
+        let path = root.join("README.md");
+        let mut text = std::fs::read_to_string(&path)?;
+        for (name, content) in &blocks {
+            text = readme::with_block(&text, name, content)
+                .with_context(|| format!("README.md has no block `{name}`"))?;
+        }
+        std::fs::write(&path, text)?;
+        eprintln!("wrote {} blocks into {}", blocks.len(), path.display());
+    } else {
+        for (name, content) in &blocks {
+            println!("<!-- generated: {name} -->\n{content}\n<!-- end generated -->\n");
+        }
+    }
+    Ok(())
+}
