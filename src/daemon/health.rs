@@ -101,26 +101,41 @@ impl Figures {
         self.dead_time_s.is_some() && self.reversal_delay_s.is_some()
     }
 
-    /// What drifted past `limits` against `base`, one phrase each (empty: healthy).
-    pub fn drifts(&self, base: &Figures, limits: &HealthConfig) -> Vec<String> {
+    /// The limit of each figure against `base`: a delay may rise by its `*_rise_s`, a stroke
+    /// speed fall by `speed_drop`, the tracking error grow by `tracking_rise`.
+    pub fn limits(base: &Figures, cfg: &HealthConfig) -> HealthLimits {
+        HealthLimits {
+            dead_time_s: base.dead_time_s.map(|d| d + cfg.dead_time_rise_s),
+            reversal_delay_s: base.reversal_delay_s.map(|d| d + cfg.reversal_delay_rise_s),
+            opening_speed_pct_per_s: base.opening_speed_pct_per_s * (1.0 - cfg.speed_drop),
+            closing_speed_pct_per_s: base.closing_speed_pct_per_s * (1.0 - cfg.speed_drop),
+            tracking_rms_pct: base.tracking_rms_pct * (1.0 + cfg.tracking_rise),
+        }
+    }
+
+    /// What drifted past its limit against `base`, one phrase each (empty: healthy).
+    pub fn drifts(&self, base: &Figures, cfg: &HealthConfig) -> Vec<String> {
+        let lim = Figures::limits(base, cfg);
         let mut out = Vec::new();
         let delays = [
             (
                 "dead time",
                 self.dead_time_s,
                 base.dead_time_s,
-                limits.dead_time_rise_s,
+                lim.dead_time_s,
+                cfg.dead_time_rise_s,
             ),
             (
                 "reversal delay",
                 self.reversal_delay_s,
                 base.reversal_delay_s,
-                limits.reversal_delay_rise_s,
+                lim.reversal_delay_s,
+                cfg.reversal_delay_rise_s,
             ),
         ];
-        for (what, now, then, rise) in delays {
-            if let (Some(now), Some(then)) = (now, then) {
-                if now - then > rise {
+        for (what, now, then, limit, rise) in delays {
+            if let (Some(now), Some(then), Some(limit)) = (now, then, limit) {
+                if now > limit {
                     out.push(format!(
                         "{what} {now:.3} s against {then:.3} s (limit +{rise} s)"
                     ));
@@ -132,30 +147,47 @@ impl Figures {
                 "opening",
                 self.opening_speed_pct_per_s,
                 base.opening_speed_pct_per_s,
+                lim.opening_speed_pct_per_s,
             ),
             (
                 "closing",
                 self.closing_speed_pct_per_s,
                 base.closing_speed_pct_per_s,
+                lim.closing_speed_pct_per_s,
             ),
         ];
-        for (what, now, then) in speeds {
-            if then > 0.0 && now < then * (1.0 - limits.speed_drop) {
+        for (what, now, then, limit) in speeds {
+            if then > 0.0 && now < limit {
                 out.push(format!(
                     "{what} speed {now:.2} %/s against {then:.2} %/s (limit -{:.0} %)",
-                    limits.speed_drop * 100.0
+                    cfg.speed_drop * 100.0
                 ));
             }
         }
         let (now, then) = (self.tracking_rms_pct, base.tracking_rms_pct);
-        if now > then * (1.0 + limits.tracking_rise) {
+        if now > lim.tracking_rms_pct {
             out.push(format!(
                 "tracking error {now:.2} % against {then:.2} % (limit +{:.0} %)",
-                limits.tracking_rise * 100.0
+                cfg.tracking_rise * 100.0
             ));
         }
         out
     }
+}
+
+/// The limit of each figure against a baseline (a delay's: none while the baseline has none);
+/// past one, the alarm is raised.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HealthLimits {
+    /// Highest dead time, s.
+    pub dead_time_s: Option<f64>,
+    /// Highest reversal delay, s.
+    pub reversal_delay_s: Option<f64>,
+    /// Lowest stroke speeds, %/s.
+    pub opening_speed_pct_per_s: f64,
+    pub closing_speed_pct_per_s: f64,
+    /// Highest RMS of O_P - V_P, %.
+    pub tracking_rms_pct: f64,
 }
 
 /// What the health check of one valve did, for the summary.
@@ -424,7 +456,7 @@ impl Monitor {
             notes.push("no baseline yet".into());
         }
         if let Some(m) = &self.metrics {
-            m.publish(&fig, alarm);
+            m.publish(&fig, base.map(|b| Figures::limits(&b, cfg)).as_ref(), alarm);
         }
         self.write(t_s, Some(&fig), &notes.join("; "))
     }
@@ -515,7 +547,8 @@ mod tests {
         assert!((0.3..0.6).contains(&dead), "{base:?}");
         assert!(base.reversal_delay_s.unwrap() > dead + 0.2, "{base:?}");
         assert!(base.drifts(&base, &cfg).is_empty());
-        let (op, vp) = window(0.3);
+        // Past both limits by more than a sample: a rise of exactly a limit does not alarm.
+        let (op, vp) = window(0.4);
         let worn = Figures::of(&op, &vp, 0.01, cfg.min_steps);
         let drifts = worn.drifts(&base, &cfg);
         assert!(
