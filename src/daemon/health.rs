@@ -17,7 +17,8 @@
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
 //! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
-//! bit [`HEALTH_ALARM_BIT`] of its status word.
+//! bit [`HEALTH_ALARM_BIT`] of its status word. With `[diagnosis]`, the thread also feeds the
+//! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -27,6 +28,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::config::HealthConfig;
+use super::diagnosis::Feed;
 use super::exporter::HealthMetrics;
 use super::hil::HEALTH_ALARM_BIT;
 use super::logger::{fixed, Sample};
@@ -277,6 +279,7 @@ pub fn start(
     dir: &Path,
     period_s: f64,
     valves: Vec<Watched>,
+    diagnosis: Option<Feed>,
 ) -> Result<Health, DaemonError> {
     let cap = ((cfg.window_s / period_s).round() as usize).max(1);
     let mut monitors = Vec::with_capacity(valves.len());
@@ -317,7 +320,7 @@ pub fn start(
     let cfg = cfg.clone();
     let handle = std::thread::Builder::new()
         .name("vb-health".into())
-        .spawn(move || watch(rx, monitors, &cfg, period_s, cap))
+        .spawn(move || watch(rx, monitors, &cfg, period_s, cap, diagnosis))
         .map_err(|source| DaemonError::Thread {
             what: "health thread",
             source,
@@ -339,6 +342,7 @@ fn watch(
     cfg: &HealthConfig,
     period_s: f64,
     cap: usize,
+    mut diagnosis: Option<Feed>,
 ) -> Result<Vec<HealthReport>, DaemonError> {
     for (i, row) in rx {
         let Some(m) = monitors.get_mut(i) else {
@@ -350,9 +354,20 @@ fn watch(
         }
         m.op.push_back(row.op_pct.unwrap_or(f64::NAN));
         m.vp.push_back(row.vp_pct.unwrap_or(f64::NAN));
+        let mut raised = false;
         if row.t_s >= m.next_at_s && m.op.len() == cap {
             m.next_at_s += cfg.every_s;
-            m.estimate(row.t_s, cfg, period_s)?;
+            raised = m.estimate(row.t_s, cfg, period_s)?;
+        }
+        if let Some(d) = &mut diagnosis {
+            let (op, vp) = (m.op.back(), m.vp.back());
+            d.push(
+                i,
+                row.t_s,
+                *op.unwrap_or(&f64::NAN),
+                *vp.unwrap_or(&f64::NAN),
+                raised,
+            );
         }
     }
     for m in &monitors {
@@ -381,8 +396,14 @@ fn filled(x: &VecDeque<f64>) -> (Vec<f64>, usize) {
 }
 
 impl Monitor {
-    /// Estimates the window ending at loop time `t_s`, compares, alarms, writes and publishes.
-    fn estimate(&mut self, t_s: f64, cfg: &HealthConfig, period_s: f64) -> Result<(), DaemonError> {
+    /// Estimates the window ending at loop time `t_s`, compares, alarms, writes and publishes;
+    /// true when it raised the alarm.
+    fn estimate(
+        &mut self,
+        t_s: f64,
+        cfg: &HealthConfig,
+        period_s: f64,
+    ) -> Result<bool, DaemonError> {
         let (op, _) = filled(&self.op);
         let (vp, missing) = filled(&self.vp);
         self.report.windows += 1;
@@ -391,7 +412,7 @@ impl Monitor {
                 "{:.0} % of the rows have no V_P: no estimate",
                 100.0 * missing as f64 / vp.len() as f64
             );
-            return self.write(t_s, None, &note);
+            return self.write(t_s, None, &note).map(|()| false);
         }
         let fig = Figures::of(&op, &vp, period_s, cfg.min_steps);
         let base = match &mut self.baseline {
@@ -416,7 +437,8 @@ impl Monitor {
         let drifts = base.map(|b| fig.drifts(&b, cfg)).unwrap_or_default();
         // A window that cannot measure the delays keeps the alarm unless it sees a drift itself.
         let alarm = !drifts.is_empty() || (self.alarm && !fig.complete());
-        if alarm && !self.alarm {
+        let raised = alarm && !self.alarm;
+        if raised {
             self.report.alarms += 1;
             self.report.first_alarm_t_s.get_or_insert(t_s);
             tracing::warn!(valve = %self.name, t_s, "health alarm: {}", drifts.join("; "));
@@ -459,6 +481,7 @@ impl Monitor {
             m.publish(&fig, base.map(|b| Figures::limits(&b, cfg)).as_ref(), alarm);
         }
         self.write(t_s, Some(&fig), &notes.join("; "))
+            .map(|()| raised)
     }
 
     /// `health*.svg` beside the CSV: each figure over its baseline's, and the alarm, against
