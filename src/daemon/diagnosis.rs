@@ -198,13 +198,16 @@ impl Feed {
     }
 }
 
+/// The diagnosis thread, joined for each valve's report.
+pub type Thread = JoinHandle<Result<Vec<DiagnosisReport>, DaemonError>>;
+
 /// Starts the diagnosis thread for `valves` with their histories in `dir`.
 pub fn start(
     cfg: &DiagnosisConfig,
     dir: &Path,
     period_s: f64,
     valves: Vec<Watched>,
-) -> Result<(Feed, JoinHandle<Result<Vec<DiagnosisReport>, DaemonError>>), DaemonError> {
+) -> Result<(Feed, Thread), DaemonError> {
     let cap = ((cfg.window_s / period_s).round() as usize).max(1);
     let (tx, rx) = std::sync::mpsc::channel();
     let mut rings = Vec::with_capacity(valves.len());

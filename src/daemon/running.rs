@@ -14,7 +14,7 @@ use std::time::Duration;
 use super::compensation::Compensation;
 use super::config::{ClockKind, Config};
 use super::control::{self, Lane, Loop, LoopEnd};
-use super::diagnosis::{self, DiagnosisMetrics, DiagnosisReport};
+use super::diagnosis::{self, DiagnosisMetrics};
 use super::exporter::LoopMetrics;
 use super::health::{self, HealthReport};
 use super::logger::{LogReport, Logger};
@@ -36,7 +36,7 @@ pub struct Running {
     /// The health thread, with `[health]`.
     health: Option<JoinHandle<Result<Vec<HealthReport>, DaemonError>>>,
     /// The diagnosis thread, with `[diagnosis]`.
-    diagnosis: Option<JoinHandle<Result<Vec<DiagnosisReport>, DaemonError>>>,
+    diagnosis: Option<diagnosis::Thread>,
     net: Option<Net>,
     endpoints: Vec<(&'static str, SocketAddr)>,
     servers: Vec<(&'static str, Arc<Health>)>,
@@ -189,9 +189,6 @@ impl Drop for LoopThreads {
     }
 }
 
-/// The started diagnosis thread.
-type DiagnosisThread = JoinHandle<Result<Vec<DiagnosisReport>, DaemonError>>;
-
 /// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, and the
 /// alarm bit in the status word of each valve a process controller drives (`sources`); and
 /// with `[diagnosis]`, the diagnosis thread it feeds.
@@ -200,7 +197,7 @@ fn start_health(
     dir: &std::path::Path,
     metrics: Option<&LoopMetrics>,
     sources: &[Source],
-) -> Result<(Option<health::Health>, Option<DiagnosisThread>), DaemonError> {
+) -> Result<(Option<health::Health>, Option<diagnosis::Thread>), DaemonError> {
     let Some(cfg) = &config.health else {
         return Ok((None, None));
     };
