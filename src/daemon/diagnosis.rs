@@ -87,12 +87,14 @@ impl DiagnosisMetrics {
         })
     }
 
-    fn age(&self, valve: &str) -> Option<Gauge> {
+    /// The age gauge of `valve`.
+    pub fn age(&self, valve: &str) -> Option<Gauge> {
         self.age.get_metric_with_label_values(&[valve]).ok()
     }
 
     /// Replaces the valve's sizes and alarms with those of `r`.
-    fn publish(&self, valve: &str, r: &Record, before: &Record) {
+    /// (`before`: the valve's last record, whose sizes and alarms are taken down first).
+    pub fn publish(&self, valve: &str, r: &Record, before: &Record) {
         for e in &before.effects {
             let _gone = (self.size).remove_label_values(&[valve, e.effect.name(), e.size.unit]);
         }

@@ -25,6 +25,9 @@
 //!   0 once the guard has switched it off) and, each guard window,
 //!   `valve_bridge_compensation_tracking_error_ratio{case="with"|"without"}` (RMS of O_P - V_P
 //!   measured with compensation, and the model's without it);
+//! - with `[diagnosis]`, per valve: `valve_bridge_effect_size{effect,unit}`,
+//!   `valve_bridge_diagnosis_age_seconds` and `valve_bridge_diagnosis_alarm{effect}`
+//!   (registered by [`super::diagnosis::DiagnosisMetrics`]);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
 //!   `valve_bridge_server_connections_accepted_total`, `..._evicted_total` (idle ones closed at the
