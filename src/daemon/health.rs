@@ -15,7 +15,8 @@
 //! It runs on a thread of its own (`vb-health`), fed by the loggers with the rows they write:
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
-//! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
+//! plots each figure against its baseline and limit, drawn from the CSV by
+//! [`crate::report::health`]; an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
 //! bit [`HEALTH_ALARM_BIT`] of its status word. With `[diagnosis]`, the thread also feeds the
 //! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
@@ -39,7 +40,6 @@ use crate::metrics::stats::median;
 use crate::modbus::server::RegisterBank;
 use crate::model::Valve;
 use crate::recording::RecordingView;
-use crate::report::plot;
 
 /// What counts as a step for the health delays: a jump of 0.5 % held 1 s, as for `steps`; its
 /// delay ends when V_P has moved 2 % of it (and four noise sigmas), so the slewing of a large
@@ -227,22 +227,11 @@ struct Monitor {
     metrics: Option<HealthMetrics>,
     /// The process controller's register bank of the valve, for the alarm bit.
     status: Option<Arc<RegisterBank>>,
-    /// Loop time of each compared window and its figures over the baseline's, for the plot.
-    history: Vec<(f64, [f64; 6])>,
 }
 
-/// The figures of the plot, in the order of [`Monitor::history`].
-const PLOTTED: [&str; 6] = [
-    "dead time",
-    "reversal delay",
-    "opening speed",
-    "closing speed",
-    "tracking error",
-    "alarm",
-];
-
-/// The header of the health CSV.
-pub const HEADER: [&str; 10] = [
+/// The header of the health CSV: the figures, the alarm, each figure's baseline and limit
+/// (empty until there is a baseline), the note.
+pub const HEADER: [&str; 20] = [
     "t_s",
     "same_steps",
     "reversals",
@@ -252,6 +241,16 @@ pub const HEADER: [&str; 10] = [
     "closing_speed_pct_per_s",
     "tracking_rms_pct",
     "alarm",
+    "dead_time_base_s",
+    "dead_time_limit_s",
+    "reversal_delay_base_s",
+    "reversal_delay_limit_s",
+    "opening_speed_base_pct_per_s",
+    "opening_speed_limit_pct_per_s",
+    "closing_speed_base_pct_per_s",
+    "closing_speed_limit_pct_per_s",
+    "tracking_rms_base_pct",
+    "tracking_rms_limit_pct",
     "note",
 ];
 
@@ -312,7 +311,6 @@ pub fn start(
             csv,
             metrics: w.metrics,
             status: w.status,
-            history: Vec::new(),
         });
     }
     // Bounded like the loggers' queues; a logger waits for the health thread, never the loop.
@@ -412,7 +410,7 @@ impl Monitor {
                 "{:.0} % of the rows have no V_P: no estimate",
                 100.0 * missing as f64 / vp.len() as f64
             );
-            return self.write(t_s, None, &note).map(|()| false);
+            return self.write(t_s, None, None, &note).map(|()| false);
         }
         let fig = Figures::of(&op, &vp, period_s, cfg.min_steps);
         let base = match &mut self.baseline {
@@ -450,78 +448,37 @@ impl Monitor {
             let bit = 1 << HEALTH_ALARM_BIT;
             bank.report(None, bit, if alarm { bit } else { 0 });
         }
-        if let Some(b) = base {
-            let ratio = |now: Option<f64>, then: Option<f64>| match (now, then) {
-                (Some(n), Some(t)) if t > 0.0 => n / t,
-                _ => f64::NAN,
-            };
-            self.history.push((
-                t_s / 3600.0,
-                [
-                    ratio(fig.dead_time_s, b.dead_time_s),
-                    ratio(fig.reversal_delay_s, b.reversal_delay_s),
-                    ratio(
-                        Some(fig.opening_speed_pct_per_s),
-                        Some(b.opening_speed_pct_per_s),
-                    ),
-                    ratio(
-                        Some(fig.closing_speed_pct_per_s),
-                        Some(b.closing_speed_pct_per_s),
-                    ),
-                    ratio(Some(fig.tracking_rms_pct), Some(b.tracking_rms_pct)),
-                    f64::from(u8::from(alarm)),
-                ],
-            ));
-        }
         notes.extend(drifts);
         if base.is_none() {
             notes.push("no baseline yet".into());
         }
+        let limits = base.map(|b| (b, Figures::limits(&b, cfg)));
         if let Some(m) = &self.metrics {
-            m.publish(&fig, base.map(|b| Figures::limits(&b, cfg)).as_ref(), alarm);
+            m.publish(&fig, limits.as_ref().map(|l| &l.1), alarm);
         }
-        self.write(t_s, Some(&fig), &notes.join("; "))
+        self.write(t_s, Some(&fig), limits.as_ref(), &notes.join("; "))
             .map(|()| raised)
     }
 
-    /// `health*.svg` beside the CSV: each figure over its baseline's, and the alarm, against
-    /// loop time (nothing when no window was compared).
+    /// `health*.svg` beside the CSV, drawn from it (nothing when no window was estimated).
     fn plot(&self) -> Result<(), DaemonError> {
-        if self.history.is_empty() {
+        let file = &self.report.file;
+        let svg = crate::report::health::svg(&self.name, file).map_err(|e| write_error(file, e))?;
+        if svg.is_empty() {
             return Ok(());
         }
-        let t: Vec<f64> = self.history.iter().map(|h| h.0).collect();
-        let ys: Vec<Vec<f64>> = (0..PLOTTED.len())
-            .map(|i| self.history.iter().map(|h| h.1[i]).collect())
-            .collect();
-        let colors = [
-            plot::AFTER,
-            plot::EXTRA,
-            plot::MEASURED,
-            plot::GREY,
-            plot::PURPLE,
-            plot::BEFORE,
-        ];
-        let series: Vec<plot::Series> = (PLOTTED.iter().zip(&ys).zip(colors))
-            .map(|((name, y), color)| plot::Series { name, y, color })
-            .collect();
-        let svg = plot::lines(
-            &format!(
-                "valve {}: health figures over the baseline's (1 = as the baseline; alarm 0/1)",
-                self.name
-            ),
-            "figure / baseline",
-            "loop time (h)",
-            &t,
-            &series,
-            0..t.len(),
-        );
-        let path = self.report.file.with_extension("svg");
+        let path = file.with_extension("svg");
         std::fs::write(&path, svg).map_err(|source| DaemonError::LogWrite { path, source })
     }
 
     /// One row of the health CSV, flushed.
-    fn write(&mut self, t_s: f64, fig: Option<&Figures>, note: &str) -> Result<(), DaemonError> {
+    fn write(
+        &mut self,
+        t_s: f64,
+        fig: Option<&Figures>,
+        base: Option<&(Figures, HealthLimits)>,
+        note: &str,
+    ) -> Result<(), DaemonError> {
         let opt = |v: Option<f64>| v.map_or(String::new(), |v| fixed(v, 4));
         let row = [
             fixed(t_s, 3),
@@ -533,6 +490,16 @@ impl Monitor {
             opt(fig.map(|f| f.closing_speed_pct_per_s)),
             opt(fig.map(|f| f.tracking_rms_pct)),
             u8::from(self.alarm).to_string(),
+            opt(base.and_then(|b| b.0.dead_time_s)),
+            opt(base.and_then(|b| b.1.dead_time_s)),
+            opt(base.and_then(|b| b.0.reversal_delay_s)),
+            opt(base.and_then(|b| b.1.reversal_delay_s)),
+            opt(base.map(|b| b.0.opening_speed_pct_per_s)),
+            opt(base.map(|b| b.1.opening_speed_pct_per_s)),
+            opt(base.map(|b| b.0.closing_speed_pct_per_s)),
+            opt(base.map(|b| b.1.closing_speed_pct_per_s)),
+            opt(base.map(|b| b.0.tracking_rms_pct)),
+            opt(base.map(|b| b.1.tracking_rms_pct)),
             note.to_string(),
         ];
         let path = &self.report.file;

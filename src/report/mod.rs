@@ -13,6 +13,7 @@
 
 pub mod diagnose;
 pub mod fleet;
+pub mod health;
 pub mod identify;
 pub mod plot;
 pub mod verdict;
