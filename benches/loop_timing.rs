@@ -2,7 +2,10 @@
 //! II, random steps, 100 Hz, real clock, logging to a temporary directory) for a fixed time and
 //! reports the timing error |actual - scheduled| (p50, p99, max) and the missed cycles; then the
 //! same with the two valves of `config/two-valves.toml` in each cycle, and the ratio of the two
-//! p99s (the two-valve loop should stay within 2x of the single one on an idle machine).
+//! p99s (the two-valve loop should stay within 2x of the single one on an idle machine); then
+//! the two valves with `[health]` (a 60 s window each minute) without and with `[diagnosis]`
+//! (a 60 s window each minute, so the diagnosis thread works through most of the run), and the
+//! ratio of their p99s (live diagnosis should cost the loop nothing beyond the bench's noise).
 //!
 //! `cargo bench --bench loop_timing`; `VB_BENCH_SECS` sets the run time (default 60 s);
 //! `VB_BENCH_PRIORITY=N` runs the loop thread under SCHED_FIFO priority N (`[loop] realtime_priority`).
@@ -12,6 +15,7 @@
 use std::time::{Duration, Instant};
 
 use hdrhistogram::Histogram;
+use valve_bridge::daemon::config::{DiagnosisConfig, HealthConfig};
 use valve_bridge::daemon::{self, Config, RunOptions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -32,13 +36,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         std::path::Path::new("config/two-valves.toml"),
     )?;
     let mut p99 = Vec::new();
-    for (what, mut config) in [("one valve", one), ("two valves", two)] {
+    for (what, mut config) in [("one valve", one), ("two valves", two.clone())] {
         config.loop_.realtime_priority = priority;
         p99.push(timed(what, config, secs)?);
     }
     println!(
         "p99 two valves / one valve: {:.2}",
         p99[1] / p99[0].max(f64::MIN_POSITIVE)
+    );
+    let mut watched = two;
+    watched.loop_.realtime_priority = priority;
+    watched.health = Some(HealthConfig {
+        window_s: 60.0,
+        ..HealthConfig::default()
+    });
+    let without = timed("two valves, [health]", watched.clone(), secs)?;
+    watched.diagnosis = Some(DiagnosisConfig {
+        window_s: 60.0,
+        every_s: 60.0,
+        ..DiagnosisConfig::default()
+    });
+    let with = timed("two valves, [health] and [diagnosis]", watched, secs)?;
+    println!(
+        "p99 with live diagnosis / without: {:.2}",
+        with / without.max(f64::MIN_POSITIVE)
     );
     if std::env::var("VB_BENCH_TOKIO").is_ok_and(|v| v == "1") {
         let (hist, missed) = tokio_interval(secs)?;
@@ -70,6 +91,12 @@ fn timed(what: &str, config: Config, secs: f64) -> Result<f64, Box<dyn std::erro
     .finish()?;
     let v = summary.valves.first().ok_or("the run has no valve")?;
     let s = &v.stats;
+    if let Some(d) = &v.diagnosis {
+        println!(
+            "  live diagnosis: {} diagnoses of the first valve",
+            d.diagnoses
+        );
+    }
     println!(
         "daemon loop, {what}: {} samples per valve, {} missed cycles, timing error p50 {:.2} us, p99 {:.2} us, max {:.2} us",
         v.samples(),

@@ -46,13 +46,23 @@ fn health_rows(path: &Path) -> Vec<(f64, bool, String)> {
             "closing_speed_pct_per_s",
             "tracking_rms_pct",
             "alarm",
+            "dead_time_base_s",
+            "dead_time_limit_s",
+            "reversal_delay_base_s",
+            "reversal_delay_limit_s",
+            "opening_speed_base_pct_per_s",
+            "opening_speed_limit_pct_per_s",
+            "closing_speed_base_pct_per_s",
+            "closing_speed_limit_pct_per_s",
+            "tracking_rms_base_pct",
+            "tracking_rms_limit_pct",
             "note"
         ]
     );
     r.records()
         .map(|rec| {
             let rec = rec.unwrap();
-            (rec[0].parse().unwrap(), &rec[8] == "1", rec[9].to_string())
+            (rec[0].parse().unwrap(), &rec[8] == "1", rec[19].to_string())
         })
         .collect()
 }
@@ -82,6 +92,22 @@ fn a_growing_dead_time_raises_the_alarm_within_the_window() {
         stdout.contains("health: 51 windows, 1 alarms (first at"),
         "{stdout}"
     );
+    // Each row carries the baseline and the limit it was judged against: the dead time's is
+    // the baseline's plus dead_time_rise_s (0.2 s).
+    let mut r = csv::Reader::from_path(dir.path().join("health-worn.csv")).unwrap();
+    let last = r.records().last().unwrap().unwrap();
+    let (base, limit): (f64, f64) = (last[9].parse().unwrap(), last[10].parse().unwrap());
+    assert!((limit - base - 0.2).abs() < 1e-3, "{last:?}");
+    // The plot: a panel per figure in its unit, with its baseline, limit and the alarm spans.
+    let svg = std::fs::read_to_string(dir.path().join("health-worn.svg")).unwrap();
+    for text in [
+        "dead time (s)",
+        "opening speed (%/s)",
+        "alarm limit",
+        "in alarm",
+    ] {
+        assert!(svg.contains(text), "{text} missing in the plot");
+    }
 }
 
 #[test]

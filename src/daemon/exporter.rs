@@ -16,11 +16,18 @@
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
 //!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
 //!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
-//!   `..._tracking_error_ratio` and `valve_bridge_health_alarm` (1 in alarm);
+//!   `..._tracking_error_ratio`, the limit of each against the baseline (past it the alarm is
+//!   raised; NaN until there is a baseline): `valve_bridge_health_dead_time_limit_seconds`,
+//!   `..._reversal_delay_limit_seconds`, `..._opening_speed_limit_ratio_per_second`,
+//!   `..._closing_speed_limit_ratio_per_second`, `..._tracking_error_limit_ratio`, and
+//!   `valve_bridge_health_alarm` (1 in alarm);
 //! - with `[valve.compensation]`, per compensated valve: `valve_bridge_compensation_active` (1,
 //!   0 once the guard has switched it off) and, each guard window,
 //!   `valve_bridge_compensation_tracking_error_ratio{case="with"|"without"}` (RMS of O_P - V_P
 //!   measured with compensation, and the model's without it);
+//! - with `[diagnosis]`, per valve: `valve_bridge_effect_size{effect,unit}`,
+//!   `valve_bridge_diagnosis_age_seconds` and `valve_bridge_diagnosis_alarm{effect}`
+//!   (registered by [`super::diagnosis::DiagnosisMetrics`]);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
 //!   `valve_bridge_server_connections_accepted_total`, `..._evicted_total` (idle ones closed at the
@@ -45,7 +52,7 @@ use prometheus::{
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
-use super::health::Figures;
+use super::health::{Figures, HealthLimits};
 use super::logger::{Sample, Status};
 use crate::compensate::Window;
 use crate::modbus::client::LinkStats;
@@ -114,11 +121,14 @@ pub struct HealthMetrics {
     closing_speed: Gauge,
     tracking: Gauge,
     alarm: Gauge,
+    /// The limits, in the order and units of the figures above.
+    limits: [Gauge; 5],
 }
 
 impl HealthMetrics {
-    /// Publishes a window's figures (NaN for a delay it could not measure) and the alarm.
-    pub fn publish(&self, f: &Figures, alarm: bool) {
+    /// Publishes a window's figures (NaN for a delay it could not measure), their limits (NaN
+    /// without a baseline) and the alarm.
+    pub fn publish(&self, f: &Figures, limits: Option<&HealthLimits>, alarm: bool) {
         self.dead_time_s.set(f.dead_time_s.unwrap_or(f64::NAN));
         self.reversal_delay_s
             .set(f.reversal_delay_s.unwrap_or(f64::NAN));
@@ -126,6 +136,20 @@ impl HealthMetrics {
         self.closing_speed.set(f.closing_speed_pct_per_s / 100.0);
         self.tracking.set(f.tracking_rms_pct / 100.0);
         self.alarm.set(f64::from(u8::from(alarm)));
+        let nan = f64::NAN;
+        let values = match limits {
+            Some(l) => [
+                l.dead_time_s.unwrap_or(nan),
+                l.reversal_delay_s.unwrap_or(nan),
+                l.opening_speed_pct_per_s / 100.0,
+                l.closing_speed_pct_per_s / 100.0,
+                l.tracking_rms_pct / 100.0,
+            ],
+            None => [nan; 5],
+        };
+        for (g, v) in self.limits.iter().zip(values) {
+            g.set(v);
+        }
     }
 }
 
@@ -164,11 +188,31 @@ fn health_metrics(
             "valve_bridge_health_alarm",
             "1 while a health figure is past its limit against the baseline",
         )?,
+        gauge(
+            "valve_bridge_health_dead_time_limit_seconds",
+            "Highest dead time before the alarm: the baseline's plus dead_time_rise_s",
+        )?,
+        gauge(
+            "valve_bridge_health_reversal_delay_limit_seconds",
+            "Highest reversal delay before the alarm: the baseline's plus reversal_delay_rise_s",
+        )?,
+        gauge(
+            "valve_bridge_health_opening_speed_limit_ratio_per_second",
+            "Lowest opening speed before the alarm: the baseline's less speed_drop",
+        )?,
+        gauge(
+            "valve_bridge_health_closing_speed_limit_ratio_per_second",
+            "Lowest closing speed before the alarm: the baseline's less speed_drop",
+        )?,
+        gauge(
+            "valve_bridge_health_tracking_error_limit_ratio",
+            "Highest tracking error before the alarm: the baseline's plus tracking_rise",
+        )?,
     ];
     valves
         .iter()
         .map(|&v| {
-            let [d, r, o, c, t, a] = gauges
+            let [d, r, o, c, t, a, ld, lr, lo, lc, lt] = gauges
                 .each_ref()
                 .map(|g| g.get_metric_with_label_values(&[v]));
             Ok(HealthMetrics {
@@ -178,6 +222,7 @@ fn health_metrics(
                 closing_speed: c?,
                 tracking: t?,
                 alarm: a?,
+                limits: [ld?, lr?, lo?, lc?, lt?],
             })
         })
         .collect()
@@ -635,9 +680,22 @@ mod tests {
             closing_speed_pct_per_s: 10.0,
             tracking_rms_pct: 5.0,
         };
-        m.health(0).unwrap().publish(&f, true);
+        m.health(0).unwrap().publish(&f, None, false);
+        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        assert!(
+            text.contains("valve_bridge_health_tracking_error_limit_ratio{valve=\"a\"} NaN"),
+            "no baseline, no limit: {text}"
+        );
+        // Against a baseline of itself: the limits of the default [health].
+        let limits = Figures::limits(&f, &crate::daemon::config::HealthConfig::default());
+        m.health(0).unwrap().publish(&f, Some(&limits), true);
         let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
         for line in [
+            "valve_bridge_health_dead_time_limit_seconds{valve=\"a\"} 0.65",
+            "valve_bridge_health_reversal_delay_limit_seconds{valve=\"a\"} NaN",
+            "valve_bridge_health_opening_speed_limit_ratio_per_second{valve=\"a\"} 0.14",
+            "valve_bridge_health_closing_speed_limit_ratio_per_second{valve=\"a\"} 0.07",
+            "valve_bridge_health_tracking_error_limit_ratio{valve=\"a\"} 0.1",
             "valve_bridge_health_dead_time_seconds{valve=\"a\"} 0.45",
             "valve_bridge_health_reversal_delay_seconds{valve=\"a\"} NaN",
             "valve_bridge_health_opening_speed_ratio_per_second{valve=\"a\"} 0.2",

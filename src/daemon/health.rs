@@ -15,9 +15,11 @@
 //! It runs on a thread of its own (`vb-health`), fed by the loggers with the rows they write:
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
-//! plots each figure over its baseline's against loop time; an alarm is a warning in the log, the
+//! plots each figure against its baseline and limit, drawn from the CSV by
+//! [`crate::report::health`]; an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
-//! bit [`HEALTH_ALARM_BIT`] of its status word.
+//! bit [`HEALTH_ALARM_BIT`] of its status word. With `[diagnosis]`, the thread also feeds the
+//! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -27,6 +29,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::config::HealthConfig;
+use super::diagnosis::Feed;
 use super::exporter::HealthMetrics;
 use super::hil::HEALTH_ALARM_BIT;
 use super::logger::{fixed, Sample};
@@ -37,7 +40,6 @@ use crate::metrics::stats::median;
 use crate::modbus::server::RegisterBank;
 use crate::model::Valve;
 use crate::recording::RecordingView;
-use crate::report::plot;
 
 /// What counts as a step for the health delays: a jump of 0.5 % held 1 s, as for `steps`; its
 /// delay ends when V_P has moved 2 % of it (and four noise sigmas), so the slewing of a large
@@ -101,26 +103,41 @@ impl Figures {
         self.dead_time_s.is_some() && self.reversal_delay_s.is_some()
     }
 
-    /// What drifted past `limits` against `base`, one phrase each (empty: healthy).
-    pub fn drifts(&self, base: &Figures, limits: &HealthConfig) -> Vec<String> {
+    /// The limit of each figure against `base`: a delay may rise by its `*_rise_s`, a stroke
+    /// speed fall by `speed_drop`, the tracking error grow by `tracking_rise`.
+    pub fn limits(base: &Figures, cfg: &HealthConfig) -> HealthLimits {
+        HealthLimits {
+            dead_time_s: base.dead_time_s.map(|d| d + cfg.dead_time_rise_s),
+            reversal_delay_s: base.reversal_delay_s.map(|d| d + cfg.reversal_delay_rise_s),
+            opening_speed_pct_per_s: base.opening_speed_pct_per_s * (1.0 - cfg.speed_drop),
+            closing_speed_pct_per_s: base.closing_speed_pct_per_s * (1.0 - cfg.speed_drop),
+            tracking_rms_pct: base.tracking_rms_pct * (1.0 + cfg.tracking_rise),
+        }
+    }
+
+    /// What drifted past its limit against `base`, one phrase each (empty: healthy).
+    pub fn drifts(&self, base: &Figures, cfg: &HealthConfig) -> Vec<String> {
+        let lim = Figures::limits(base, cfg);
         let mut out = Vec::new();
         let delays = [
             (
                 "dead time",
                 self.dead_time_s,
                 base.dead_time_s,
-                limits.dead_time_rise_s,
+                lim.dead_time_s,
+                cfg.dead_time_rise_s,
             ),
             (
                 "reversal delay",
                 self.reversal_delay_s,
                 base.reversal_delay_s,
-                limits.reversal_delay_rise_s,
+                lim.reversal_delay_s,
+                cfg.reversal_delay_rise_s,
             ),
         ];
-        for (what, now, then, rise) in delays {
-            if let (Some(now), Some(then)) = (now, then) {
-                if now - then > rise {
+        for (what, now, then, limit, rise) in delays {
+            if let (Some(now), Some(then), Some(limit)) = (now, then, limit) {
+                if now > limit {
                     out.push(format!(
                         "{what} {now:.3} s against {then:.3} s (limit +{rise} s)"
                     ));
@@ -132,30 +149,47 @@ impl Figures {
                 "opening",
                 self.opening_speed_pct_per_s,
                 base.opening_speed_pct_per_s,
+                lim.opening_speed_pct_per_s,
             ),
             (
                 "closing",
                 self.closing_speed_pct_per_s,
                 base.closing_speed_pct_per_s,
+                lim.closing_speed_pct_per_s,
             ),
         ];
-        for (what, now, then) in speeds {
-            if then > 0.0 && now < then * (1.0 - limits.speed_drop) {
+        for (what, now, then, limit) in speeds {
+            if then > 0.0 && now < limit {
                 out.push(format!(
                     "{what} speed {now:.2} %/s against {then:.2} %/s (limit -{:.0} %)",
-                    limits.speed_drop * 100.0
+                    cfg.speed_drop * 100.0
                 ));
             }
         }
         let (now, then) = (self.tracking_rms_pct, base.tracking_rms_pct);
-        if now > then * (1.0 + limits.tracking_rise) {
+        if now > lim.tracking_rms_pct {
             out.push(format!(
                 "tracking error {now:.2} % against {then:.2} % (limit +{:.0} %)",
-                limits.tracking_rise * 100.0
+                cfg.tracking_rise * 100.0
             ));
         }
         out
     }
+}
+
+/// The limit of each figure against a baseline (a delay's: none while the baseline has none);
+/// past one, the alarm is raised.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HealthLimits {
+    /// Highest dead time, s.
+    pub dead_time_s: Option<f64>,
+    /// Highest reversal delay, s.
+    pub reversal_delay_s: Option<f64>,
+    /// Lowest stroke speeds, %/s.
+    pub opening_speed_pct_per_s: f64,
+    pub closing_speed_pct_per_s: f64,
+    /// Highest RMS of O_P - V_P, %.
+    pub tracking_rms_pct: f64,
 }
 
 /// What the health check of one valve did, for the summary.
@@ -193,22 +227,11 @@ struct Monitor {
     metrics: Option<HealthMetrics>,
     /// The process controller's register bank of the valve, for the alarm bit.
     status: Option<Arc<RegisterBank>>,
-    /// Loop time of each compared window and its figures over the baseline's, for the plot.
-    history: Vec<(f64, [f64; 6])>,
 }
 
-/// The figures of the plot, in the order of [`Monitor::history`].
-const PLOTTED: [&str; 6] = [
-    "dead time",
-    "reversal delay",
-    "opening speed",
-    "closing speed",
-    "tracking error",
-    "alarm",
-];
-
-/// The header of the health CSV.
-pub const HEADER: [&str; 10] = [
+/// The header of the health CSV: the figures, the alarm, each figure's baseline and limit
+/// (empty until there is a baseline), the note.
+pub const HEADER: [&str; 20] = [
     "t_s",
     "same_steps",
     "reversals",
@@ -218,6 +241,16 @@ pub const HEADER: [&str; 10] = [
     "closing_speed_pct_per_s",
     "tracking_rms_pct",
     "alarm",
+    "dead_time_base_s",
+    "dead_time_limit_s",
+    "reversal_delay_base_s",
+    "reversal_delay_limit_s",
+    "opening_speed_base_pct_per_s",
+    "opening_speed_limit_pct_per_s",
+    "closing_speed_base_pct_per_s",
+    "closing_speed_limit_pct_per_s",
+    "tracking_rms_base_pct",
+    "tracking_rms_limit_pct",
     "note",
 ];
 
@@ -245,6 +278,7 @@ pub fn start(
     dir: &Path,
     period_s: f64,
     valves: Vec<Watched>,
+    diagnosis: Option<Feed>,
 ) -> Result<Health, DaemonError> {
     let cap = ((cfg.window_s / period_s).round() as usize).max(1);
     let mut monitors = Vec::with_capacity(valves.len());
@@ -277,7 +311,6 @@ pub fn start(
             csv,
             metrics: w.metrics,
             status: w.status,
-            history: Vec::new(),
         });
     }
     // Bounded like the loggers' queues; a logger waits for the health thread, never the loop.
@@ -285,7 +318,7 @@ pub fn start(
     let cfg = cfg.clone();
     let handle = std::thread::Builder::new()
         .name("vb-health".into())
-        .spawn(move || watch(rx, monitors, &cfg, period_s, cap))
+        .spawn(move || watch(rx, monitors, &cfg, period_s, cap, diagnosis))
         .map_err(|source| DaemonError::Thread {
             what: "health thread",
             source,
@@ -307,6 +340,7 @@ fn watch(
     cfg: &HealthConfig,
     period_s: f64,
     cap: usize,
+    mut diagnosis: Option<Feed>,
 ) -> Result<Vec<HealthReport>, DaemonError> {
     for (i, row) in rx {
         let Some(m) = monitors.get_mut(i) else {
@@ -318,9 +352,20 @@ fn watch(
         }
         m.op.push_back(row.op_pct.unwrap_or(f64::NAN));
         m.vp.push_back(row.vp_pct.unwrap_or(f64::NAN));
+        let mut raised = false;
         if row.t_s >= m.next_at_s && m.op.len() == cap {
             m.next_at_s += cfg.every_s;
-            m.estimate(row.t_s, cfg, period_s)?;
+            raised = m.estimate(row.t_s, cfg, period_s)?;
+        }
+        if let Some(d) = &mut diagnosis {
+            let (op, vp) = (m.op.back(), m.vp.back());
+            d.push(
+                i,
+                row.t_s,
+                *op.unwrap_or(&f64::NAN),
+                *vp.unwrap_or(&f64::NAN),
+                raised,
+            );
         }
     }
     for m in &monitors {
@@ -349,8 +394,14 @@ fn filled(x: &VecDeque<f64>) -> (Vec<f64>, usize) {
 }
 
 impl Monitor {
-    /// Estimates the window ending at loop time `t_s`, compares, alarms, writes and publishes.
-    fn estimate(&mut self, t_s: f64, cfg: &HealthConfig, period_s: f64) -> Result<(), DaemonError> {
+    /// Estimates the window ending at loop time `t_s`, compares, alarms, writes and publishes;
+    /// true when it raised the alarm.
+    fn estimate(
+        &mut self,
+        t_s: f64,
+        cfg: &HealthConfig,
+        period_s: f64,
+    ) -> Result<bool, DaemonError> {
         let (op, _) = filled(&self.op);
         let (vp, missing) = filled(&self.vp);
         self.report.windows += 1;
@@ -359,7 +410,7 @@ impl Monitor {
                 "{:.0} % of the rows have no V_P: no estimate",
                 100.0 * missing as f64 / vp.len() as f64
             );
-            return self.write(t_s, None, &note);
+            return self.write(t_s, None, None, &note).map(|()| false);
         }
         let fig = Figures::of(&op, &vp, period_s, cfg.min_steps);
         let base = match &mut self.baseline {
@@ -384,7 +435,8 @@ impl Monitor {
         let drifts = base.map(|b| fig.drifts(&b, cfg)).unwrap_or_default();
         // A window that cannot measure the delays keeps the alarm unless it sees a drift itself.
         let alarm = !drifts.is_empty() || (self.alarm && !fig.complete());
-        if alarm && !self.alarm {
+        let raised = alarm && !self.alarm;
+        if raised {
             self.report.alarms += 1;
             self.report.first_alarm_t_s.get_or_insert(t_s);
             tracing::warn!(valve = %self.name, t_s, "health alarm: {}", drifts.join("; "));
@@ -396,77 +448,37 @@ impl Monitor {
             let bit = 1 << HEALTH_ALARM_BIT;
             bank.report(None, bit, if alarm { bit } else { 0 });
         }
-        if let Some(b) = base {
-            let ratio = |now: Option<f64>, then: Option<f64>| match (now, then) {
-                (Some(n), Some(t)) if t > 0.0 => n / t,
-                _ => f64::NAN,
-            };
-            self.history.push((
-                t_s / 3600.0,
-                [
-                    ratio(fig.dead_time_s, b.dead_time_s),
-                    ratio(fig.reversal_delay_s, b.reversal_delay_s),
-                    ratio(
-                        Some(fig.opening_speed_pct_per_s),
-                        Some(b.opening_speed_pct_per_s),
-                    ),
-                    ratio(
-                        Some(fig.closing_speed_pct_per_s),
-                        Some(b.closing_speed_pct_per_s),
-                    ),
-                    ratio(Some(fig.tracking_rms_pct), Some(b.tracking_rms_pct)),
-                    f64::from(u8::from(alarm)),
-                ],
-            ));
-        }
         notes.extend(drifts);
         if base.is_none() {
             notes.push("no baseline yet".into());
         }
+        let limits = base.map(|b| (b, Figures::limits(&b, cfg)));
         if let Some(m) = &self.metrics {
-            m.publish(&fig, alarm);
+            m.publish(&fig, limits.as_ref().map(|l| &l.1), alarm);
         }
-        self.write(t_s, Some(&fig), &notes.join("; "))
+        self.write(t_s, Some(&fig), limits.as_ref(), &notes.join("; "))
+            .map(|()| raised)
     }
 
-    /// `health*.svg` beside the CSV: each figure over its baseline's, and the alarm, against
-    /// loop time (nothing when no window was compared).
+    /// `health*.svg` beside the CSV, drawn from it (nothing when no window was estimated).
     fn plot(&self) -> Result<(), DaemonError> {
-        if self.history.is_empty() {
+        let file = &self.report.file;
+        let svg = crate::report::health::svg(&self.name, file).map_err(|e| write_error(file, e))?;
+        if svg.is_empty() {
             return Ok(());
         }
-        let t: Vec<f64> = self.history.iter().map(|h| h.0).collect();
-        let ys: Vec<Vec<f64>> = (0..PLOTTED.len())
-            .map(|i| self.history.iter().map(|h| h.1[i]).collect())
-            .collect();
-        let colors = [
-            plot::AFTER,
-            plot::EXTRA,
-            plot::MEASURED,
-            plot::GREY,
-            plot::PURPLE,
-            plot::BEFORE,
-        ];
-        let series: Vec<plot::Series> = (PLOTTED.iter().zip(&ys).zip(colors))
-            .map(|((name, y), color)| plot::Series { name, y, color })
-            .collect();
-        let svg = plot::lines(
-            &format!(
-                "valve {}: health figures over the baseline's (1 = as the baseline; alarm 0/1)",
-                self.name
-            ),
-            "figure / baseline",
-            "loop time (h)",
-            &t,
-            &series,
-            0..t.len(),
-        );
-        let path = self.report.file.with_extension("svg");
+        let path = file.with_extension("svg");
         std::fs::write(&path, svg).map_err(|source| DaemonError::LogWrite { path, source })
     }
 
     /// One row of the health CSV, flushed.
-    fn write(&mut self, t_s: f64, fig: Option<&Figures>, note: &str) -> Result<(), DaemonError> {
+    fn write(
+        &mut self,
+        t_s: f64,
+        fig: Option<&Figures>,
+        base: Option<&(Figures, HealthLimits)>,
+        note: &str,
+    ) -> Result<(), DaemonError> {
         let opt = |v: Option<f64>| v.map_or(String::new(), |v| fixed(v, 4));
         let row = [
             fixed(t_s, 3),
@@ -478,6 +490,16 @@ impl Monitor {
             opt(fig.map(|f| f.closing_speed_pct_per_s)),
             opt(fig.map(|f| f.tracking_rms_pct)),
             u8::from(self.alarm).to_string(),
+            opt(base.and_then(|b| b.0.dead_time_s)),
+            opt(base.and_then(|b| b.1.dead_time_s)),
+            opt(base.and_then(|b| b.0.reversal_delay_s)),
+            opt(base.and_then(|b| b.1.reversal_delay_s)),
+            opt(base.map(|b| b.0.opening_speed_pct_per_s)),
+            opt(base.map(|b| b.1.opening_speed_pct_per_s)),
+            opt(base.map(|b| b.0.closing_speed_pct_per_s)),
+            opt(base.map(|b| b.1.closing_speed_pct_per_s)),
+            opt(base.map(|b| b.0.tracking_rms_pct)),
+            opt(base.map(|b| b.1.tracking_rms_pct)),
             note.to_string(),
         ];
         let path = &self.report.file;
@@ -515,7 +537,8 @@ mod tests {
         assert!((0.3..0.6).contains(&dead), "{base:?}");
         assert!(base.reversal_delay_s.unwrap() > dead + 0.2, "{base:?}");
         assert!(base.drifts(&base, &cfg).is_empty());
-        let (op, vp) = window(0.3);
+        // Past both limits by more than a sample: a rise of exactly a limit does not alarm.
+        let (op, vp) = window(0.4);
         let worn = Figures::of(&op, &vp, 0.01, cfg.min_steps);
         let drifts = worn.drifts(&base, &cfg);
         assert!(

@@ -11,7 +11,8 @@
 //! ([`schedule`]) and runs each valve transaction on a current-thread tokio runtime it owns, so
 //! async backends need no other thread and no cross-thread hop. The logger writes on its own
 //! thread, and passes the rows on to the health thread (`vb-health`, with `[health]`,
-//! [`health`]), which estimates each valve's health off the loop. The network thread (`vb-net`, only when there is something to serve) runs the
+//! [`health`]), which estimates each valve's health off the loop and, with `[diagnosis]`,
+//! hands windows to the diagnosis thread (`vb-diagnosis`, [`diagnosis`]). The network thread (`vb-net`, only when there is something to serve) runs the
 //! process controller's Modbus server ([`hil`]) and the Prometheus endpoint ([`exporter`]) on a
 //! runtime of its own: the loop shares only a register bank and atomic metric handles with it and
 //! never waits on a socket. The calling thread waits for signals (tokio), drives the progress
@@ -31,6 +32,7 @@
 mod compensation;
 pub mod config;
 mod control;
+pub mod diagnosis;
 pub mod exporter;
 pub mod health;
 pub mod hil;

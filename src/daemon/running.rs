@@ -14,6 +14,7 @@ use std::time::Duration;
 use super::compensation::Compensation;
 use super::config::{ClockKind, Config};
 use super::control::{self, Lane, Loop, LoopEnd};
+use super::diagnosis::{self, DiagnosisMetrics};
 use super::exporter::LoopMetrics;
 use super::health::{self, HealthReport};
 use super::logger::{LogReport, Logger};
@@ -34,6 +35,8 @@ pub struct Running {
     threads: LoopThreads,
     /// The health thread, with `[health]`.
     health: Option<JoinHandle<Result<Vec<HealthReport>, DaemonError>>>,
+    /// The diagnosis thread, with `[diagnosis]`.
+    diagnosis: Option<diagnosis::Thread>,
     net: Option<Net>,
     endpoints: Vec<(&'static str, SocketAddr)>,
     servers: Vec<(&'static str, Arc<Health>)>,
@@ -77,7 +80,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
-    let health = start_health(&config, &dir, metrics.as_ref(), &sources)?;
+    let (health, diagnosis) = start_health(&config, &dir, metrics.as_ref(), &sources)?;
     let mut lanes = Vec::with_capacity(config.valves.len());
     let mut loggers = Vec::with_capacity(config.valves.len());
     for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
@@ -145,6 +148,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         live,
         rate_hz,
         health: health.map(|h| h.handle),
+        diagnosis,
         net,
         endpoints,
         servers,
@@ -186,15 +190,16 @@ impl Drop for LoopThreads {
 }
 
 /// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, and the
-/// alarm bit in the status word of each valve a process controller drives (`sources`).
+/// alarm bit in the status word of each valve a process controller drives (`sources`); and
+/// with `[diagnosis]`, the diagnosis thread it feeds.
 fn start_health(
     config: &Config,
     dir: &std::path::Path,
     metrics: Option<&LoopMetrics>,
     sources: &[Source],
-) -> Result<Option<health::Health>, DaemonError> {
+) -> Result<(Option<health::Health>, Option<diagnosis::Thread>), DaemonError> {
     let Some(cfg) = &config.health else {
-        return Ok(None);
+        return Ok((None, None));
     };
     std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
         dir: dir.to_path_buf(),
@@ -224,7 +229,24 @@ fn start_health(
             status: sources.get(i).and_then(Source::served_bank).cloned(),
         });
     }
-    health::start(cfg, dir, period_s, watched).map(Some)
+    let (feed, diagnosis) = match &config.diagnosis {
+        Some(d) => {
+            let m = metrics
+                .map(|m| DiagnosisMetrics::register(m.registry()))
+                .transpose()?;
+            let valves = (config.valves.iter())
+                .map(|v| diagnosis::Watched {
+                    name: v.label().to_string(),
+                    metrics: m.clone(),
+                })
+                .collect();
+            let (feed, handle) = diagnosis::start(d, dir, period_s, valves)?;
+            (Some(feed), Some(handle))
+        }
+        None => (None, None),
+    };
+    let health = health::start(cfg, dir, period_s, watched, feed)?;
+    Ok((Some(health), diagnosis))
 }
 
 /// The clock the loop runs on, after checking that `--duration` and the clock fit the config.
@@ -299,6 +321,12 @@ impl Running {
             None => Vec::new(),
         }
         .into_iter();
+        // The health thread has dropped the feed: the diagnosis thread finishes its jobs.
+        let mut diagnosis = match self.diagnosis {
+            Some(h) => h.join().map_err(|_| DaemonError::Panicked("diagnosis"))??,
+            None => Vec::new(),
+        }
+        .into_iter();
         net?;
         let end = end??;
         Ok(Summary {
@@ -310,6 +338,7 @@ impl Running {
                     link: lane.link,
                     log,
                     health: health.next(),
+                    diagnosis: diagnosis.next(),
                     compensation: lane.compensation,
                 })
                 .collect(),

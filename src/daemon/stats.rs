@@ -12,6 +12,7 @@ use std::time::Duration;
 use hdrhistogram::Histogram;
 
 use super::compensation::CompensationReport;
+use super::diagnosis::DiagnosisReport;
 use super::health::HealthReport;
 use super::logger::{LogReport, Sample, Status};
 use super::valve::Fault;
@@ -258,6 +259,8 @@ pub struct ValveSummary {
     pub log: LogReport,
     /// What the live health check did, with `[health]`.
     pub health: Option<HealthReport>,
+    /// What the live diagnosis did, with `[diagnosis]`.
+    pub diagnosis: Option<DiagnosisReport>,
     /// What compensation did, with `[valve.compensation]`.
     pub compensation: Option<CompensationReport>,
 }
@@ -390,6 +393,18 @@ impl ValveSummary {
                     .map_or(String::new(), |t| format!(" (first at {t:.0} s)")),
                 h.file.display()
             )?;
+        }
+        if let Some(d) = &self.diagnosis {
+            writeln!(
+                f,
+                "{indent}diagnosis: {} diagnoses, {} alarms, in {}",
+                d.diagnoses,
+                d.alarms.len(),
+                d.file.display()
+            )?;
+            for a in &d.alarms {
+                writeln!(f, "{indent}  alarm: {a}")?;
+            }
         }
         if let Some(c) = &self.compensation {
             write_compensation(f, indent, c)?;

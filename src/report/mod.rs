@@ -16,6 +16,7 @@
 pub mod chart;
 pub mod diagnose;
 pub mod fleet;
+pub mod health;
 pub mod identify;
 pub mod plot;
 pub mod readme;

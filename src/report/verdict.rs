@@ -7,7 +7,7 @@
 use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Size, Trace};
 
 /// What a size's name means to a person, and the unit it is printed in.
-fn label(name: &str) -> (&'static str, &'static str) {
+pub fn label(name: &str) -> (&'static str, &'static str) {
     match name {
         "dead_time_s" => ("dead time", " s"),
         "friction_band_pct" => ("friction band", " %"),

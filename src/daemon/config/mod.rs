@@ -1,8 +1,8 @@
 //! The daemon's TOML configuration: types, defaults, range checks and the embedded default.
 //!
 //! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]`, `[metrics]`
-//! and `[health]`, all optional (no `[metrics]`: no Prometheus endpoint; no `[health]`: no live
-//! health check). Several valves are several
+//! `[health]` and `[diagnosis]`, all optional (no `[metrics]`: no Prometheus endpoint; no
+//! `[health]`: no live health check; no `[diagnosis]`: no live diagnosis). Several valves are several
 //! `[[valve]]` tables, each with a `name` and, optionally, a `[valve.source]` of its own.
 //! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
 //! each kind live in their own sub-table (`[valve.emulated]`, `[source.sine]`, ...), so a file
@@ -20,6 +20,7 @@
 //! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
 
 pub mod bus;
+mod diagnosis;
 mod health;
 mod source;
 mod valve;
@@ -31,6 +32,7 @@ use serde::Deserialize;
 
 use crate::toml_file::{self, TomlError};
 
+pub use diagnosis::DiagnosisConfig;
 pub use health::HealthConfig;
 pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
@@ -75,6 +77,8 @@ pub struct Config {
     pub metrics: Option<MetricsConfig>,
     /// The live health check of every valve, if any.
     pub health: Option<HealthConfig>,
+    /// The live diagnosis of every valve, if any (needs `health`).
+    pub diagnosis: Option<DiagnosisConfig>,
 }
 
 /// `[loop]`: rate and clock.
@@ -353,6 +357,9 @@ impl Config {
         self.log.check_in(&c)?;
         if let Some(h) = &self.health {
             h.check_in(&c, self.loop_.period_s())?;
+        }
+        if let Some(d) = &self.diagnosis {
+            d.check_in(&c, self.loop_.period_s(), self.health.is_some())?;
         }
         if let Some(m) = &self.metrics {
             c.max_connections("metrics", m.max_connections)?;

@@ -463,3 +463,37 @@ fn profile_errors_name_file_line_key_and_the_shipped_profiles() {
         "{e}"
     );
 }
+
+#[test]
+fn diagnosis_is_checked_against_its_table_and_needs_health() {
+    let c = Config::from_toml("[health]\n[diagnosis]\n", Path::new("c.toml")).unwrap();
+    assert_eq!(c.diagnosis, Some(DiagnosisConfig::default()));
+    assert_eq!(
+        (
+            c.diagnosis.unwrap().every_s,
+            DiagnosisConfig::default().window_s
+        ),
+        (1800.0, 1200.0)
+    );
+    let e = err("[diagnosis]\nevery_s = 600.0\n");
+    assert!(
+        e.starts_with(
+            "c.toml:1: diagnosis: the live diagnosis is fed with the rows of the health check"
+        ),
+        "{e}"
+    );
+    let e = err("[health]\n\n[diagnosis]\nwindow_s = 10.0\n");
+    assert!(
+        e.starts_with(
+            "c.toml:4: diagnosis.window_s: 10 is out of range: a window in s, at least 60 s"
+        ),
+        "{e}"
+    );
+    let e = err("[health]\n[diagnosis]\nevery_s = 1.0\n");
+    assert!(
+        e.starts_with("c.toml:3: diagnosis.every_s: 1 is out of range"),
+        "{e}"
+    );
+    let e = err("[health]\n[diagnosis]\nevery = 1.0\n");
+    assert!(e.contains("c.toml:3") && e.contains("every"), "{e}");
+}

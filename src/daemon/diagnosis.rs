@@ -1,0 +1,412 @@
+//! Live diagnosis (`[diagnosis]`): every `every_s` of loop time, and on every health alarm,
+//! each valve's last `window_s` of rows is diagnosed ([`crate::diagnose`]) off the loop thread,
+//! and the history, gauges and alarms are kept per valve.
+//!
+//! The health thread feeds a [`Feed`] with the rows it gets from the loggers: a ring per
+//! valve, copied into a job when a diagnosis is due. Jobs go through an unbounded queue to the
+//! diagnosis thread (`vb-diagnosis`), so neither the health thread nor the loop ever waits for
+//! a diagnosis. It diagnoses on a pool of its own whose threads run at the lowest priority
+//! (`SCHED_IDLE`, else nice 19): they take only CPU time nothing else wants. Jobs are
+//! diagnosed in the order they were made, each from its own copy of the rows, so on the virtual
+//! clock the history is the same on every run; at the end of a run the thread finishes the jobs
+//! still queued.
+//!
+//! Each diagnosis is a line of `diagnosis-<valve>.jsonl` beside the logs ([`history::Record`])
+//! and, with `reports`, the full report in `diagnosis-<valve>/<t_s>/`; the gauges are
+//! `valve_bridge_effect_size{valve,effect,unit}` (each finding's and trace's size, in the unit
+//! of its label), `valve_bridge_diagnosis_age_seconds{valve}` (loop time since the diagnosed
+//! window's end) and `valve_bridge_diagnosis_alarm{valve,effect}` (1 while the effect is in
+//! alarm against the valve's first diagnosis, see [`history`]).
+//!
+//! Not here: the diagnosis itself ([`crate::diagnose`]), the health figures ([`super::health`]).
+
+pub mod history;
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, Sender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use prometheus::{Gauge, GaugeVec, Opts, Registry};
+
+use super::config::DiagnosisConfig;
+use super::DaemonError;
+use crate::diagnose::diagnose;
+use crate::recording::RecordingView;
+use history::{Baseline, Record};
+
+/// What the live diagnosis of one valve did, for the summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiagnosisReport {
+    /// Diagnoses made (failed ones included).
+    pub diagnoses: u64,
+    /// Every alarm raised, in order.
+    pub alarms: Vec<String>,
+    /// Loop time at the end of the window of the first diagnosis that raised one, s.
+    pub first_alarm_t_s: Option<f64>,
+    /// The history file.
+    pub file: PathBuf,
+}
+
+/// The diagnosis gauges of every valve.
+#[derive(Debug, Clone)]
+pub struct DiagnosisMetrics {
+    size: GaugeVec,
+    age: GaugeVec,
+    alarm: GaugeVec,
+}
+
+impl DiagnosisMetrics {
+    /// Registers the gauges in `registry`.
+    pub fn register(registry: &Registry) -> Result<Self, prometheus::Error> {
+        let vec = |name: &str, help: &str, labels: &[&str]| {
+            let g = GaugeVec::new(Opts::new(name, help), labels)?;
+            registry.register(Box::new(g.clone()))?;
+            Ok::<_, prometheus::Error>(g)
+        };
+        Ok(DiagnosisMetrics {
+            size: vec(
+                "valve_bridge_effect_size",
+                "Size of each effect the last live diagnosis found (finding or trace), in its unit",
+                &["valve", "effect", "unit"],
+            )?,
+            age: vec(
+                "valve_bridge_diagnosis_age_seconds",
+                "Loop time since the end of the window of the last live diagnosis (NaN before one)",
+                &["valve"],
+            )?,
+            alarm: vec(
+                "valve_bridge_diagnosis_alarm",
+                "1 while an effect is new or past its interval against the first diagnosis",
+                &["valve", "effect"],
+            )?,
+        })
+    }
+
+    /// The age gauge of `valve`.
+    pub fn age(&self, valve: &str) -> Option<Gauge> {
+        self.age.get_metric_with_label_values(&[valve]).ok()
+    }
+
+    /// Replaces the valve's sizes and alarms with those of `r`.
+    /// (`before`: the valve's last record, whose sizes and alarms are taken down first).
+    pub fn publish(&self, valve: &str, r: &Record, before: &Record) {
+        for e in &before.effects {
+            let _gone = (self.size).remove_label_values(&[valve, e.effect.name(), e.size.unit]);
+        }
+        for e in &r.effects {
+            if let Ok(g) =
+                (self.size).get_metric_with_label_values(&[valve, e.effect.name(), e.size.unit])
+            {
+                g.set(e.size.value);
+            }
+        }
+        for e in crate::diagnose::Effect::ALL {
+            let on = r
+                .alarms
+                .iter()
+                .any(|a| a.starts_with(&format!("{}:", e.name())));
+            let was = (before.alarms.iter()).any(|a| a.starts_with(&format!("{}:", e.name())));
+            if on || was {
+                if let Ok(g) = self.alarm.get_metric_with_label_values(&[valve, e.name()]) {
+                    g.set(f64::from(u8::from(on)));
+                }
+            }
+        }
+    }
+}
+
+/// One valve to diagnose: its name (label and file names) and its gauges.
+pub struct Watched {
+    pub name: String,
+    pub metrics: Option<DiagnosisMetrics>,
+}
+
+/// A window to diagnose.
+struct Job {
+    valve: usize,
+    t_s: f64,
+    trigger: &'static str,
+    op: Vec<f64>,
+    vp: Vec<f64>,
+}
+
+/// One valve's ring of rows on the health thread.
+struct Ring {
+    op: VecDeque<f64>,
+    vp: VecDeque<f64>,
+    next_at_s: f64,
+    /// Loop time of the window end of the last finished diagnosis (f64 bits; NaN: none yet).
+    done_t_s: Arc<AtomicU64>,
+    age: Option<Gauge>,
+}
+
+/// The health thread's side: the rings, and the queue to the diagnosis thread.
+pub struct Feed {
+    cfg: DiagnosisConfig,
+    cap: usize,
+    rings: Vec<Ring>,
+    tx: Sender<Job>,
+}
+
+impl Feed {
+    /// Takes valve `i`'s row at loop time `t_s` (NaN for a missing value); `alarm_raised`: the
+    /// health check raised its alarm with this row. Queues a diagnosis when one is due.
+    pub fn push(&mut self, i: usize, t_s: f64, op: f64, vp: f64, alarm_raised: bool) {
+        let Some(r) = self.rings.get_mut(i) else {
+            return;
+        };
+        if r.op.len() == self.cap {
+            r.op.pop_front();
+            r.vp.pop_front();
+        }
+        r.op.push_back(op);
+        r.vp.push_back(vp);
+        if let Some(age) = &r.age {
+            age.set(t_s - f64::from_bits(r.done_t_s.load(Ordering::Relaxed)));
+        }
+        let full = r.op.len() == self.cap;
+        let trigger = if alarm_raised && self.cfg.on_alarm {
+            "health alarm"
+        } else if full && t_s >= r.next_at_s {
+            r.next_at_s += self.cfg.every_s;
+            "every_s"
+        } else {
+            return;
+        };
+        // Leading rows before the first O_P are dropped; a missing O_P holds the last one.
+        let mut op: Vec<f64> = r.op.iter().copied().collect();
+        let first = op.iter().position(|v| !v.is_nan()).unwrap_or(op.len());
+        let mut last = f64::NAN;
+        for v in &mut op[first..] {
+            if v.is_nan() {
+                *v = last;
+            }
+            last = *v;
+        }
+        let job = Job {
+            valve: i,
+            t_s,
+            trigger,
+            op: op.split_off(first),
+            vp: r.vp.iter().skip(first).copied().collect(),
+        };
+        // The diagnosis thread outlives the feed; a failed send means it already failed.
+        let _queued = self.tx.send(job);
+    }
+}
+
+/// The diagnosis thread, joined for each valve's report.
+pub type Thread = JoinHandle<Result<Vec<DiagnosisReport>, DaemonError>>;
+
+/// Starts the diagnosis thread for `valves` with their histories in `dir`.
+pub fn start(
+    cfg: &DiagnosisConfig,
+    dir: &Path,
+    period_s: f64,
+    valves: Vec<Watched>,
+) -> Result<(Feed, Thread), DaemonError> {
+    let cap = ((cfg.window_s / period_s).round() as usize).max(1);
+    let (tx, rx) = std::sync::mpsc::channel();
+    let mut rings = Vec::with_capacity(valves.len());
+    let mut histories = Vec::with_capacity(valves.len());
+    for w in valves {
+        let done = Arc::new(AtomicU64::new(f64::NAN.to_bits()));
+        let path = dir.join(format!("diagnosis-{}.jsonl", w.name));
+        let file = File::create(&path).map_err(|source| DaemonError::LogFile {
+            path: path.clone(),
+            source,
+        })?;
+        rings.push(Ring {
+            op: VecDeque::with_capacity(cap),
+            vp: VecDeque::with_capacity(cap),
+            next_at_s: (cap as f64 - 0.5) * period_s,
+            done_t_s: done.clone(),
+            age: w.metrics.as_ref().and_then(|m| m.age(&w.name)),
+        });
+        histories.push(History {
+            name: w.name,
+            file,
+            dir: dir.to_path_buf(),
+            baseline: Baseline::default(),
+            last: None,
+            metrics: w.metrics,
+            done_t_s: done,
+            report: DiagnosisReport {
+                diagnoses: 0,
+                alarms: Vec::new(),
+                first_alarm_t_s: None,
+                file: path,
+            },
+        });
+    }
+    let (cfg2, thread_err) = (cfg.clone(), |source| DaemonError::Thread {
+        what: "diagnosis thread",
+        source,
+    });
+    let handle = std::thread::Builder::new()
+        .name("vb-diagnosis".into())
+        .spawn(move || work(rx, histories, &cfg2, period_s))
+        .map_err(thread_err)?;
+    let feed = Feed {
+        cfg: cfg.clone(),
+        cap,
+        rings,
+        tx,
+    };
+    Ok((feed, handle))
+}
+
+/// One valve's history on the diagnosis thread.
+struct History {
+    name: String,
+    file: File,
+    dir: PathBuf,
+    baseline: Baseline,
+    last: Option<Record>,
+    metrics: Option<DiagnosisMetrics>,
+    done_t_s: Arc<AtomicU64>,
+    report: DiagnosisReport,
+}
+
+/// The diagnosis thread: diagnoses each job in order on the low-priority pool.
+fn work(
+    rx: Receiver<Job>,
+    mut histories: Vec<History>,
+    cfg: &DiagnosisConfig,
+    period_s: f64,
+) -> Result<Vec<DiagnosisReport>, DaemonError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .thread_name(|i| format!("vb-diagnose-{i}"))
+        .start_handler(|_| lowest_priority())
+        .build()
+        .map_err(|e| DaemonError::Thread {
+            what: "diagnosis pool",
+            source: std::io::Error::other(e),
+        })?;
+    lowest_priority();
+    for job in rx {
+        let Some(h) = histories.get_mut(job.valve) else {
+            continue;
+        };
+        let record = pool.install(|| h.diagnose(&job, cfg, period_s));
+        h.write(record)?;
+    }
+    Ok(histories.into_iter().map(|h| h.report).collect())
+}
+
+/// Puts the calling thread at the lowest priority: `SCHED_IDLE`, else nice 19.
+fn lowest_priority() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: plain system calls on the calling thread (pid 0) with a valid parameter.
+    let idle = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } == 0;
+    if !idle {
+        // SAFETY: as above; on Linux PRIO_PROCESS with 0 is the calling thread.
+        let _ = unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, 19) };
+    }
+}
+
+impl History {
+    /// Diagnoses a job's window: its record, with the alarms against the baseline, and its
+    /// report files written.
+    fn diagnose(&mut self, job: &Job, cfg: &DiagnosisConfig, period_s: f64) -> Record {
+        // Loop time of each row, the last at the job's time.
+        let n = job.op.len();
+        let t: Vec<f64> = (0..n)
+            .map(|k| job.t_s - (n - 1 - k) as f64 * period_s)
+            .collect();
+        let rec = RecordingView {
+            t: &t,
+            op: &job.op,
+            vp: &job.vp,
+            restarts: &[],
+            dt: period_s,
+        };
+        let mut record = Record {
+            t_s: job.t_s,
+            window_s: job.op.len() as f64 * period_s,
+            trigger: job.trigger,
+            verdict: String::new(),
+            effects: Vec::new(),
+            alarms: Vec::new(),
+            report: None,
+            error: None,
+        };
+        let d = match diagnose(&rec, None, &|_, _| {}) {
+            Ok(d) => d,
+            Err(e) => {
+                tracing::warn!(valve = %self.name, t_s = job.t_s, "live diagnosis failed: {e}");
+                record.error = Some(e.to_string());
+                return record;
+            }
+        };
+        record.verdict = crate::report::verdict::verdict(&d);
+        record.effects = history::entries(&d);
+        let whole = job.trigger == "every_s";
+        let (standing, raised) = self.baseline.compare(job.t_s, whole, &record.effects);
+        for a in &raised {
+            tracing::warn!(valve = %self.name, t_s = job.t_s, "diagnosis alarm: {a}");
+            self.report.first_alarm_t_s.get_or_insert(job.t_s);
+        }
+        self.report.alarms.extend(raised);
+        record.alarms = standing;
+        if cfg.reports {
+            record.report = self.write_report(job.t_s, &rec, &d);
+        }
+        record
+    }
+
+    /// `diagnosis-<valve>/<t_s>/`: the files of `diagnose --out`; the report's path relative
+    /// to the history's directory (None when it could not be written: said in the log).
+    fn write_report(
+        &self,
+        t_s: f64,
+        rec: &RecordingView,
+        d: &crate::diagnose::Diagnosis,
+    ) -> Option<String> {
+        let rel = format!("diagnosis-{}/{:.0}", self.name, t_s);
+        let dir = self.dir.join(&rel);
+        let title = format!("valve {}: live diagnosis at {t_s:.0} s", self.name);
+        let written = std::fs::create_dir_all(&dir).and_then(|()| {
+            (crate::report::diagnose::files(&title, rec, d).iter())
+                .try_for_each(|(name, text)| std::fs::write(dir.join(name), text))
+        });
+        match written {
+            Ok(()) => Some(format!("{rel}/report.html")),
+            Err(e) => {
+                tracing::warn!(dir = %dir.display(), "cannot write the diagnosis report: {e}");
+                None
+            }
+        }
+    }
+
+    /// Appends `record` to the history, publishes it and marks its time as done.
+    fn write(&mut self, record: Record) -> Result<(), DaemonError> {
+        self.report.diagnoses += 1;
+        let path = &self.report.file;
+        let line = serde_json::to_string(&record).map_err(std::io::Error::other);
+        line.and_then(|l| writeln!(self.file, "{l}"))
+            .and_then(|()| self.file.flush())
+            .map_err(|source| DaemonError::LogWrite {
+                path: path.clone(),
+                source,
+            })?;
+        if let Some(m) = &self.metrics {
+            let empty = Record {
+                effects: Vec::new(),
+                alarms: Vec::new(),
+                ..record.clone()
+            };
+            m.publish(&self.name, &record, self.last.as_ref().unwrap_or(&empty));
+        }
+        if record.error.is_none() {
+            self.done_t_s.store(record.t_s.to_bits(), Ordering::Relaxed);
+        }
+        self.last = Some(record);
+        Ok(())
+    }
+}

@@ -1,0 +1,106 @@
+//! The live diagnosis (`[diagnosis]`) through the real binary, on the virtual clock, with
+//! `config/friction-drift.toml` (a valve whose friction band widens beside a healthy one) and
+//! a short window: every valve's history gets a line per diagnosis (each effect with its size,
+//! unit and interval, the report beside it), a health alarm triggers one at once, and two runs
+//! write the same histories (the diagnosis thread is deterministic on the virtual clock).
+
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::Value;
+
+const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
+
+/// Runs friction-drift with `[diagnosis]` for `secs` s in `dir`; the summary.
+fn run(dir: &Path, secs: &str) -> String {
+    let base = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/friction-drift.toml"
+    ))
+    .unwrap();
+    let config = dir.join("c.toml");
+    let text = format!("{base}\n[diagnosis]\nwindow_s = 300.0\nevery_s = 600.0\n");
+    std::fs::write(&config, text).unwrap();
+    let out = Command::new(BIN)
+        .args(["run", "--config", config.to_str().unwrap()])
+        .args(["--as-fast-as-possible", "--duration", secs, "--log-dir"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    stdout
+}
+
+fn history(path: &Path) -> Vec<Value> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn each_valve_gets_a_history_of_sized_effects_the_same_on_every_run() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let (pa, pb) = (a.path().to_path_buf(), b.path().to_path_buf());
+    let other = std::thread::spawn(move || run(&pb, "1200"));
+    let summary = run(&pa, "1200");
+    other.join().unwrap();
+    for valve in ["packing", "healthy"] {
+        let name = format!("diagnosis-{valve}.jsonl");
+        let lines = history(&a.path().join(&name));
+        let times: Vec<(f64, &str)> = (lines.iter())
+            .filter(|l| l["trigger"] == "every_s")
+            .map(|l| (l["t_s"].as_f64().unwrap(), l["window_s"].as_f64().unwrap()))
+            .map(|(t, w)| {
+                (
+                    t,
+                    if (w - 300.0).abs() < 0.02 {
+                        "whole"
+                    } else {
+                        "part"
+                    },
+                )
+            })
+            .collect();
+        assert_eq!(times, [(300.0, "whole"), (900.0, "whole")], "{lines:?}");
+        for l in &lines {
+            assert!(l["error"].is_null(), "{l}");
+            assert!(l["verdict"].as_str().unwrap().len() > 10, "{l}");
+            for e in l["effects"].as_array().unwrap() {
+                let s = &e["size"];
+                let (v, lo, hi) = (s["value"].as_f64(), s["low"].as_f64(), s["high"].as_f64());
+                let (v, lo, hi) = (v.unwrap(), lo.unwrap(), hi.unwrap());
+                assert!(lo <= v && v <= hi, "{e}");
+                assert!(!s["unit"].as_str().unwrap().is_empty(), "{e}");
+                assert!(e["effect"].is_string() && e["finding"].is_boolean(), "{e}");
+            }
+            let report = a.path().join(l["report"].as_str().unwrap());
+            let html = std::fs::read_to_string(&report).unwrap();
+            assert!(html.contains("live diagnosis"), "{}", report.display());
+        }
+        // The same rows, the same jobs in the same order: the same history.
+        let again = std::fs::read_to_string(b.path().join(&name)).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(a.path().join(&name)).unwrap(),
+            again
+        );
+        assert!(
+            summary.contains(&format!("diagnosis: {}", lines.len())),
+            "{summary}"
+        );
+    }
+    // The packing valve's health alarm (its reversal delay, after about 17 min) asked for a
+    // diagnosis at once; the healthy valve raised none.
+    let packing = history(&a.path().join("diagnosis-packing.jsonl"));
+    assert!(
+        packing.iter().any(|l| l["trigger"] == "health alarm"),
+        "{packing:?}"
+    );
+    let healthy = history(&a.path().join("diagnosis-healthy.jsonl"));
+    assert!(
+        healthy.iter().all(|l| l["trigger"] == "every_s"),
+        "{healthy:?}"
+    );
+}
