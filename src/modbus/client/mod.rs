@@ -34,7 +34,7 @@ use std::time::Duration;
 use tokio::sync::Mutex;
 use tokio::time::Instant;
 
-use super::budget::{Budget, BudgetError};
+use super::budget::{Budget, BudgetError, DEFAULT_TIMEOUT_SHARE};
 pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction, MAX_JOINED_SPAN};
@@ -48,8 +48,6 @@ pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
 pub const SILENT_LINK: Duration = Duration::from_secs(3);
 /// How long the first connection at start-up may take.
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(3);
-/// Default deadline of a cycle, as a share of the loop period.
-pub const DEFAULT_TIMEOUT_SHARE: f64 = 0.8;
 
 /// Why a cycle gave no V_P.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
