@@ -10,7 +10,7 @@
 use super::config::ValveConfig;
 use super::exporter::CompensationMetrics;
 use super::logger::{round_pct, Sample};
-use super::DaemonError;
+use super::error::DaemonError;
 use crate::compensate::guard::Figure;
 use crate::compensate::{CompensateError, Compensator, Window};
 use crate::model::ModelSpec;

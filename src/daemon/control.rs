@@ -23,7 +23,7 @@ use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
 use super::stats::{Live, Stats, StopAction, StopReason};
 use super::valve::{Backend, Fault};
-use super::DaemonError;
+use super::error::DaemonError;
 use crate::modbus::client::LinkStats;
 
 /// What the loop thread hands back.

@@ -30,7 +30,7 @@ use super::config::HealthConfig;
 use super::exporter::HealthMetrics;
 use super::hil::HEALTH_ALARM_BIT;
 use super::logger::{fixed, Sample};
-use super::DaemonError;
+use super::error::DaemonError;
 use crate::fit::seeds::travel_speed;
 use crate::fit::steps::{analyse, StepOptions};
 use crate::metrics::stats::median;

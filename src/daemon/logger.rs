@@ -47,7 +47,7 @@ use std::time::{Duration, Instant, SystemTime};
 use time::OffsetDateTime;
 
 use super::config::LogConfig;
-use super::DaemonError;
+use super::error::DaemonError;
 
 /// The header of every log file.
 pub const HEADER: [&str; 9] = [

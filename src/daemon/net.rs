@@ -15,7 +15,7 @@ use super::control::current_thread_runtime;
 use super::exporter::{self, LoopMetrics};
 use super::hil;
 use super::source::Source;
-use super::DaemonError;
+use super::error::DaemonError;
 use crate::modbus::blocks::Blocks;
 use crate::net::{Health, Limits};
 

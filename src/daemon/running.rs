@@ -21,7 +21,8 @@ use super::net::{Listeners, Net};
 use super::source::Source;
 use super::stats::{Live, Summary, ValveSummary};
 use super::valve::BackendError;
-use super::{DaemonError, RunOptions};
+use super::error::DaemonError;
+use super::RunOptions;
 use crate::model::{ModelSpec, Valve};
 use crate::net::Health;
 
