@@ -8,9 +8,9 @@
 //! when compensation is switched off. Not here: the compensation itself ([`crate::compensate`]).
 
 use super::config::ValveConfig;
+use super::error::DaemonError;
 use super::exporter::CompensationMetrics;
 use super::logger::{round_pct, Sample};
-use super::error::DaemonError;
 use crate::compensate::guard::Figure;
 use crate::compensate::{CompensateError, Compensator, Window};
 use crate::model::ModelSpec;

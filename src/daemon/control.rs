@@ -17,13 +17,13 @@ use std::time::{Duration, Instant, SystemTime};
 
 use super::compensation::{Compensation, CompensationReport};
 use super::config::{ClockKind, OnStop, ValveConfig};
+use super::error::DaemonError;
 use super::exporter::{LoopMetrics, ValveMetrics};
 use super::logger::{round_pct, Sample, Status};
 use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
 use super::stats::{Live, Stats, StopAction, StopReason};
 use super::valve::{Backend, Fault};
-use super::error::DaemonError;
 use crate::modbus::client::LinkStats;
 
 /// What the loop thread hands back.

@@ -27,10 +27,10 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::config::HealthConfig;
+use super::error::DaemonError;
 use super::exporter::HealthMetrics;
 use super::hil::HEALTH_ALARM_BIT;
 use super::logger::{fixed, Sample};
-use super::error::DaemonError;
 use crate::fit::seeds::travel_speed;
 use crate::fit::steps::{analyse, StepOptions};
 use crate::metrics::stats::median;

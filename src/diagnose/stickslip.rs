@@ -44,9 +44,9 @@ use rayon::prelude::*;
 
 use super::composed::{self, Knob};
 use super::facts::{self, Facts, Slip};
+use super::measure::Measure;
 use super::scorer::Scorer;
 use super::tuning::Tuning;
-use super::Measure;
 use crate::metrics::stats;
 use crate::model::ModelSpec;
 
