@@ -147,6 +147,14 @@ pub struct StatusRegister {
     pub setpoint_error_bit: u8,
 }
 
+/// Bit of the status word the daemon serves a process controller (`modbus-server` source) set
+/// while the valve gives no V_P.
+pub const VALVE_FAULT_BIT: u8 = 1;
+/// Status word bit set while the watchdog holds the safe O_P.
+pub const WATCHDOG_BIT: u8 = 2;
+/// Status word bit set while the valve's health is in alarm (with `[health]`).
+pub const HEALTH_ALARM_BIT: u8 = 3;
+
 impl StatusRegister {
     /// The mask of the set-point error bit.
     pub fn error_mask(&self) -> u16 {
