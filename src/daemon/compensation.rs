@@ -10,10 +10,10 @@
 use super::config::ValveConfig;
 use super::error::DaemonError;
 use super::exporter::CompensationMetrics;
-use super::logger::{round_pct, Sample};
 use crate::compensate::guard::Figure;
 use crate::compensate::{CompensateError, Compensator, Window};
 use crate::model::ModelSpec;
+use crate::recording::log_format::{round_pct, Sample};
 
 /// What compensation did in a run, for the summary.
 #[derive(Debug, Clone, PartialEq)]

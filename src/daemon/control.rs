@@ -19,12 +19,12 @@ use super::compensation::{Compensation, CompensationReport};
 use super::config::{ClockKind, OnStop, ValveConfig};
 use super::error::DaemonError;
 use super::exporter::{LoopMetrics, ValveMetrics};
-use super::logger::{round_pct, Sample, Status};
 use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
 use super::stats::{Live, Stats, StopAction, StopReason};
 use super::valve::{Backend, Fault};
 use crate::modbus::client::LinkStats;
+use crate::recording::log_format::{round_pct, Sample, Status};
 
 /// What the loop thread hands back.
 pub(super) struct LoopEnd {

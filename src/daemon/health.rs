@@ -29,13 +29,13 @@ use std::thread::JoinHandle;
 use super::config::HealthConfig;
 use super::error::DaemonError;
 use super::exporter::HealthMetrics;
-use super::logger::{fixed, Sample};
 use crate::fit::seeds::travel_speed;
 use crate::fit::steps::{analyse, StepOptions};
 use crate::metrics::stats::median;
 use crate::modbus::map::HEALTH_ALARM_BIT;
 use crate::modbus::server::RegisterBank;
 use crate::model::Valve;
+use crate::recording::log_format::{fixed, Sample};
 use crate::recording::RecordingView;
 use crate::report::plot;
 

@@ -2,7 +2,7 @@
 //!
 //! Every slot of an absolute time grid, the loop asks the [`source::Source`] for the wanted
 //! opening O_P, sends it to the valve [`valve::Backend`] and reads V_P back in one transaction,
-//! and hands a [`logger::Sample`] to the [`logger`]. Missed slots and failed transactions are
+//! and hands a [`crate::recording::log_format::Sample`] to the [`logger`]. Missed slots and failed transactions are
 //! logged as such with an empty V_P. On stop (SIGINT, SIGTERM, `--duration`, or the end of a
 //! replay) the loop applies the configured safe action in the next slot, logs it, the log is
 //! flushed and closed, and a [`stats::Summary`] is returned.

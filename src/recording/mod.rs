@@ -26,6 +26,7 @@ mod columns;
 mod error;
 pub mod grid;
 mod join;
+pub mod log_format;
 mod read;
 mod resample;
 mod write;
