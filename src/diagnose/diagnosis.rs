@@ -6,13 +6,13 @@
 
 use serde::Serialize;
 
-use super::composed::{self, Effect};
 use super::evidence::Evidence;
 use super::facts;
 use super::locate::Window;
 use super::measure::Measure;
 use super::size::Size;
 use crate::metrics::Scores;
+use crate::model::composed::{self, Effect};
 use crate::model::ModelSpec;
 
 /// The starting point, scored.

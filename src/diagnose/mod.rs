@@ -9,7 +9,7 @@
 //!    above it, each tied to what O_P and V_P were doing. [`facts`] measures what the
 //!    recording shows without a model (step delays, speeds, holds, the sensor lattice, slips).
 //! 3. **Explain and extend** ([`rounds`]): every effect of the vocabulary ([`Effect`]) is a few
-//!    numbers of a composed pin-cart II valve ([`composed`]). Each candidate
+//!    numbers of a composed pin-cart II valve ([`crate::model::composed`]). Each candidate
 //!    ([`candidates`]) is added and refitted ([`refit`]) on the fit blocks ([`scorer`]), and
 //!    kept only if, on **held-out** blocks that were never fitted, it lowers the error by more
 //!    than chance, by a real share of the error above the noise floor, BIC agrees, and it is
@@ -31,7 +31,6 @@
 //! [`crate::fit::search::nelder_mead`].
 
 mod candidates;
-pub mod composed;
 mod diagnosis;
 pub mod evidence;
 pub mod facts;
@@ -46,9 +45,9 @@ mod stickslip;
 pub mod tuning;
 
 use crate::metrics::{self, stats};
-use crate::model::{ModelSpec, Valve};
+pub use crate::model::composed::Effect;
+use crate::model::{composed, ModelSpec, Valve};
 use crate::recording::RecordingView;
-pub use composed::Effect;
 pub use diagnosis::{
     Baseline, Comparison, Diagnosis, Figures, Final, Finding, Note, Outcome, Support, Trace,
 };

@@ -22,7 +22,6 @@ use rayon::prelude::*;
 use serde_json::{Map, Value};
 
 use super::candidates::{self, MAX_DEAD_TIME_S, MAX_WINDUP_PCT};
-use super::composed::{self, Effect, Knob};
 use super::diagnosis::{Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
@@ -35,6 +34,7 @@ use super::size::{self, Size};
 use super::stickslip;
 use super::tuning::Tuning;
 use crate::metrics::stats;
+use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 

@@ -21,11 +21,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::composed::{self, Effect, Knob};
 use super::facts::Facts;
 use super::scorer::Scorer;
 use super::tuning::Tuning;
 use crate::metrics::stats;
+use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
 
 /// An effect's size, with its interval and its weight against what is worth maintenance.

@@ -14,9 +14,11 @@
 //! one of the paper's models: a first-principles pneumatic valve with positioner, friction,
 //! stops and sensor ([`PhysicalParams`]), for emulation and for testing diagnosis against
 //! physics it does not share; its sensor reading is reported unclamped. Nothing here does I/O
-//! beyond [`ModelSpec::load`]; stepping never allocates.
+//! beyond [`ModelSpec::load`]; stepping never allocates. [`composed`] writes any model as
+//! pin-cart II plus named effects ([`composed::Effect`]), the valve diagnosis grows.
 
 mod checks;
+pub mod composed;
 mod delay;
 pub mod drift;
 mod effects;
