@@ -12,8 +12,8 @@ use serde::Serialize;
 use super::facts::Facts;
 use super::locate::{Context, Window};
 use super::stickslip;
-use crate::fit::steps::Population;
 use crate::metrics::stats;
+use crate::metrics::steps::Population;
 use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
 

@@ -6,7 +6,7 @@
 
 use super::Job;
 use crate::diagnose::Diagnosis;
-use crate::fit::steps::Population;
+use crate::metrics::steps::Population;
 use crate::recording::Recording;
 pub use crate::report::fleet_table::{Fleet, Limits, ValveSummary};
 

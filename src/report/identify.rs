@@ -15,9 +15,9 @@ use plotters::style::RGBColor;
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 use super::{esc, page, row};
 use crate::fit::determined::Why;
-use crate::fit::steps::StepAnalysis;
 use crate::fit::{Identification, ModelFit};
 use crate::metrics;
+use crate::metrics::steps::StepAnalysis;
 use crate::model::ModelKind;
 use crate::recording::RecordingView;
 
