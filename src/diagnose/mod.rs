@@ -82,6 +82,18 @@ pub enum DiagnoseError {
 /// Runs the whole diagnosis of a recording, starting from the user's model `base` or, without
 /// one, a fitted FOPDT, with the default [`Tuning`]. `progress(done, total)` is called as the
 /// rounds finish.
+///
+/// ```no_run
+/// use valve_bridge::diagnose::diagnose;
+/// use valve_bridge::recording::{read, ReadOptions};
+///
+/// let rec = read("recording.csv".as_ref(), &ReadOptions::default())?;
+/// let d = diagnose(&rec.view(), None, &|_, _| {})?;
+/// for f in &d.findings {
+///     println!("{}: {:?}", f.effect.name(), f.size);
+/// }
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn diagnose(
     rec: &RecordingView,
     base: Option<&ModelSpec>,

@@ -319,6 +319,25 @@ struct Shared<'a> {
 
 /// Identifies `opts.models` on a recording. `progress(done, total)` is called as models finish
 /// (from worker threads).
+///
+/// ```
+/// use valve_bridge::fit::{identify, Options};
+/// use valve_bridge::model::{bundled, ModelKind, Valve};
+/// use valve_bridge::recording::RecordingView;
+///
+/// // 60 s at 10 Hz of an FOPDT valve answering steps of O_P every 5 s.
+/// let dt = 0.1;
+/// let t: Vec<f64> = (0..600).map(|k| k as f64 * dt).collect();
+/// let op: Vec<f64> = (t.iter())
+///     .map(|t| if (t / 5.0) as usize % 2 == 0 { 40.0 } else { 60.0 })
+///     .collect();
+/// let vp = Valve::new(&bundled(ModelKind::Fopdt), dt)?.simulate(&op, op[0]);
+/// let rec = RecordingView { t: &t, op: &op, vp: &vp, restarts: &[], dt };
+/// let id = identify(&rec, &Options::for_models(&[ModelKind::Fopdt]), &|_, _| {})?;
+/// let fopdt = id.rows.iter().find(|r| r.kind == ModelKind::Fopdt).expect("fitted");
+/// assert!(fopdt.scores.r2 > 0.99, "R² {}", fopdt.scores.r2);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn identify(
     rec: &RecordingView,
     opts: &Options,

@@ -165,6 +165,17 @@ impl StatusRegister {
 
 /// The register map of one positioner (see the module documentation). Read from TOML through
 /// [`RegisterKeys`]: a key left out keeps its [`Default`].
+///
+/// ```
+/// use valve_bridge::modbus::map::RegisterMap;
+///
+/// // The default map: O_P written and V_P read in per mille of travel.
+/// let map = RegisterMap::default();
+/// let words = map.encode_setpoint(45.67)?;
+/// assert_eq!(words, [457]);
+/// assert!((map.decode_position(&[457])? - 45.7).abs() < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(from = "RegisterKeys")]
 pub struct RegisterMap {
