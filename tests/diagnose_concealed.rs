@@ -6,7 +6,8 @@
 //! and the held-out error lowered; a healthy valve must get no finding, and a coarse sensor
 //! must not be taken for stiction. Stick-slip that hunts in the loop is found by its slips.
 
-use valve_bridge::diagnose::{self, composed, composed::Knob, Diagnosis, Outcome};
+use valve_bridge::diagnose::{self, Diagnosis, Outcome};
+use valve_bridge::model::composed::{self, Knob};
 use valve_bridge::model::{bundled, ModelKind, ModelSpec};
 use valve_bridge::synth::{self, Excitation};
 

@@ -14,10 +14,10 @@ use tokio_modbus::Request;
 use valve_bridge::compensate::{CompensationConfig, Compensator};
 use valve_bridge::daemon::config::Config;
 use valve_bridge::daemon::exporter::LoopMetrics;
-use valve_bridge::daemon::logger::{Sample, Status};
 use valve_bridge::daemon::source::Source;
 use valve_bridge::modbus::client::LinkStats;
 use valve_bridge::model::{bundled, Drift, DriftSpec, ModelKind, Valve};
+use valve_bridge::recording::log_format::{Sample, Status};
 
 struct Counting;
 

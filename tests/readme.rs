@@ -164,6 +164,9 @@ fn how(cmd: &Cmd) -> How {
         ["valve-bridge", args @ ..] if run_without_duration(args) => How::Background,
         ["valve-bridge", ..] => How::Foreground,
         ["sim-device", ..] | ["while", ..] => How::Background,
+        ["python3", "-m", "venv", ..] | ["." | "source", ..] => {
+            How::NotRun("makes or enters a virtual environment")
+        }
         ["mbpoll" | "curl" | "python3" | "for", ..] => How::Foreground,
         ["cargo", "run", "--example", ..] => {
             How::NotRun("rewrites README itself (the tests compare its figures)")
@@ -179,9 +182,6 @@ fn how(cmd: &Cmd) -> How {
         ["cargo", "bench", ..] => How::NotRun("a benchmark (minutes; run by hand)"),
         ["cargo", "build" | "install" | "fmt" | "clippy", ..] => How::NotRun("a build step"),
         ["pip" | "pip3" | "apt-get" | "apt", ..] => How::NotRun("installs packages"),
-        ["python3", "-m", "venv", ..] | ["." | "source", ..] => {
-            How::NotRun("makes or enters a virtual environment")
-        }
         ["maturin", ..] => How::NotRun("builds the Python package (minutes; .ci/run builds it)"),
         ["pytest", ..] => How::NotRun("the Python tests (.ci/run runs them)"),
         ["sudo", ..] => How::NotRun("needs root and systemd"),

@@ -13,8 +13,9 @@ use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
 use serde::Serialize;
 use valve_bridge::diagnose as diagnosis;
-use valve_bridge::fit::{self, steps::StepOptions, windows::WindowList};
+use valve_bridge::fit::{self, windows::WindowList};
 use valve_bridge::fleet::{self, Job, ValveMap, ValveSummary};
+use valve_bridge::metrics::steps::{analyse_recording, StepOptions};
 use valve_bridge::model::{ModelKind, ModelSpec, Valve};
 use valve_bridge::recording::{self, ColumnMap, ReadOptions};
 use valve_bridge::report;
@@ -238,7 +239,7 @@ fn steps(
 ) -> PyResult<PyObject> {
     let opts = StepOptions::new(min_size, fraction, min_hold).map_err(err)?;
     let a = py
-        .allow_threads(|| fit::steps::analyse_recording(&rec.0.view(), &opts))
+        .allow_threads(|| analyse_recording(&rec.0.view(), &opts))
         .map_err(|e| err(anyhow::Error::from(e).context(rec.0.source.clone())))?;
     to_py(py, &a)
 }

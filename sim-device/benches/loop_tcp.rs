@@ -29,8 +29,8 @@ use std::error::Error;
 use std::path::{Path, PathBuf};
 
 use common::{percentile, Sim};
-use valve_bridge::daemon::logger::Status;
 use valve_bridge::daemon::{self, Config, RunOptions, ValveSummary};
+use valve_bridge::recording::log_format::Status;
 
 /// The shipped daemon config for sim-device over TCP.
 const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/sim-device-tcp.toml");

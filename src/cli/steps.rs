@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use valve_bridge::fit::steps::{self, StepOptions};
+use valve_bridge::metrics::steps::{self, StepOptions};
 use valve_bridge::recording;
 use valve_bridge::report::identify;
 

@@ -51,7 +51,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::diagnose::composed;
+use crate::model::composed;
 use crate::model::{Effects, ModelError, ModelKind, ModelSpec, Valve};
 use guard::Guard;
 pub use guard::Window;

@@ -205,8 +205,8 @@ pub fn nominal(valve: &ModelSpec) -> ModelSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::Effect;
     use crate::model::bundled;
+    use crate::model::composed::Effect;
 
     #[test]
     fn the_twin_keeps_the_valve_and_loses_what_compensation_answers() {

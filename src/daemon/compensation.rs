@@ -8,12 +8,12 @@
 //! when compensation is switched off. Not here: the compensation itself ([`crate::compensate`]).
 
 use super::config::ValveConfig;
+use super::error::DaemonError;
 use super::exporter::CompensationMetrics;
-use super::logger::{round_pct, Sample};
-use super::DaemonError;
 use crate::compensate::guard::Figure;
 use crate::compensate::{CompensateError, Compensator, Window};
 use crate::model::ModelSpec;
+use crate::recording::log_format::{round_pct, Sample};
 
 /// What compensation did in a run, for the summary.
 #[derive(Debug, Clone, PartialEq)]

@@ -17,14 +17,14 @@ use std::time::{Duration, Instant, SystemTime};
 
 use super::compensation::{Compensation, CompensationReport};
 use super::config::{ClockKind, OnStop, ValveConfig};
+use super::error::DaemonError;
 use super::exporter::{LoopMetrics, ValveMetrics};
-use super::logger::{round_pct, Sample, Status};
 use super::schedule::{self, Schedule, Slot};
 use super::source::Source;
 use super::stats::{Live, Stats, StopAction, StopReason};
 use super::valve::{Backend, Fault};
-use super::DaemonError;
 use crate::modbus::client::LinkStats;
+use crate::recording::log_format::{round_pct, Sample, Status};
 
 /// What the loop thread hands back.
 pub(super) struct LoopEnd {
@@ -285,9 +285,13 @@ impl Loop {
                     Some(c) => c.setpoint(lane.op, t_s),
                     None => lane.op,
                 };
-                let (mut row, _) =
-                    lane.transact(rt, sent, (k, t_s, schedule.wall(k)), lateness, None);
-                row.op_controller_pct = Some(lane.op);
+                let (mut row, _) = lane.transact(
+                    rt,
+                    (sent, lane.op),
+                    (k, t_s, schedule.wall(k)),
+                    lateness,
+                    None,
+                );
                 lane.last_op_controller = Some(lane.op);
                 if let Some(c) = &mut lane.compensation {
                     c.observe(&row);
@@ -351,7 +355,7 @@ impl Loop {
         };
         let (row, fault) = lane.transact(
             rt,
-            op,
+            (op, op),
             (k_end, schedule.t_s(k_end), schedule.wall(k_end)),
             lateness_end,
             Some(status),
@@ -407,20 +411,22 @@ impl Loop {
 }
 
 impl Lane {
-    /// One valve transaction for slot `k` at `t_s`: its row and, for the stop action's row
-    /// (marked by `safe`), the fault that kept the valve from confirming it.
+    /// One valve transaction for slot `k` at `t_s`: `(op, op_controller)` is the O_P sent and
+    /// the one the source asked for (before compensation). Returns its row and, for the stop
+    /// action's row (marked by `safe`), the fault that kept the valve from confirming it.
     fn transact(
         &mut self,
         rt: &tokio::runtime::Runtime,
-        op: f64,
+        (op, op_controller): (f64, f64),
         (k, t_s, utc): (u64, f64, SystemTime),
         lateness: Duration,
         safe: Option<Status>,
     ) -> (Sample, Option<Fault>) {
         let started = Instant::now();
-        let result = rt.block_on(self.backend.transact(op, k));
+        let cycle = rt.block_on(self.backend.transact(op, k));
         let latency = started.elapsed();
         self.last_op = Some(op);
+        let result = cycle.vp_pct;
         let (status, vp) = match result {
             Ok(vp) => (Status::Ok, Some(vp)),
             Err(ref fault) => (
@@ -460,9 +466,9 @@ impl Lane {
             status: safe.unwrap_or(status),
             lateness_us: Some(micros(lateness)),
             latency_us: Some(micros(latency)),
-            op_sent_pct: self.backend.sent_pct(),
+            op_sent_pct: cycle.sent_pct,
             utc,
-            op_controller_pct: Some(op),
+            op_controller_pct: Some(op_controller),
         };
         (row, fault)
     }

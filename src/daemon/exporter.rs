@@ -53,10 +53,10 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
 use super::health::{Figures, HealthLimits};
-use super::logger::{Sample, Status};
 use crate::compensate::Window;
 use crate::modbus::client::LinkStats;
 use crate::net::{self, Health, Limits};
+use crate::recording::log_format::{Sample, Status};
 
 /// Upper bounds of the timing-error buckets, s.
 const TIMING_BUCKETS_S: [f64; 12] = [

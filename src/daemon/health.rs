@@ -3,10 +3,10 @@
 //! alarm when one drifts past its limit.
 //!
 //! The figures come from the same code as `steps` and `identify`: the step analysis
-//! ([`crate::fit::steps::analyse`]) gives the dead time (the median delay of steps that keep
+//! ([`crate::metrics::steps::analyse`]) gives the dead time (the median delay of steps that keep
 //! the direction, until V_P has moved 2 % of the step) and the reversal delay (of steps against
 //! it); the identification's travel-speed
-//! estimate ([`crate::fit::seeds::travel_speed`]) the opening and closing stroke speeds; the
+//! estimate ([`crate::metrics::steps::travel_speed`]) the opening and closing stroke speeds; the
 //! tracking error is the RMS of O_P - V_P. A window with fewer than `min_steps` steps of a kind
 //! gives no delay and says so in its note. The baseline is the first window with enough steps,
 //! or, with `health_baseline_model`, that model's answer to each window's O_P (analysed the
@@ -30,15 +30,15 @@ use std::thread::JoinHandle;
 
 use super::config::HealthConfig;
 use super::diagnosis::Feed;
+use super::error::DaemonError;
 use super::exporter::HealthMetrics;
-use super::hil::HEALTH_ALARM_BIT;
-use super::logger::{fixed, Sample};
-use super::DaemonError;
-use crate::fit::seeds::travel_speed;
-use crate::fit::steps::{analyse, StepOptions};
 use crate::metrics::stats::median;
+use crate::metrics::steps::travel_speed;
+use crate::metrics::steps::{analyse, StepOptions};
+use crate::modbus::map::HEALTH_ALARM_BIT;
 use crate::modbus::server::RegisterBank;
 use crate::model::Valve;
+use crate::recording::log_format::{fixed, Sample};
 use crate::recording::RecordingView;
 
 /// What counts as a step for the health delays: a jump of 0.5 % held 1 s, as for `steps`; its

@@ -15,8 +15,9 @@
 //! cycle read none) and the status bits:
 //! - bit [`VALVE_FAULT_BIT`] (1): the last cycle read no V_P (timeout, error, disconnected);
 //! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P;
-//! - bit [`HEALTH_ALARM_BIT`] (3): the live health check (`[health]`) is in alarm for the
-//!   valve; set by the health thread ([`super::health`]) at each window, not by the loop.
+//! - bit [`HEALTH_ALARM_BIT`](crate::modbus::map::HEALTH_ALARM_BIT) (3): the live health
+//!   check (`[health]`) is in alarm for the valve; set by the health thread
+//!   ([`super::health`]) at each window, not by the loop.
 //!
 //! Until the first write the O_P is `initial_pct`. Watchdog: when no set-point write has been
 //! accepted for `watchdog_s` of loop time (counted from the start of the loop, so a controller
@@ -37,19 +38,15 @@ use tokio::net::TcpListener;
 use tokio_modbus::Request;
 
 use super::config::{OnStop, SafetyConfig, SourceConfig};
-use super::logger::Sample;
 use crate::modbus::blocks::Blocks;
+use crate::modbus::map::{VALVE_FAULT_BIT, WATCHDOG_BIT};
 use crate::modbus::server::{OutOfRange, RegisterBank};
 use crate::modbus::tcp_server::{self, Reply, Respond};
 use crate::net::{Health, Limits};
+use crate::recording::log_format::Sample;
 
-/// Status register bit set while the valve gives no V_P.
-pub const VALVE_FAULT_BIT: u8 = 1;
-/// Status register bit set while the watchdog holds the safe O_P.
-pub const WATCHDOG_BIT: u8 = 2;
-/// Status register bit set while the valve's health is in alarm (with `[health]`).
-pub const HEALTH_ALARM_BIT: u8 = 3;
-/// The status bits the loop owns (the health thread owns [`HEALTH_ALARM_BIT`]).
+/// The status bits the loop owns (the health thread owns
+/// [`HEALTH_ALARM_BIT`](crate::modbus::map::HEALTH_ALARM_BIT)).
 const STATUS_MASK: u16 = (1 << VALVE_FAULT_BIT) | (1 << WATCHDOG_BIT);
 
 /// The loop's side of the `modbus-server` source: set-points in, V_P and status out, watchdog.
@@ -185,7 +182,7 @@ pub async fn serve(listener: TcpListener, bank: Arc<Blocks>, limits: Limits, hea
 mod tests {
     use super::*;
     use crate::daemon::config::Config;
-    use crate::daemon::logger::Status;
+    use crate::recording::log_format::Status;
     use std::borrow::Cow;
     use std::path::Path;
     use tokio_modbus::ExceptionCode;

@@ -2,7 +2,7 @@
 //!
 //! Every slot of an absolute time grid, the loop asks the [`source::Source`] for the wanted
 //! opening O_P, sends it to the valve [`valve::Backend`] and reads V_P back in one transaction,
-//! and hands a [`logger::Sample`] to the [`logger`]. Missed slots and failed transactions are
+//! and hands a [`crate::recording::log_format::Sample`] to the [`logger`]. Missed slots and failed transactions are
 //! logged as such with an empty V_P. On stop (SIGINT, SIGTERM, `--duration`, or the end of a
 //! replay) the loop applies the configured safe action in the next slot, logs it, the log is
 //! flushed and closed, and a [`stats::Summary`] is returned.
@@ -24,7 +24,7 @@
 //! the log's 0.0001 % before sending), V_P to the log's precision.
 //!
 //! Files: [`running`] starts the threads ([`start`], [`Running`]), [`control`] is the loop
-//! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread; this file holds the errors, the options and [`run`]
+//! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread; [`error`] the errors; this file holds the options and [`run`]
 //! (signals and progress display).
 //!
 //! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis.
@@ -33,6 +33,7 @@ mod compensation;
 pub mod config;
 mod control;
 pub mod diagnosis;
+mod error;
 pub mod exporter;
 pub mod health;
 pub mod hil;
@@ -54,81 +55,9 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 pub use compensation::CompensationReport;
 pub use config::Config;
+pub use error::DaemonError;
 pub use running::{start, Running};
 pub use stats::{Summary, ValveSummary};
-use valve::BackendError;
-
-use crate::toml_file::TomlError;
-
-/// Why the daemon could not start or finish.
-#[derive(Debug, thiserror::Error)]
-pub enum DaemonError {
-    /// The configuration is invalid.
-    #[error(transparent)]
-    Config(#[from] TomlError),
-    /// The valve backend cannot start (model, Modbus settings, bus budget, connection).
-    #[error(transparent)]
-    Valve(#[from] BackendError),
-    /// A valve's compensation cannot start (its model file).
-    #[error("[valve.compensation]: {0}")]
-    Compensation(#[from] crate::compensate::CompensateError),
-    /// `--duration` is not a positive number.
-    #[error("--duration {0}: must be a positive number of seconds")]
-    Duration(f64),
-    /// The virtual clock was asked for a real valve.
-    #[error("the virtual clock (--as-fast-as-possible, [loop] clock = \"virtual\") needs a simulated valve, not {0}")]
-    VirtualClock(String),
-    /// The virtual clock was asked for a process controller.
-    #[error("the virtual clock (--as-fast-as-possible) cannot serve a process controller ([source] kind = \"modbus-server\"), which runs on the wall clock: leave the option out")]
-    VirtualClockController,
-    /// A listening socket cannot be opened.
-    #[error(
-        "cannot listen on {addr} ({key}): {source} (is the port taken? set another address there)"
-    )]
-    Listen {
-        key: &'static str,
-        addr: SocketAddr,
-        #[source]
-        source: std::io::Error,
-    },
-    /// The Prometheus metrics cannot be registered (a bug).
-    #[error("cannot set up the metrics: {0}")]
-    Metrics(#[from] prometheus::Error),
-    /// The log directory cannot be created.
-    #[error(
-        "cannot create log directory `{dir}`: {source} (set another with --log-dir or [log] dir)"
-    )]
-    LogDir {
-        dir: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// A log file cannot be created.
-    #[error("cannot create log file `{path}`: {source}")]
-    LogFile {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// A log file cannot be written.
-    #[error("cannot write log file `{path}`: {source} (is the disk full?)")]
-    LogWrite {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// A thread, runtime or signal handler could not be set up.
-    #[error("cannot start the {what}: {source}")]
-    Thread {
-        what: &'static str,
-        #[source]
-        source: std::io::Error,
-    },
-    /// A daemon thread panicked (a bug).
-    #[error("the {0} thread stopped unexpectedly")]
-    Panicked(&'static str),
-}
-
 /// Command-line overrides of the configuration.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {

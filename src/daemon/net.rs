@@ -12,10 +12,10 @@ use std::thread::JoinHandle;
 
 use super::config::Config;
 use super::control::current_thread_runtime;
+use super::error::DaemonError;
 use super::exporter::{self, LoopMetrics};
 use super::hil;
 use super::source::Source;
-use super::DaemonError;
 use crate::modbus::blocks::Blocks;
 use crate::net::{Health, Limits};
 

@@ -15,6 +15,7 @@ use super::compensation::Compensation;
 use super::config::{ClockKind, Config};
 use super::control::{self, Lane, Loop, LoopEnd};
 use super::diagnosis::{self, DiagnosisMetrics};
+use super::error::DaemonError;
 use super::exporter::LoopMetrics;
 use super::health::{self, HealthReport};
 use super::logger::{LogReport, Logger};
@@ -22,7 +23,7 @@ use super::net::{Listeners, Net};
 use super::source::Source;
 use super::stats::{Live, Summary, ValveSummary};
 use super::valve::BackendError;
-use super::{DaemonError, RunOptions};
+use super::RunOptions;
 use crate::model::{ModelSpec, Valve};
 use crate::net::Health;
 

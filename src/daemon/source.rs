@@ -17,8 +17,8 @@ use std::sync::Arc;
 
 use super::config::{SafetyConfig, SourceConfig, SourceKind};
 use super::hil::Controller;
-use super::logger::Sample;
 use crate::modbus::server::RegisterBank;
+use crate::recording::log_format::Sample;
 use crate::signal::{Prbs, RandomSteps, Signal, StepsParams};
 
 /// An O_P source with its clamp range.

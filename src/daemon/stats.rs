@@ -14,11 +14,12 @@ use hdrhistogram::Histogram;
 use super::compensation::CompensationReport;
 use super::diagnosis::DiagnosisReport;
 use super::health::HealthReport;
-use super::logger::{LogReport, Sample, Status};
+use super::logger::LogReport;
 use super::valve::Fault;
 use crate::human;
 use crate::modbus::client::LinkStats;
 use crate::net::HealthView;
+use crate::recording::log_format::{Sample, Status};
 
 /// The failure statuses, in the order of [`Stats::last_faults`].
 const FAILURES: [Status; 3] = [Status::Timeout, Status::Error, Status::Disconnected];

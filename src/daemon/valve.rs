@@ -42,7 +42,7 @@ use crate::modbus::client::{Link, LinkStats, ModbusValve, OpenError, MAX_BACKOFF
 use crate::model::{Drift, ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
-pub use crate::modbus::client::Fault;
+pub use crate::modbus::client::{Cycle, Fault};
 
 /// Why the valve backend cannot start.
 #[derive(Debug, thiserror::Error)]
@@ -166,21 +166,17 @@ impl Backend {
         Ok(backends)
     }
 
-    /// Sends `op_pct` as the O_P of loop slot `k` and returns the valve position V_P (%).
-    pub async fn transact(&mut self, op_pct: f64, k: u64) -> Result<f64, Fault> {
+    /// Sends `op_pct` as the O_P of loop slot `k`: the valve position V_P (%) or the fault, and
+    /// the set-point the valve received (the O_P after the register's scaling and rounding; the
+    /// O_P itself for the emulated valve; None when no write was acknowledged).
+    pub async fn transact(&mut self, op_pct: f64, k: u64) -> Cycle {
         match self {
-            Backend::Emulated(e) => Ok(e.step_to(op_pct, k)),
-            Backend::Modbus(m) => m.transact(op_pct).await.map(|r| r.vp_pct),
-        }
-    }
-
-    /// The set-point the valve received in the last transaction, % (the O_P after the
-    /// register's scaling and rounding; the O_P itself for the emulated valve); None when no
-    /// write was acknowledged.
-    pub fn sent_pct(&self) -> Option<f64> {
-        match self {
-            Backend::Emulated(e) => e.last.map(|(_, op)| op),
-            Backend::Modbus(m) => m.sent_pct(),
+            Backend::Emulated(e) => Cycle {
+                vp_pct: Ok(e.step_to(op_pct, k)),
+                sent_pct: Some(op_pct),
+                status: None,
+            },
+            Backend::Modbus(m) => m.cycle(op_pct).await,
         }
     }
 
@@ -284,7 +280,7 @@ mod tests {
             .build()
             .unwrap();
         ops.iter()
-            .map(|&(k, op)| rt.block_on(b.transact(op, k)).unwrap())
+            .map(|&(k, op)| rt.block_on(b.transact(op, k)).vp_pct.unwrap())
             .collect()
     }
 

@@ -10,9 +10,9 @@
 //!
 //! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
 
-use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use super::facts::Facts;
 use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
+use crate::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use crate::model::ModelSpec;
 
 /// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).

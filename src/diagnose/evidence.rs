@@ -9,12 +9,12 @@
 
 use serde::Serialize;
 
-use super::composed::{self, Effect, Knob};
 use super::facts::Facts;
 use super::locate::{Context, Window};
 use super::stickslip;
-use crate::fit::steps::Population;
 use crate::metrics::stats;
+use crate::metrics::steps::Population;
+use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
 
 /// The share of the model's excess error that lies in windows of some kinds.

@@ -5,8 +5,8 @@
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
-use crate::fit::steps::{self, StepOptions};
 use crate::metrics::stats::{self, median, quantile, Differences};
+use crate::metrics::steps::{self, StepOptions};
 use crate::recording::RecordingView;
 
 /// One step of O_P and how V_P answered it.
@@ -228,7 +228,7 @@ fn count_reversals(op: &[f64]) -> usize {
     n
 }
 
-/// The step delays of the step analysis (`fit::steps`), for steps of at least 0.3 % held for
+/// The step delays of the step analysis (`metrics::steps`), for steps of at least 0.3 % held for
 /// a second that V_P answered.
 fn step_responses(rec: &RecordingView) -> Vec<StepResponse> {
     let opts = StepOptions {

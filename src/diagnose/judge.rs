@@ -23,12 +23,12 @@
 //! Not here: what is refitted ([`super::candidates`]) or what is said about it
 //! ([`super::evidence`]).
 
-use super::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use super::facts::{self, Facts};
 use super::refit::Free;
 use super::scorer::{Errors, Scorer};
 use super::size::{self, Size};
 use super::tuning::Tuning;
+use crate::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use crate::model::ModelSpec;
 
 /// Smallest crossing time at half travel that is lost motion rather than stem dynamics, s: a

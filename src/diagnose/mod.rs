@@ -9,7 +9,7 @@
 //!    above it, each tied to what O_P and V_P were doing. [`facts`] measures what the
 //!    recording shows without a model (step delays, speeds, holds, the sensor lattice, slips).
 //! 3. **Explain and extend** ([`rounds`]): every effect of the vocabulary ([`Effect`]) is a few
-//!    numbers of a composed pin-cart II valve ([`composed`]). Each candidate
+//!    numbers of a composed pin-cart II valve ([`crate::model::composed`]). Each candidate
 //!    ([`candidates`]) is added and refitted ([`refit`]) on the fit blocks ([`scorer`]), and
 //!    kept only if, on **held-out** blocks that were never fitted, it lowers the error by more
 //!    than chance, by a real share of the error above the noise floor, BIC agrees, and it is
@@ -31,11 +31,12 @@
 //! [`crate::fit::search::nelder_mead`].
 
 mod candidates;
-pub mod composed;
+mod diagnosis;
 pub mod evidence;
 pub mod facts;
 mod judge;
 pub mod locate;
+mod measure;
 mod refit;
 mod rounds;
 mod scorer;
@@ -43,14 +44,15 @@ pub mod size;
 mod stickslip;
 pub mod tuning;
 
-use serde::Serialize;
-
-use crate::metrics::{self, stats, Scores};
-use crate::model::{ModelSpec, Valve};
+use crate::metrics::{self, stats};
+pub use crate::model::composed::Effect;
+use crate::model::{composed, ModelSpec, Valve};
 use crate::recording::RecordingView;
-pub use composed::Effect;
-use evidence::Evidence;
+pub use diagnosis::{
+    Baseline, Comparison, Diagnosis, Figures, Final, Finding, Note, Outcome, Support, Trace,
+};
 use locate::Window;
+pub use measure::Measure;
 pub use refit::{NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
 use rounds::{Data, Search};
 use scorer::{Errors, Scorer};
@@ -59,193 +61,6 @@ pub use tuning::{Tuning, Worth};
 
 /// Slowest sampling diagnosis accepts, s.
 pub const MAX_SAMPLE_PERIOD_S: f64 = 2.0;
-
-/// The starting point, scored.
-#[derive(Debug, Clone, Serialize)]
-pub struct Baseline {
-    pub model: String,
-    pub heldout_sse: f64,
-    pub sse: f64,
-    #[serde(skip)]
-    pub spec: ModelSpec,
-}
-
-/// One effect found and kept.
-#[derive(Debug, Clone, Serialize)]
-pub struct Finding {
-    pub effect: Effect,
-    /// What the recording and the fit show (rendered as `evidence` in `--json`).
-    pub facts: Evidence,
-    /// The fitted values of the knobs the effect freed, by label.
-    pub params: serde_json::Map<String, serde_json::Value>,
-    /// Look-alikes that explain the recording nearly as well (within a fifth of the held-out
-    /// error this effect removes): the recording cannot tell them apart (see the notes for the
-    /// experiment that would).
-    pub alternatives: Vec<Effect>,
-    pub heldout_sse_before: f64,
-    pub heldout_sse_after: f64,
-    pub delta_bic: f64,
-    /// How strongly the held-out blocks support it: the share of the error above the noise
-    /// floor it removes, and the number of blocks it helps beyond noise (see `judge`); `None`
-    /// for effects named from their evidence rather than the free-run error.
-    pub support: Option<Support>,
-    /// Its size in engineering units, in the final model, with its interval.
-    pub size: Size,
-    /// The measure in which adding it improved the model.
-    pub measure: Measure,
-    /// The knobs of `params`.
-    #[serde(skip)]
-    pub knobs: Vec<composed::Knob>,
-}
-
-/// How a finding showed the fit improve.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Measure {
-    /// The free-run squared error on the held-out blocks, %², before and after.
-    HeldoutSse { before: f64, after: f64 },
-    /// The distance between the slip-size histograms of the model and of the recording,
-    /// summed over 10 s pieces (in slips), before and after: over the held-out pieces, or over
-    /// the whole recording. What free-run error cannot judge (a limit cycle's phase), this can.
-    SlipDistance {
-        heldout: bool,
-        before: f64,
-        after: f64,
-    },
-}
-
-/// An effect the recording shows beyond chance, too small to be worth maintenance (by its size
-/// or by the share of the held-out error it removes): reported, never a finding.
-#[derive(Debug, Clone, Serialize)]
-pub struct Trace {
-    pub effect: Effect,
-    /// Its size with its interval.
-    pub size: Size,
-    /// Share of the held-out error it would remove.
-    pub heldout_share: f64,
-    pub params: serde_json::Map<String, serde_json::Value>,
-    #[serde(skip)]
-    pub spec: ModelSpec,
-}
-
-/// The figures of the final model every output quotes under these names (report, JSON, fleet,
-/// Python): one value per quantity.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Figures {
-    /// Dead time T_d, s.
-    pub dead_time_s: f64,
-    /// Friction band (lost motion on a reversal), %: the model's band, or its crossing time
-    /// converted to the band it means in this recording ([`size::friction_band`]); 0 without
-    /// either.
-    pub friction_band_pct: f64,
-    /// Stroke-speed limit opening and closing at half travel, %/s.
-    pub opening_speed_pct_per_s: f64,
-    pub closing_speed_pct_per_s: f64,
-}
-
-/// How strongly the held-out blocks support a finding.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Support {
-    pub excess_share: f64,
-    pub blocks_helped: f64,
-}
-
-/// The model diagnosis ends with.
-#[derive(Debug, Clone, Serialize)]
-pub struct Final {
-    pub model: String,
-    pub heldout_sse: f64,
-    pub params: serde_json::Value,
-    #[serde(skip)]
-    pub spec: ModelSpec,
-}
-
-/// Table 1 rows on the held-out blocks, before and after.
-#[derive(Debug, Clone)]
-pub struct Comparison {
-    pub before: Scores,
-    pub after: Scores,
-}
-
-/// What the data could not settle, or how an effect was judged.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Note {
-    /// Two look-alikes explain the mismatch almost equally well (shares of the held-out error
-    /// each removes).
-    LookAlike {
-        effect: Effect,
-        other: Effect,
-        removed_share: f64,
-        other_removed_share: f64,
-    },
-    /// Stiction was kept by the slips of V_P, not by the free-run error.
-    JudgedBySlips {
-        heldout_sse_before: f64,
-        heldout_sse_after: f64,
-    },
-    /// Too few reversals of O_P to test the effects that show at reversals.
-    FewReversals { reversals: usize },
-    /// The reading's calibration, too small to name, was put in the model before the effects
-    /// were judged: it explained more of the held-out error than any effect did.
-    SensorCalibration {
-        gain: f64,
-        offset_pct: f64,
-        heldout_sse_before: f64,
-        heldout_sse_after: f64,
-    },
-}
-
-/// The conclusion of a diagnosis (rendered as `verdict` in `--json`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Outcome {
-    /// Nothing found, and the residual is consistent with measurement noise.
-    Noise,
-    /// Nothing found, although `windows` stand above the noise floor.
-    NotSignificant { windows: usize },
-    /// The model was missing these effects; the held-out SSE before and after adding those
-    /// judged by it (stiction judged by its slips improves the slip distance instead, see its
-    /// finding's [`Measure`]).
-    Missing {
-        effects: Vec<Effect>,
-        heldout_sse_before: f64,
-        heldout_sse_after: f64,
-        /// Stiction was judged by the slips of V_P.
-        by_slips: bool,
-    },
-}
-
-/// Everything a diagnosis found, in the shape of `--json`.
-#[derive(Debug, Clone, Serialize)]
-pub struct Diagnosis {
-    pub baseline: Baseline,
-    pub noise_floor_pct: f64,
-    pub mismatch_windows: Vec<Window>,
-    pub findings: Vec<Finding>,
-    /// Effects shown beyond chance but not worth maintenance.
-    pub traces: Vec<Trace>,
-    /// The final model's figures, as every output quotes them.
-    pub figures: Figures,
-    #[serde(rename = "final")]
-    pub final_model: Final,
-    pub outcome: Outcome,
-    /// What the data could not tell apart, and what experiment would.
-    pub notes: Vec<Note>,
-    /// Windows left after the final model.
-    #[serde(skip)]
-    pub windows_after: Vec<Window>,
-    #[serde(skip)]
-    pub heldout: Option<Comparison>,
-    /// Simulated V_P of the baseline and the final model, for plots.
-    #[serde(skip)]
-    pub sim_before: Vec<f64>,
-    #[serde(skip)]
-    pub sim_after: Vec<f64>,
-    /// The step responses measured in the recording (evidence for delays).
-    #[serde(skip)]
-    pub steps: Vec<facts::StepResponse>,
-}
 
 /// Errors that stop a diagnosis.
 #[derive(Debug, thiserror::Error)]
@@ -267,6 +82,18 @@ pub enum DiagnoseError {
 /// Runs the whole diagnosis of a recording, starting from the user's model `base` or, without
 /// one, a fitted FOPDT, with the default [`Tuning`]. `progress(done, total)` is called as the
 /// rounds finish.
+///
+/// ```no_run
+/// use valve_bridge::diagnose::diagnose;
+/// use valve_bridge::recording::{read, ReadOptions};
+///
+/// let rec = read("recording.csv".as_ref(), &ReadOptions::default())?;
+/// let d = diagnose(&rec.view(), None, &|_, _| {})?;
+/// for f in &d.findings {
+///     println!("{}: {:?}", f.effect.name(), f.size);
+/// }
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn diagnose(
     rec: &RecordingView,
     base: Option<&ModelSpec>,

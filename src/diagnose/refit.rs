@@ -12,12 +12,12 @@
 
 use rayon::prelude::*;
 
-use super::composed::{self, Knob, FASTEST_PCT_PER_S};
 use super::facts::Facts;
 use super::scorer::{Errors, Scorer};
 use crate::fit::params::ParamDef;
 use crate::fit::search;
 use crate::metrics::stats;
+use crate::model::composed::{self, Knob, FASTEST_PCT_PER_S};
 use crate::model::{FopdtParams, ModelKind, ModelSpec};
 
 /// Largest dead time a healthy positioner is allowed in the fitted baseline, s.

@@ -22,18 +22,19 @@ use rayon::prelude::*;
 use serde_json::{Map, Value};
 
 use super::candidates::{self, MAX_DEAD_TIME_S, MAX_WINDUP_PCT};
-use super::composed::{self, Effect, Knob};
+use super::diagnosis::{Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
 use super::judge::{bic_change, Judge, Trial};
 use super::locate::Window;
+use super::measure::Measure;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
 use super::scorer::{Errors, Scorer};
 use super::size::{self, Size};
 use super::stickslip;
 use super::tuning::Tuning;
-use super::{Finding, Measure, Note, Support, Trace};
 use crate::metrics::stats;
+use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 

@@ -21,11 +21,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::composed::{self, Effect, Knob};
 use super::facts::Facts;
 use super::scorer::Scorer;
 use super::tuning::Tuning;
 use crate::metrics::stats;
+use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
 
 /// An effect's size, with its interval and its weight against what is worth maintenance.
@@ -62,7 +62,7 @@ pub(crate) fn size(
     let w = &tuning.worth;
     let g = |k| composed::get(spec, k);
     let worth = match effect {
-        Effect::DeadTime => (value - super::NOMINAL_DEAD_TIME_S) / w.dead_time_excess_s,
+        Effect::DeadTime => (value - super::refit::NOMINAL_DEAD_TIME_S) / w.dead_time_excess_s,
         Effect::Backlash => value / w.friction_band_pct,
         Effect::StateDependentDelay if g(Knob::Slowdown) > 0.0 => (value - 1.0) / w.open_slowdown,
         Effect::StateDependentDelay => (100.0 * g(Knob::CrossingSlope)).abs() / w.crossing_growth_s,

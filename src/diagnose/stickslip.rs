@@ -42,12 +42,12 @@
 
 use rayon::prelude::*;
 
-use super::composed::{self, Knob};
 use super::facts::{self, Facts, Slip};
+use super::measure::Measure;
 use super::scorer::Scorer;
 use super::tuning::Tuning;
-use super::Measure;
 use crate::metrics::stats;
+use crate::model::composed::{self, Knob};
 use crate::model::ModelSpec;
 
 /// Slip-size bins: octaves from the slip threshold, the last one open-ended.

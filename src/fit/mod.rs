@@ -6,7 +6,8 @@
 //! - [`cost`]: the simulation-error cost over masked samples ([`cost::Problem`]).
 //! - [`search`]: Latin hypercube + argmin Nelder-Mead in the unit cube, in parallel (rayon).
 //! - [`seeds`]: warm starts from physical estimates (cross-correlation dead time, step T63).
-//! - [`steps`]: the step-delay analysis of Section 4.1 and pin-cart II's polynomial.
+//! - [`crate::metrics::steps`] (below, shared with diagnosis and the daemon): the step-delay
+//!   analysis of Section 4.1 and pin-cart II's polynomial.
 //! - [`windows`]: windows to score (given or unsaturated) and the blocked held-out split.
 //! - [`figures`]: maintenance figures (T63/T86, dead band, speeds) measured on a fitted model.
 //! - [`determined`]: which fitted parameters the recording does not pin down (at a bound of
@@ -28,7 +29,6 @@ pub mod figures;
 pub mod params;
 pub mod search;
 pub mod seeds;
-pub mod steps;
 pub mod windows;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -36,13 +36,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::metrics::steps::{self, StepAnalysis, StepOptions, StepsError};
 use crate::metrics::{self, Scores};
 use crate::model::{ModelKind, ModelSpec};
 use crate::recording::RecordingView;
 use cost::Problem;
 use params::{Layout, Limits};
 use seeds::Physical;
-use steps::{StepAnalysis, StepOptions};
 use windows::{Split, Window};
 
 /// Why identification could not run.
@@ -51,15 +51,12 @@ pub enum FitError {
     /// A `--windows` list that cannot be read.
     #[error("--windows {text}: {detail}")]
     Windows { text: String, detail: String },
-    /// Step-analysis options that make no sense.
-    #[error("step analysis: {0}")]
-    StepOptions(String),
+    /// Step-analysis options that make no sense, or no measured V_P.
+    #[error(transparent)]
+    Steps(#[from] StepsError),
     /// A model that is not one of the paper's (the physical simulator).
     #[error("{0} is a simulator with {count} parameters, not one of the paper's identifiable models: choose from fopdt, stiction, pincart1, pincart2 (modelless and delayed are always added)", count = crate::model::PhysicalParams::COUNT)]
     NotIdentifiable(ModelKind),
-    /// No measured V_P to fit to.
-    #[error("the recording has no measured V_P column: identification and step delays need it (map it with --columns vp=NAME)")]
-    NoPosition,
     /// Too little data in the windows.
     #[error(
         "only {scored} samples to score {where_}: identification needs at least {need}; {fix}"
@@ -322,6 +319,25 @@ struct Shared<'a> {
 
 /// Identifies `opts.models` on a recording. `progress(done, total)` is called as models finish
 /// (from worker threads).
+///
+/// ```
+/// use valve_bridge::fit::{identify, Options};
+/// use valve_bridge::model::{bundled, ModelKind, Valve};
+/// use valve_bridge::recording::RecordingView;
+///
+/// // 60 s at 10 Hz of an FOPDT valve answering steps of O_P every 5 s.
+/// let dt = 0.1;
+/// let t: Vec<f64> = (0..600).map(|k| k as f64 * dt).collect();
+/// let op: Vec<f64> = (t.iter())
+///     .map(|t| if (t / 5.0) as usize % 2 == 0 { 40.0 } else { 60.0 })
+///     .collect();
+/// let vp = Valve::new(&bundled(ModelKind::Fopdt), dt)?.simulate(&op, op[0]);
+/// let rec = RecordingView { t: &t, op: &op, vp: &vp, restarts: &[], dt };
+/// let id = identify(&rec, &Options::for_models(&[ModelKind::Fopdt]), &|_, _| {})?;
+/// let fopdt = id.rows.iter().find(|r| r.kind == ModelKind::Fopdt).expect("fitted");
+/// assert!(fopdt.scores.r2 > 0.99, "R² {}", fopdt.scores.r2);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn identify(
     rec: &RecordingView,
     opts: &Options,
@@ -333,7 +349,7 @@ pub fn identify(
         return Err(FitError::NotIdentifiable(kind));
     }
     if vp.len() != op.len() || vp.is_empty() {
-        return Err(FitError::NoPosition);
+        return Err(StepsError::NoPosition.into());
     }
     let (wins, auto) = match &opts.windows {
         Some(w) => (w.clone(), false),

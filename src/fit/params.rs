@@ -9,13 +9,14 @@
 //!
 //! Pin-cart II's eq. (7) polynomial is searched as its crossing times at 0, 50 and 100 %
 //! opening (three well-scaled numbers of seconds) rather than as `a_p, b_p, c_p`, whose scales
-//! differ by four orders of magnitude; [`crossing_poly`] converts. Stiction's jump band is
+//! differ by four orders of magnitude; [`crossing_poly`](crate::model::crossing_poly) converts. Stiction's jump band is
 //! searched as a share of the stickband, so `J <= S` holds everywhere in the box.
 //!
 //! Not here: the cost function or the search ([`super::cost`], [`super::search`]).
 
 use crate::model::{
-    FopdtParams, ModelKind, ModelSpec, PinCart1Params, PinCart2Params, StictionParams,
+    crossing_poly, FopdtParams, ModelKind, ModelSpec, PinCart1Params, PinCart2Params,
+    StictionParams,
 };
 
 /// How a parameter is searched.
@@ -306,25 +307,6 @@ impl Layout {
     }
 }
 
-/// `a_p, b_p, c_p` of the quadratic through the crossing times `t0`, `t50`, `t100` (s) at 0,
-/// 50 and 100 % opening. If it dips below zero inside 0-100 % it is lifted until its minimum
-/// there is zero, so the spec stays valid (crossing times are never negative).
-pub fn crossing_poly(t0: f64, t50: f64, t100: f64) -> (f64, f64, f64) {
-    let a = (t100 - 2.0 * t50 + t0) / 5000.0;
-    let b = (t50 - t0) / 50.0 - 50.0 * a;
-    let mut c = t0;
-    if a > 0.0 {
-        let v = -b / (2.0 * a);
-        if (0.0..=100.0).contains(&v) {
-            let min = (a * v + b) * v + c;
-            if min < 0.0 {
-                c -= min;
-            }
-        }
-    }
-    (a, b, c)
-}
-
 /// The physical parameters of a fitted spec as Table 2 lists them: `(name, value, unit)`,
 /// dead time first. Pin-cart II reports `a_p, b_p, c_p` (the paper's parameters), stiction
 /// the jump band in %.
@@ -390,23 +372,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn crossing_polynomial_passes_through_its_three_points() {
-        let (a, b, c) = crossing_poly(0.3, 0.5, 0.8);
-        let p = |v: f64| (a * v + b) * v + c;
-        assert!((p(0.0) - 0.3).abs() < 1e-12);
-        assert!((p(50.0) - 0.5).abs() < 1e-12);
-        assert!((p(100.0) - 0.8).abs() < 1e-12);
-        // The bundled file's polynomial: 2e-5, 3e-3, 0.3.
-        assert!((a - 2e-5).abs() < 1e-12 && (b - 3e-3).abs() < 1e-12);
-        // A dip below zero is lifted.
-        let (a, b, c) = crossing_poly(1.0, 0.0, 1.0);
-        let min = (0..=100)
-            .map(|v| (a * v as f64 + b) * v as f64 + c)
-            .fold(f64::INFINITY, f64::min);
-        assert!(min >= -1e-12);
     }
 
     #[test]

@@ -11,8 +11,8 @@
 use serde::Serialize;
 
 use super::params::Layout;
-use super::steps::{CrossingSeed, StepAnalysis};
 use crate::metrics::stats::quantile;
+use crate::metrics::steps::{travel_speed, CrossingSeed, StepAnalysis};
 use crate::model::ModelKind;
 
 /// Physical estimates read off a recording.
@@ -71,23 +71,6 @@ pub fn dead_time_xcorr(op: &[f64], vp: &[f64], dt: f64, max_lag_s: f64) -> f64 {
         0.0
     };
     ((best as f64 + frac) * dt).max(0.0)
-}
-
-/// The 99.5th percentile of the speed of V_P over 0.1 s, %/s: of every move (`direction`
-/// None), or only of the opening (`Some(1.0)`) or closing (`Some(-1.0)`) moves (0 when there
-/// are none).
-pub fn travel_speed(vp: &[f64], dt: f64, direction: Option<f64>) -> f64 {
-    let h = ((0.1 / dt).round() as usize).max(1);
-    let mut speeds: Vec<f64> = (h..vp.len())
-        .step_by(h)
-        .map(|k| (vp[k] - vp[k - h]) / (h as f64 * dt))
-        .filter(|v| v.is_finite())
-        .filter_map(|v| match direction {
-            None => Some(v.abs()),
-            Some(d) => (v * d > 0.0).then_some(v.abs()),
-        })
-        .collect();
-    quantile(&mut speeds, 0.995)
 }
 
 /// Reads the physical estimates off a recording and its step analysis.

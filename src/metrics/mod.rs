@@ -8,6 +8,8 @@
 //! - [`aic`], [`bic`]: Gaussian-likelihood information criteria from an SSE.
 //! - [`stats`]: quantiles, mean and spread, robust noise and a residual's correlation length.
 //! - [`travel`]: a valve's travel and reversals through a deadband (wear figures).
+//! - [`steps`]: the step delays and stroke speeds a recording shows, shared by identification,
+//!   diagnosis and the daemon's health check.
 //!
 //! Units: MAE in the units of the data (percent of travel for V_P); SSE in those units squared
 //! (%²). The paper's SSE column is on fractions of full travel: its modelless row (MAE 1.106 %,
@@ -18,6 +20,7 @@
 
 mod filter;
 pub mod stats;
+pub mod steps;
 mod travel;
 
 pub use filter::{filtfilt_butter_lowpass, PAPER_FILTER_CUTOFF_HZ, PAPER_FILTER_ORDER};

@@ -17,6 +17,8 @@ use super::plan::Plan;
 
 /// Above this share of the period the margin counts as thin.
 pub const THIN_USAGE: f64 = 0.7;
+/// Default deadline of a cycle, as a share of the loop period.
+pub const DEFAULT_TIMEOUT_SHARE: f64 = 0.8;
 
 /// One transaction's share of the cycle.
 #[derive(Debug, Clone, PartialEq)]
@@ -306,8 +308,8 @@ impl BusBudget {
                 given * 1e3
             ));
         }
-        let share = if self.usage() <= crate::modbus::client::DEFAULT_TIMEOUT_SHARE {
-            crate::modbus::client::DEFAULT_TIMEOUT_SHARE
+        let share = if self.usage() <= DEFAULT_TIMEOUT_SHARE {
+            DEFAULT_TIMEOUT_SHARE
         } else {
             1.0
         };

@@ -147,6 +147,14 @@ pub struct StatusRegister {
     pub setpoint_error_bit: u8,
 }
 
+/// Bit of the status word the daemon serves a process controller (`modbus-server` source) set
+/// while the valve gives no V_P.
+pub const VALVE_FAULT_BIT: u8 = 1;
+/// Status word bit set while the watchdog holds the safe O_P.
+pub const WATCHDOG_BIT: u8 = 2;
+/// Status word bit set while the valve's health is in alarm (with `[health]`).
+pub const HEALTH_ALARM_BIT: u8 = 3;
+
 impl StatusRegister {
     /// The mask of the set-point error bit.
     pub fn error_mask(&self) -> u16 {
@@ -157,6 +165,17 @@ impl StatusRegister {
 
 /// The register map of one positioner (see the module documentation). Read from TOML through
 /// [`RegisterKeys`]: a key left out keeps its [`Default`].
+///
+/// ```
+/// use valve_bridge::modbus::map::RegisterMap;
+///
+/// // The default map: O_P written and V_P read in per mille of travel.
+/// let map = RegisterMap::default();
+/// let words = map.encode_setpoint(45.67)?;
+/// assert_eq!(words, [457]);
+/// assert!((map.decode_position(&[457])? - 45.7).abs() < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(from = "RegisterKeys")]
 pub struct RegisterMap {

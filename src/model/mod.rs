@@ -14,9 +14,11 @@
 //! one of the paper's models: a first-principles pneumatic valve with positioner, friction,
 //! stops and sensor ([`PhysicalParams`]), for emulation and for testing diagnosis against
 //! physics it does not share; its sensor reading is reported unclamped. Nothing here does I/O
-//! beyond [`ModelSpec::load`]; stepping never allocates.
+//! beyond [`ModelSpec::load`]; stepping never allocates. [`composed`] writes any model as
+//! pin-cart II plus named effects ([`composed::Effect`]), the valve diagnosis grows.
 
 mod checks;
+pub mod composed;
 mod delay;
 pub mod drift;
 mod effects;
@@ -34,7 +36,7 @@ pub use drift::{Drift, DriftSpec};
 pub use effects::Effects;
 pub use fopdt::FopdtParams;
 pub use physical::PhysicalParams;
-pub use pincart::{PinCart1Params, PinCart2Params, PinReach};
+pub use pincart::{crossing_poly, PinCart1Params, PinCart2Params, PinReach};
 pub use stiction::StictionParams;
 
 use crate::toml_file::{self, TomlError};
@@ -319,6 +321,17 @@ enum Core {
 }
 
 /// A runnable valve model: `reset`, then `step(O_P) -> V_P` once per sample.
+///
+/// ```
+/// use valve_bridge::model::{bundled, ModelKind, Valve};
+///
+/// // The paper's pin-cart II valve with its bundled parameters, stepped at 100 Hz.
+/// let mut valve = Valve::new(&bundled(ModelKind::Pincart2), 0.01)?;
+/// valve.reset(40.0, 40.0);
+/// let vp: Vec<f64> = (0..1000).map(|_| valve.step(60.0)).collect();
+/// assert!(vp[999] > 50.0 && vp[999] <= 60.5, "V_P follows the O_P step: {}", vp[999]);
+/// # Ok::<(), valve_bridge::model::ModelError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct Valve {
     spec: ModelSpec,

@@ -349,6 +349,25 @@ impl PinCart {
     }
 }
 
+/// `a_p, b_p, c_p` of the quadratic through the crossing times `t0`, `t50`, `t100` (s) at 0,
+/// 50 and 100 % opening. If it dips below zero inside 0-100 % it is lifted until its minimum
+/// there is zero, so the spec stays valid (crossing times are never negative).
+pub fn crossing_poly(t0: f64, t50: f64, t100: f64) -> (f64, f64, f64) {
+    let a = (t100 - 2.0 * t50 + t0) / 5000.0;
+    let b = (t50 - t0) / 50.0 - 50.0 * a;
+    let mut c = t0;
+    if a > 0.0 {
+        let v = -b / (2.0 * a);
+        if (0.0..=100.0).contains(&v) {
+            let min = (a * v + b) * v + c;
+            if min < 0.0 {
+                c -= min;
+            }
+        }
+    }
+    (a, b, c)
+}
+
 #[cfg(test)]
 #[path = "pincart_tests.rs"]
 mod tests;

@@ -182,3 +182,20 @@ fn breakaway_without_a_cart_follows_a_reversed_command() {
     let last = down[2999];
     assert!((last - 45.0).abs() < 1.0, "stuck at {last}");
 }
+
+#[test]
+fn crossing_polynomial_passes_through_its_three_points() {
+    let (a, b, c) = crossing_poly(0.3, 0.5, 0.8);
+    let p = |v: f64| (a * v + b) * v + c;
+    assert!((p(0.0) - 0.3).abs() < 1e-12);
+    assert!((p(50.0) - 0.5).abs() < 1e-12);
+    assert!((p(100.0) - 0.8).abs() < 1e-12);
+    // The bundled file's polynomial: 2e-5, 3e-3, 0.3.
+    assert!((a - 2e-5).abs() < 1e-12 && (b - 3e-3).abs() < 1e-12);
+    // A dip below zero is lifted.
+    let (a, b, c) = crossing_poly(1.0, 0.0, 1.0);
+    let min = (0..=100)
+        .map(|v| (a * v as f64 + b) * v as f64 + c)
+        .fold(f64::INFINITY, f64::min);
+    assert!(min >= -1e-12);
+}

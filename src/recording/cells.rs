@@ -8,13 +8,11 @@
 use time::macros::format_description;
 use time::PrimitiveDateTime;
 
+use super::log_format::{self, Status};
 use super::{ColumnMap, RecordingError};
 
 /// The daemon's status column.
-pub(super) const STATUS_COLUMN: &str = "status";
-/// Statuses of a row whose V_P read failed: it has no V_P whatever its cell holds. (Rows of the
-/// other statuses, `skipped`, `watchdog`, `safe-hold`, `safe-go-to`, carry the V_P read, if any.)
-const FAILED_READS: [&str; 3] = ["timeout", "error", "disconnected"];
+pub(super) const STATUS_COLUMN: &str = log_format::HEADER[3];
 
 /// What one row holds.
 pub(super) struct Row {
@@ -112,7 +110,13 @@ impl<'m> Columns<'m> {
         let vp = match (self.vp, &self.map.vp) {
             (Some(i), Some(name)) => match number(name, cell(i), MAX_POSITION) {
                 Err(Problem::Missing { .. }) => Some(f64::NAN),
-                _ if status.as_deref().is_some_and(|s| FAILED_READS.contains(&s)) => Some(f64::NAN),
+                _ if status
+                    .as_deref()
+                    .and_then(|s| s.parse::<Status>().ok())
+                    .is_some_and(Status::is_failed_read) =>
+                {
+                    Some(f64::NAN)
+                }
                 v => Some(v?),
             },
             _ => None,

@@ -28,6 +28,7 @@ mod error;
 pub mod grid;
 pub mod gzip;
 mod join;
+pub mod log_format;
 mod read;
 mod resample;
 mod write;

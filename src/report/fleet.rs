@@ -4,8 +4,8 @@
 
 use std::fmt::Write;
 
+use super::fleet_table::{Fleet, ValveSummary};
 use super::{esc, page};
-use crate::fleet::{Fleet, ValveSummary};
 
 /// `value` with `digits` decimals, bold when `over`; `-` when absent.
 fn cell(value: Option<f64>, digits: usize, over: bool) -> String {

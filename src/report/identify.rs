@@ -16,9 +16,9 @@ use super::chart::Dataset;
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 use super::{esc, page, row};
 use crate::fit::determined::Why;
-use crate::fit::steps::StepAnalysis;
 use crate::fit::{Identification, ModelFit};
 use crate::metrics;
+use crate::metrics::steps::StepAnalysis;
 use crate::model::ModelKind;
 use crate::recording::RecordingView;
 

@@ -5,7 +5,8 @@
 //!   document and its page (the recording against the model before and after, the residual,
 //!   the worst windows zoomed in, the step-delay evidence and the Table 1 rows).
 //! - [`identify`]: an identification's page (Tables 1 and 2, the paper's Figs. 5-10).
-//! - [`fleet`]: a fleet's page (its valves ranked for maintenance, each linked to its own page).
+//! - [`fleet`]: a fleet's page (its valves ranked for maintenance, each linked to its own page),
+//!   from the rows of [`fleet_table`] (which `crate::fleet` fills from the diagnoses).
 //! - [`plot`]: the SVG charts.
 //! - [`chart`]: the interactive time-series charts (uPlot, embedded), the SVG kept for a page
 //!   without scripts.
@@ -16,6 +17,7 @@
 pub mod chart;
 pub mod diagnose;
 pub mod fleet;
+pub mod fleet_table;
 pub mod health;
 pub mod identify;
 pub mod plot;

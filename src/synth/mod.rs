@@ -166,7 +166,7 @@ fn closed_loop(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::Effect;
+    use crate::model::composed::Effect;
 
     #[test]
     fn every_excitation_is_deterministic_for_a_seed() {

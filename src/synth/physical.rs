@@ -20,7 +20,7 @@
 //! This module only builds specs; it does not decide what counts as healthy or detectable
 //! (a benchmark states its own thresholds) and does not run anything.
 
-use crate::diagnose::Effect;
+use crate::model::composed::Effect;
 use crate::model::{bundled, ModelKind, ModelSpec, PhysicalParams};
 
 /// The healthy physical valve: `config/models/physical.toml` (fast positioner, 0.05 s

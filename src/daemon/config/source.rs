@@ -12,8 +12,7 @@ use std::time::Duration;
 use serde::Deserialize;
 
 use super::{Check, ClockKind, ListenAddr, LoopConfig};
-use crate::daemon::hil;
-use crate::modbus::map::RegisterMap;
+use crate::modbus::map::{self, RegisterMap};
 use crate::net::Limits;
 use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
 /// The settings of the generated sources (`[source.random-steps]`, `[source.steps]`, ...) are
@@ -409,9 +408,9 @@ impl ModbusServerConfig {
         if let Some(st) = self.registers.status {
             let bit = st.setpoint_error_bit;
             if [
-                hil::VALVE_FAULT_BIT,
-                hil::WATCHDOG_BIT,
-                hil::HEALTH_ALARM_BIT,
+                map::VALVE_FAULT_BIT,
+                map::WATCHDOG_BIT,
+                map::HEALTH_ALARM_BIT,
             ]
             .contains(&bit)
             {
@@ -425,9 +424,9 @@ impl ModbusServerConfig {
                         "{bit} is taken: the daemon reports a valve fault in bit {}, the \
                          watchdog in bit {} and a health alarm in bit {} of the status \
                          register; use 0 or 4-15",
-                        hil::VALVE_FAULT_BIT,
-                        hil::WATCHDOG_BIT,
-                        hil::HEALTH_ALARM_BIT
+                        map::VALVE_FAULT_BIT,
+                        map::WATCHDOG_BIT,
+                        map::HEALTH_ALARM_BIT
                     ),
                 });
             }

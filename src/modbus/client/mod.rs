@@ -34,7 +34,7 @@ use std::time::Duration;
 use tokio::sync::Mutex;
 use tokio::time::Instant;
 
-use super::budget::{Budget, BudgetError};
+use super::budget::{Budget, BudgetError, DEFAULT_TIMEOUT_SHARE};
 pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction, MAX_JOINED_SPAN};
@@ -48,8 +48,6 @@ pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
 pub const SILENT_LINK: Duration = Duration::from_secs(3);
 /// How long the first connection at start-up may take.
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(3);
-/// Default deadline of a cycle, as a share of the loop period.
-pub const DEFAULT_TIMEOUT_SHARE: f64 = 0.8;
 
 /// Why a cycle gave no V_P.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -103,6 +101,18 @@ pub struct Reading {
     pub sent_pct: f64,
 }
 
+/// One cycle, answered or not: what the device received and what it answered. A fault after
+/// an acknowledged write keeps the set-point the device received.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cycle {
+    /// Valve position V_P, %, or why none was read.
+    pub vp_pct: Result<f64, Fault>,
+    /// The set-point as the device received it, % (None when no write was acknowledged).
+    pub sent_pct: Option<f64>,
+    /// The status word, when the map has a status register and the reply was read.
+    pub status: Option<u16>,
+}
+
 /// What a Modbus link went through, for the summary and the metrics.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LinkStats {
@@ -125,7 +135,6 @@ pub struct ModbusValve {
     /// The link, this valve's alone or its bus's. Locked for a transaction; never contended,
     /// since the valves of a bus take turns on one thread.
     conn: Arc<Mutex<Connection>>,
-    sent_pct: Option<f64>,
 }
 
 impl std::fmt::Debug for ModbusValve {
@@ -216,7 +225,6 @@ impl ModbusValve {
             timeout,
             budget,
             conn,
-            sent_pct: None,
         })
     }
 
@@ -307,11 +315,6 @@ impl ModbusValve {
         self.conn.try_lock().is_ok_and(|c| c.is_connected())
     }
 
-    /// The set-point the device acknowledged in the last cycle, as it received it, %.
-    pub fn sent_pct(&self) -> Option<f64> {
-        self.sent_pct
-    }
-
     /// A short description for the log.
     pub fn describe(&self) -> String {
         self.link.describe()
@@ -319,7 +322,34 @@ impl ModbusValve {
 
     /// Writes `op_pct` as the set-point and returns the position (and status).
     pub async fn transact(&mut self, op_pct: f64) -> Result<Reading, Fault> {
-        self.sent_pct = None;
+        self.exchange_cycle(op_pct, &mut None).await
+    }
+
+    /// One loop cycle: writes `op_pct` as the set-point and reads the position (and status),
+    /// keeping what the device received even when the read fails.
+    pub async fn cycle(&mut self, op_pct: f64) -> Cycle {
+        let mut sent_pct = None;
+        match self.exchange_cycle(op_pct, &mut sent_pct).await {
+            Ok(r) => Cycle {
+                vp_pct: Ok(r.vp_pct),
+                sent_pct,
+                status: r.status,
+            },
+            Err(fault) => Cycle {
+                vp_pct: Err(fault),
+                sent_pct,
+                status: None,
+            },
+        }
+    }
+
+    /// The transactions of one cycle; `sent_pct` is set once a write is acknowledged and
+    /// cleared again when the reply turns out unusable.
+    async fn exchange_cycle(
+        &mut self,
+        op_pct: f64,
+        sent_pct: &mut Option<f64>,
+    ) -> Result<Reading, Fault> {
         let setpoint = self
             .map
             .encode_setpoint(op_pct)
@@ -343,12 +373,12 @@ impl ModbusValve {
                     .await?,
             );
             if !matches!(t, Transaction::Read { .. }) {
-                self.sent_pct = Some(sent);
+                *sent_pct = Some(sent);
             }
         }
         let reading = self.decode(&replies, op_pct, sent);
         if reading.is_err() {
-            self.sent_pct = None;
+            *sent_pct = None;
         }
         reading
     }

@@ -1,3 +1,6 @@
+//! Step and speed measurements, shared by identification, diagnosis and the daemon's live
+//! health check: the stroke speed of V_P ([`travel_speed`]) and the step-delay analysis.
+//!
 //! Step-delay analysis (the paper's Section 4.1, Figs. 5-7): find the steps of O_P, measure how
 //! long V_P takes to answer each, split them into same-direction steps and reversals, fit the
 //! second-order polynomial of the reversal delay against the initial opening, and derive
@@ -17,10 +20,20 @@
 
 use serde::Serialize;
 
-use super::params::crossing_poly;
-use super::FitError;
-use crate::metrics::stats::{mean_sd, noise_sd, Differences};
+use super::stats::{mean_sd, noise_sd, quantile, Differences};
+use crate::model::crossing_poly;
 use crate::recording::RecordingView;
+
+/// Why a step analysis cannot run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepsError {
+    /// Step-analysis options that make no sense.
+    #[error("step analysis: {0}")]
+    Options(String),
+    /// No measured V_P to measure against.
+    #[error("the recording has no measured V_P column: identification and step delays need it (map it with --columns vp=NAME)")]
+    NoPosition,
+}
 
 /// What counts as a step and when it has answered.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,8 +49,8 @@ pub struct StepOptions {
 impl StepOptions {
     /// Options checked for sense: `fraction` strictly between 0 and 1, a positive size and
     /// hold.
-    pub fn new(min_size_pct: f64, fraction: f64, min_hold_s: f64) -> Result<Self, FitError> {
-        let bad = |detail: String| Err(FitError::StepOptions(detail));
+    pub fn new(min_size_pct: f64, fraction: f64, min_hold_s: f64) -> Result<Self, StepsError> {
+        let bad = |detail: String| Err(StepsError::Options(detail));
         if !(fraction > 0.0 && fraction < 1.0) {
             return bad(format!(
                 "fraction {fraction}: must be between 0 and 1 (e.g. 0.1 for a tenth of the step)"
@@ -172,13 +185,30 @@ pub struct StepAnalysis {
     pub noise_pct: f64,
 }
 
+/// The 99.5th percentile of the speed of V_P over 0.1 s, %/s: of every move (`direction`
+/// None), or only of the opening (`Some(1.0)`) or closing (`Some(-1.0)`) moves (0 when there
+/// are none).
+pub fn travel_speed(vp: &[f64], dt: f64, direction: Option<f64>) -> f64 {
+    let h = ((0.1 / dt).round() as usize).max(1);
+    let mut speeds: Vec<f64> = (h..vp.len())
+        .step_by(h)
+        .map(|k| (vp[k] - vp[k - h]) / (h as f64 * dt))
+        .filter(|v| v.is_finite())
+        .filter_map(|v| match direction {
+            None => Some(v.abs()),
+            Some(d) => (v * d > 0.0).then_some(v.abs()),
+        })
+        .collect();
+    quantile(&mut speeds, 0.995)
+}
+
 /// Analyses the steps of a recording; it must have a measured V_P.
 pub fn analyse_recording(
     rec: &RecordingView,
     opts: &StepOptions,
-) -> Result<StepAnalysis, FitError> {
+) -> Result<StepAnalysis, StepsError> {
     if rec.vp.len() != rec.op.len() || rec.vp.is_empty() {
-        return Err(FitError::NoPosition);
+        return Err(StepsError::NoPosition);
     }
     Ok(analyse(rec, opts))
 }

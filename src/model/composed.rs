@@ -1,13 +1,17 @@
 //! The composed valve that diagnosis grows: pin-cart II plus effects, and the effect vocabulary.
+//! It lives with the models so that the emulator side (compensation, synthesis) and diagnosis
+//! share it without either importing the other.
 //!
 //! Every model diagnosis starts from is first written as an equivalent pin-cart II spec with all
 //! effects off (an FOPDT is pin-cart II without a cart, without speed limits and with
 //! `P_k = (1 - e^(-dt/tau)) / dt`, which steps exactly the same recursion). Adding an effect
 //! then means freeing a few numbers of that spec ("knobs"), never writing a new model.
+//!
+//! Not here: which effect a recording shows, and how its knobs are fitted (`crate::diagnose`).
 
 use serde::Serialize;
 
-use crate::model::{Effects, ModelKind, ModelSpec, PinCart2Params};
+use super::{Effects, ModelKind, ModelSpec, PinCart2Params};
 
 /// The physics diagnosis can name; the JSON names are the vocabulary of the issue tracker.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
