@@ -52,7 +52,7 @@ use prometheus::{
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
-use super::health::{Figures, HealthLimits};
+use super::health_figures::{Figures, HealthLimits};
 use crate::compensate::Window;
 use crate::modbus::client::LinkStats;
 use crate::net::{self, Health, Limits};

@@ -36,6 +36,7 @@ pub mod diagnosis;
 mod error;
 pub mod exporter;
 pub mod health;
+mod health_figures;
 pub mod hil;
 pub mod logger;
 mod net;
