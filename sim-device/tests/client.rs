@@ -361,13 +361,19 @@ async fn line_speed_emulation_matches_the_bus_budget() {
         .await
         .expect("opens");
     let budget = v.budget().map(|b| b.cycle_s).unwrap_or(0.0);
+    let mut fastest = f64::INFINITY;
     for k in 0..5 {
         let t0 = Instant::now();
         v.transact(50.0 + k as f64).await.expect("cycle");
         let el = t0.elapsed().as_secs_f64();
-        assert!(
-            el >= 0.0147 && el < budget + 0.005,
-            "cycle {k}: {el} s vs budget {budget} s"
-        );
+        // No cycle beats the line: the emulation never answers faster than 19200 baud allows.
+        assert!(el >= 0.0147, "cycle {k}: {el} s, faster than the line");
+        fastest = fastest.min(el);
     }
+    // And it adds nothing of its own: the fastest of five cycles is within the budget (a loaded
+    // machine can stretch any one cycle, so single cycles are not held to it).
+    assert!(
+        fastest < budget + 0.005,
+        "fastest cycle {fastest} s vs budget {budget} s"
+    );
 }

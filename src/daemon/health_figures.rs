@@ -160,4 +160,3 @@ pub struct HealthLimits {
     /// Highest RMS of O_P - V_P, %.
     pub tracking_rms_pct: f64,
 }
-
