@@ -19,8 +19,9 @@
 //!
 //! Tolerance of the comparison: sim-device steps its model on its own 100 Hz clock and the loop
 //! reads the last stepped position, so a logged V_P lags the offline sample of the same slot by
-//! one to two steps and the phase between the two clocks drifts (a few samples of jitter). A
-//! logged V_P must therefore lie within the range the offline V_P covers over the slots k-4..=k,
+//! one to two steps and the phase between the two clocks drifts (a few samples of jitter, more on
+//! a loaded machine, where either clock can fall a few cycles behind). A logged V_P must
+//! therefore lie within the range the offline V_P covers over the slots k-6..=k,
 //! widened by half a register step (positions are per-mille, 0.05 %). O_P is quantised to the
 //! set-point register (0.1 %) before the offline simulation, as the device sees it.
 
@@ -41,7 +42,7 @@ use common::sim::{
 const RATE_HZ: f64 = 100.0;
 
 /// Phase window of the comparison, samples (see the module documentation).
-const LAG_WINDOW: usize = 4;
+const LAG_WINDOW: usize = 6;
 /// Half a per-mille position step, %.
 const HALF_STEP: f64 = 0.05 + 1e-9;
 
