@@ -248,10 +248,13 @@ fn a_lost_reply_costs_one_cycle() {
         share <= 0.11 && longest == 1,
         "{share} {longest}\n{summary}"
     );
-    // One reply in 7 with a bad CRC (RTU on a pty): a seventh of the cycles.
+    // One reply in 7 with a bad CRC (RTU on a pty): a seventh of the cycles. A loaded machine
+    // can stall a cycle past its deadline beside one (a `timeout` next to an `error`), so two
+    // in a row are allowed only when the summary counts such a timeout.
     let (share, longest, summary) = lost_cycles(&["--pty", "--corrupt-crc-every", "7"]);
+    let stalled = !summary.contains(" 0 timeout,");
     assert!(
-        share <= 0.16 && longest == 1,
+        share <= 0.16 && (longest == 1 || (stalled && longest == 2)),
         "{share} {longest}\n{summary}"
     );
 }
