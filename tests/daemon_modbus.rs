@@ -96,12 +96,24 @@ fn assert_grid(rows: &[Row], slots: usize) {
     assert_eq!(rows[slots].status, "safe-hold");
 }
 
-/// [`assert_grid`], and no slot missed.
-fn assert_rhythm(rows: &[Row], slots: usize) {
+/// [`assert_grid`], and the rhythm kept: every slot ran but those the summary counts as missed,
+/// which a machine stalled for longer than a period may cost (`skipped` rows: O_P kept, no V_P)
+/// and which stay rare. Timing figures themselves are measured by the loop bench, not here.
+fn assert_rhythm(rows: &[Row], slots: usize, summary: &str) -> Counts {
     assert_grid(rows, slots);
-    for (k, r) in rows.iter().enumerate() {
-        assert_ne!(r.status, "skipped", "row {k}: a cycle overran");
+    let n = counts(rows, slots, summary);
+    assert!(
+        n.skipped * 20 <= slots,
+        "{} of {slots} slots missed: the loop lost its rhythm\n{summary}",
+        n.skipped
+    );
+    for (k, r) in rows[..slots].iter().enumerate() {
+        assert!(r.op_pct.is_some(), "row {k} has no O_P");
+        if r.status == "skipped" {
+            assert_eq!(r.vp_pct, None, "row {k}: a missed slot with a V_P");
+        }
     }
+    n
 }
 
 /// Largest distance of a logged V_P from the offline range over slots k-LAG_WINDOW..=k.
@@ -119,7 +131,11 @@ fn worst_miss(rows: &[Row]) -> (f64, usize) {
         .collect();
     let mut worst = (0.0, 0);
     for (k, r) in rows.iter().enumerate() {
-        let vp = r.vp_pct.unwrap();
+        // A slot the summary counts as missed read nothing; every other row holds a V_P.
+        let Some(vp) = r.vp_pct else {
+            assert_eq!(r.status, "skipped", "row {k} has no V_P");
+            continue;
+        };
         let window = &offline[k..=k + LAG_WINDOW];
         let lo = window.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = window.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -140,19 +156,19 @@ fn replay_follows_model(device_args: &[&str]) {
     let logs = dir.path().join("logs");
     let out = run_cmd(&cfg, &logs, 3.0).output().unwrap();
     let summary = stdout(&out);
-    assert!(
-        summary.contains("samples: 300 (300 ok, 0 timeout, 0 error, 0 disconnected)"),
-        "{summary}"
-    );
     assert!(summary.contains("reconnects: 0"), "{summary}");
     let rows: Vec<Row> = common::sim::read_log(&logs);
-    assert_rhythm(&rows, 300);
-    assert!(rows.iter().all(|r| r.vp_pct.is_some()));
+    let n = assert_rhythm(&rows, 300, &summary);
+    assert_eq!(
+        n.ok + n.skipped,
+        300,
+        "every slot that ran read a V_P\n{summary}"
+    );
     // The valve really moved: up at its 20 %/s slew rate past 30 %, then back down after the
     // last step's reversal.
-    let vp: Vec<f64> = rows[..300].iter().map(|r| r.vp_pct.unwrap()).collect();
+    let vp: Vec<f64> = rows[..300].iter().filter_map(|r| r.vp_pct).collect();
     let peak = vp.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    assert!(peak > 30.0 && vp[299] < peak - 1.0, "{summary}");
+    assert!(peak > 30.0 && vp[vp.len() - 1] < peak - 1.0, "{summary}");
     let (miss, k) = worst_miss(&rows);
     assert!(
         miss == 0.0,
@@ -192,7 +208,8 @@ fn device_killed_and_restarted_keeps_the_rhythm_and_reconnects() {
     let _restarted = SimDevice::start(&["--tcp", &addr]);
     let summary = stdout(&daemon.wait_with_output().unwrap());
     let rows: Vec<Row> = common::sim::read_log(&logs);
-    assert_rhythm(&rows, 300);
+    let n = assert_rhythm(&rows, 300, &summary);
+    assert_eq!(n.error, 0, "{summary}");
     let failed: Vec<&Row> = rows
         .iter()
         .filter(|r| r.status == "timeout" || r.status == "disconnected")
@@ -205,12 +222,14 @@ fn device_killed_and_restarted_keeps_the_rhythm_and_reconnects() {
     assert!(failed
         .iter()
         .all(|r| r.vp_pct.is_none() && r.op_pct.is_some()));
-    assert!(rows.iter().all(|r| r.status != "error"), "{summary}");
-    // Ok before the kill, and ok again at the end, after the reconnection.
-    assert!(rows[..90].iter().all(|r| r.status == "ok"), "{summary}");
-    assert!(rows[250..300].iter().all(|r| r.status == "ok"), "{summary}");
-    let n = counts(&rows, 300, &summary);
-    assert_eq!(n.error, 0, "{summary}");
+    // Ok before the kill, and ok again at the end, after the reconnection (slots a stalled
+    // machine missed aside).
+    let ran_ok = |rows: &[Row]| {
+        rows.iter()
+            .all(|r| r.status == "ok" || r.status == "skipped")
+    };
+    assert!(ran_ok(&rows[..90]), "{summary}");
+    assert!(ran_ok(&rows[250..300]), "{summary}");
     assert!(reconnects(&summary) >= 1, "{summary}");
 }
 
@@ -222,6 +241,13 @@ struct Counts {
     error: usize,
     disconnected: usize,
     skipped: usize,
+}
+
+impl Counts {
+    /// Cycles that sent a request: all but the missed slots.
+    fn sent(&self) -> usize {
+        self.ok + self.timeout + self.error + self.disconnected
+    }
 }
 
 /// The statuses of the first `slots` rows, checked against the summary's `samples:` and
@@ -342,9 +368,15 @@ fn costs_one_cycle(rows: &[Row]) -> bool {
 fn corrupted_crc_on_the_pty_gives_error_rows_and_keeps_the_port() {
     let f = fault_run(&["--pty", "--corrupt-crc-every", "10"], &[]);
     let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
-    // Every 10th reply is corrupted, one request per cycle: a bad reply costs its own cycle,
-    // so about one cycle in 10 is an error and the others are ok.
-    assert!((15..=21).contains(&n.error), "{}", f.summary);
+    // Every 10th reply is corrupted, one request per cycle that ran: a bad reply costs its own
+    // cycle, so one cycle in 10 is an error (or a timeout, when a busy machine let the
+    // corrupted reply arrive late) and the others are ok.
+    let tenth = n.sent() / 10;
+    assert!(
+        n.error <= tenth + 1 && n.error + n.timeout + 1 >= tenth,
+        "{}",
+        f.summary
+    );
     assert!(
         n.ok + n.error + n.skipped + n.timeout == FAULT_SLOTS,
         "{}",
@@ -377,7 +409,12 @@ fn corrupted_crc_on_the_pty_gives_error_rows_and_keeps_the_port() {
 fn dropped_replies_time_out_and_keep_the_link() {
     let f = fault_run(&["--tcp", "127.0.0.1:0", "--drop-every", "25"], &[]);
     let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
-    assert!((7..=9).contains(&n.timeout), "{}", f.summary);
+    let dropped = n.sent() / 25;
+    assert!(
+        (dropped - 1..=dropped + 1).contains(&n.timeout),
+        "{}",
+        f.summary
+    );
     assert_eq!(n.error, 0, "{}", f.summary);
     assert_eq!(reconnects(&f.summary), 0, "{}", f.summary);
     // A lost reply costs its own cycle: the next one is ok.
@@ -489,17 +526,30 @@ fn exception_replies_are_error_rows_and_keep_the_link() {
     let n = counts(&f.rows, FAULT_SLOTS, &f.summary);
     assert!(n.error >= FAULT_SLOTS / 20, "{}", f.summary);
     // One request per cycle, and an exception keeps the link: exactly the cycles of requests
-    // 10, 20, ... fail, up to the first cycle a busy machine disturbed (if any).
-    let mut request = 0;
+    // 10, 20, ... fail. A slot a busy machine missed sent no request; after a timeout the
+    // device may or may not have counted the request, so the count picks up again at the next
+    // exception.
+    let (mut request, mut checked) = (None, 0);
     for (k, r) in f.rows[..FAULT_SLOTS].iter().enumerate() {
-        if r.status != "ok" && r.status != "error" {
-            break;
+        match (r.status.as_str(), request) {
+            ("skipped", _) => {}
+            ("ok" | "error", Some(q)) => {
+                let q: u32 = q + 1;
+                let want = if q % 10 == 0 { "error" } else { "ok" };
+                assert_eq!(r.status, want, "row {k}\n{}", f.summary);
+                request = Some(q);
+                checked += 1;
+            }
+            ("error", None) => request = Some(0),
+            ("ok", None) => {}
+            _ => request = None,
         }
-        request += 1;
-        let want = if request % 10 == 0 { "error" } else { "ok" };
-        assert_eq!(r.status, want, "row {k}\n{}", f.summary);
     }
-    assert!(request >= 20, "disturbed at row {request}\n{}", f.summary);
+    assert!(
+        checked >= FAULT_SLOTS / 2,
+        "only {checked} cycles in step with the device's count\n{}",
+        f.summary
+    );
     // Only a timeout (a busy machine) drops the link, never an exception.
     assert!(reconnects(&f.summary) <= n.timeout as u64, "{}", f.summary);
     for k in 0..FAULT_SLOTS - 1 {
