@@ -535,7 +535,7 @@ fn exception_replies_are_error_rows_and_keep_the_link() {
             ("skipped", _) => {}
             ("ok" | "error", Some(q)) => {
                 let q: u32 = q + 1;
-                let want = if q % 10 == 0 { "error" } else { "ok" };
+                let want = if q.is_multiple_of(10) { "error" } else { "ok" };
                 assert_eq!(r.status, want, "row {k}\n{}", f.summary);
                 request = Some(q);
                 checked += 1;
