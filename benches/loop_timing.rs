@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 use hdrhistogram::Histogram;
 use valve_bridge::daemon::config::{DiagnosisConfig, HealthConfig};
 use valve_bridge::daemon::{self, Config, RunOptions};
+use valve_bridge::report;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let secs: f64 = match std::env::var("VB_BENCH_SECS") {
@@ -86,6 +87,7 @@ fn timed(what: &str, config: Config, secs: f64) -> Result<f64, Box<dyn std::erro
             virtual_clock: false,
             progress: false,
             require_device: false,
+            analysis: report::live::analysis(),
         },
     )?
     .finish()?;

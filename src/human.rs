@@ -3,7 +3,10 @@
 //! `1.8234943590000001`), and `n/a` for a value that does not exist (NaN), never `NaN%`.
 //!
 //! Files meant to be read back (recordings, model files) keep full round-trip precision; this is
-//! for messages, warnings and tables.
+//! for messages, warnings and tables. An effect's size is worded here too (`friction band
+//! 1.40 % (1.10-1.80)`), the same in a diagnosis report and in a live alarm.
+
+use crate::model::composed::Size;
 
 /// `x` rounded to six significant digits, shortest form (`0.01`, `3600`, `1.5e-9`), `inf`,
 /// `-inf`, or `n/a` for NaN.
@@ -33,9 +36,85 @@ pub fn count(n: u64, noun: &str) -> String {
     }
 }
 
+/// What a size's name means to a person, and the unit it is printed in.
+pub fn size_label(name: &str) -> (&'static str, &'static str) {
+    match name {
+        "dead_time_s" => ("dead time", " s"),
+        "friction_band_pct" => ("friction band", " %"),
+        "open_vs_closed" => ("fully open slower than closed by", " times"),
+        "crossing_open_s" => ("crossing time fully open", " s"),
+        "stroke_speed_pct_per_s" => ("stroke speed at half travel", " %/s"),
+        "speed_ratio" => ("one direction faster than the other by", " times"),
+        "min_speed_pct_per_s" => ("minimum speed", " %/s"),
+        "slip_pct" => ("slip", " %"),
+        "deadband_pct" => ("deadband", " %"),
+        "stop_pct" => ("travel stop at", " %"),
+        "lattice_pct" => ("sensor lattice", " %"),
+        "reading_error_pct" => ("reading error", " %"),
+        _ => ("size", ""),
+    }
+}
+
+/// A number with three significant figures (at least two decimals below 1).
+pub fn sig3(x: f64) -> String {
+    let a = x.abs();
+    let decimals = if a >= 100.0 {
+        0
+    } else if a >= 10.0 {
+        1
+    } else if a >= 0.1 || a == 0.0 {
+        2
+    } else {
+        3
+    };
+    format!("{x:.decimals$}")
+}
+
+/// A size with its interval: `friction band 1.40 % (1.10-1.80)`.
+pub fn size_words(s: &Size) -> String {
+    size_text(s.name, s.value, s.low, s.high)
+}
+
+/// The size named `name` (as in the `--json` document) of `value` within `low`-`high`, as
+/// [`size_words`] words it.
+pub fn size_text(name: &str, value: f64, low: f64, high: f64) -> String {
+    let (what, unit) = size_label(name);
+    if low < high {
+        format!(
+            "{what} {}{unit} ({}-{})",
+            sig3(value),
+            sig3(low),
+            sig3(high)
+        )
+    } else {
+        format!("{what} {}{unit}", sig3(value))
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{count, num};
+    use super::*;
+
+    #[test]
+    fn sizes_read_with_their_intervals() {
+        let s = Size {
+            name: "friction_band_pct",
+            unit: "%",
+            value: 1.4,
+            low: 1.1,
+            high: 1.8,
+            worth: 4.7,
+        };
+        assert_eq!(size_words(&s), "friction band 1.40 % (1.10-1.80)");
+        let exact = Size {
+            low: 1.4,
+            high: 1.4,
+            ..s
+        };
+        assert_eq!(size_words(&exact), "friction band 1.40 %");
+        assert_eq!(sig3(0.05), "0.050");
+        assert_eq!(sig3(123.4), "123");
+    }
 
     #[test]
     fn counts_take_their_plural() {

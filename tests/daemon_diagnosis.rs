@@ -104,3 +104,35 @@ fn each_valve_gets_a_history_of_sized_effects_the_same_on_every_run() {
         "{healthy:?}"
     );
 }
+
+#[test]
+fn a_daemon_handed_no_diagnosis_refuses_the_diagnosis_table_before_it_starts() {
+    use valve_bridge::daemon::{self, Analysis, Config, DaemonError, RunOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/friction-drift.toml"
+    ))
+    .unwrap();
+    let path = dir.path().join("c.toml");
+    std::fs::write(&path, format!("{base}\n[diagnosis]\n")).unwrap();
+    let config = Config::load(Some(&path)).unwrap();
+    let logs = dir.path().join("logs");
+    let started = daemon::start(
+        config,
+        RunOptions {
+            duration_s: Some(1.0),
+            log_dir: Some(logs.clone()),
+            virtual_clock: true,
+            analysis: Analysis::default(),
+            ..RunOptions::default()
+        },
+    );
+    let err = started.err().expect("started without a diagnosis to run");
+    assert!(matches!(err, DaemonError::NoDiagnosis), "{err}");
+    assert!(err.to_string().starts_with("[diagnosis]: "), "{err}");
+    assert!(
+        !logs.join("diagnosis-packing.jsonl").exists(),
+        "no history before the refusal"
+    );
+}

@@ -170,6 +170,8 @@ fn run(config: Config, secs: f64) -> Result<Run, Box<dyn Error>> {
             virtual_clock: false,
             progress: false,
             require_device: true,
+            // The config has no [health] or [diagnosis]: nothing runs beside the loop.
+            analysis: daemon::Analysis::default(),
         },
     )?
     .finish()?

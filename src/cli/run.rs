@@ -4,6 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use valve_bridge::daemon::{self, Config, RunOptions};
+use valve_bridge::report;
 
 /// Arguments of `valve-bridge run`.
 #[derive(clap::Args)]
@@ -40,6 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             virtual_clock: args.as_fast_as_possible,
             progress: true,
             require_device: args.require_device,
+            analysis: report::live::analysis(),
         },
     )?;
     // The loop has stopped, the safe action is applied and the log is flushed: a closed stdout

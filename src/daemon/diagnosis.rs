@@ -1,6 +1,7 @@
 //! Live diagnosis (`[diagnosis]`): every `every_s` of loop time, and on every health alarm,
-//! each valve's last `window_s` of rows is diagnosed ([`crate::diagnose`]) off the loop thread,
-//! and the history, gauges and alarms are kept per valve.
+//! each valve's last `window_s` of rows is diagnosed off the loop thread,
+//! and the history, gauges and alarms are kept per valve. The diagnosis itself is the
+//! [`DiagnoseWindow`] the daemon was handed (the analysis layer's, `crate::report::live`).
 //!
 //! The health thread feeds a [`Feed`] with the rows it gets from the loggers: a ring per
 //! valve, copied into a job when a diagnosis is due. Jobs go through an unbounded queue to the
@@ -18,7 +19,7 @@
 //! window's end) and `valve_bridge_diagnosis_alarm{valve,effect}` (1 while the effect is in
 //! alarm against the valve's first diagnosis, see [`history`]).
 //!
-//! Not here: the diagnosis itself ([`crate::diagnose`]), the health figures ([`super::health`]).
+//! Not here: the diagnosis itself (`crate::diagnose`), the health figures ([`super::health`]).
 
 pub mod history;
 
@@ -33,9 +34,10 @@ use std::thread::JoinHandle;
 
 use prometheus::{Gauge, GaugeVec, Opts, Registry};
 
+use super::analysis::DiagnoseWindow;
 use super::config::DiagnosisConfig;
 use super::DaemonError;
-use crate::diagnose::diagnose;
+use crate::model::composed::Effect;
 use crate::recording::RecordingView;
 use history::{Baseline, Record};
 
@@ -105,7 +107,7 @@ impl DiagnosisMetrics {
                 g.set(e.size.value);
             }
         }
-        for e in crate::diagnose::Effect::ALL {
+        for e in Effect::ALL {
             let on = r
                 .alarms
                 .iter()
@@ -209,6 +211,7 @@ pub fn start(
     dir: &Path,
     period_s: f64,
     valves: Vec<Watched>,
+    diagnose: DiagnoseWindow,
 ) -> Result<(Feed, Thread), DaemonError> {
     let cap = ((cfg.window_s / period_s).round() as usize).max(1);
     let (tx, rx) = std::sync::mpsc::channel();
@@ -235,6 +238,7 @@ pub fn start(
             baseline: Baseline::default(),
             last: None,
             metrics: w.metrics,
+            diagnose,
             done_t_s: done,
             report: DiagnosisReport {
                 diagnoses: 0,
@@ -269,6 +273,7 @@ struct History {
     baseline: Baseline,
     last: Option<Record>,
     metrics: Option<DiagnosisMetrics>,
+    diagnose: DiagnoseWindow,
     done_t_s: Arc<AtomicU64>,
     report: DiagnosisReport,
 }
@@ -336,16 +341,18 @@ impl History {
             report: None,
             error: None,
         };
-        let d = match diagnose(&rec, None, &|_, _| {}) {
+        let rel = format!("diagnosis-{}/{:.0}", self.name, job.t_s);
+        let title = format!("valve {}: live diagnosis at {:.0} s", self.name, job.t_s);
+        let d = match (self.diagnose)(&rec, cfg.reports.then_some(title.as_str())) {
             Ok(d) => d,
             Err(e) => {
                 tracing::warn!(valve = %self.name, t_s = job.t_s, "live diagnosis failed: {e}");
-                record.error = Some(e.to_string());
+                record.error = Some(e);
                 return record;
             }
         };
-        record.verdict = crate::report::verdict::verdict(&d);
-        record.effects = history::entries(&d);
+        record.verdict = d.verdict;
+        record.effects = d.effects;
         let whole = job.trigger == "every_s";
         let (standing, raised) = self.baseline.compare(job.t_s, whole, &record.effects);
         for a in &raised {
@@ -354,26 +361,19 @@ impl History {
         }
         self.report.alarms.extend(raised);
         record.alarms = standing;
-        if cfg.reports {
-            record.report = self.write_report(job.t_s, &rec, &d);
+        if !d.report.is_empty() {
+            record.report = self.write_report(&rel, &d.report);
         }
         record
     }
 
-    /// `diagnosis-<valve>/<t_s>/`: the files of `diagnose --out`; the report's path relative
-    /// to the history's directory (None when it could not be written: said in the log).
-    fn write_report(
-        &self,
-        t_s: f64,
-        rec: &RecordingView,
-        d: &crate::diagnose::Diagnosis,
-    ) -> Option<String> {
-        let rel = format!("diagnosis-{}/{:.0}", self.name, t_s);
-        let dir = self.dir.join(&rel);
-        let title = format!("valve {}: live diagnosis at {t_s:.0} s", self.name);
+    /// Writes a report's files in `rel` (`diagnosis-<valve>/<t_s>/`, as `diagnose --out` would);
+    /// the report's path relative to the history's directory (None when it could not be
+    /// written: said in the log).
+    fn write_report(&self, rel: &str, files: &[(&str, String)]) -> Option<String> {
+        let dir = self.dir.join(rel);
         let written = std::fs::create_dir_all(&dir).and_then(|()| {
-            (crate::report::diagnose::files(&title, rec, d).iter())
-                .try_for_each(|(name, text)| std::fs::write(dir.join(name), text))
+            (files.iter()).try_for_each(|(name, text)| std::fs::write(dir.join(name), text))
         });
         match written {
             Ok(()) => Some(format!("{rel}/report.html")),

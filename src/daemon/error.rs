@@ -66,6 +66,9 @@ pub enum DaemonError {
         #[source]
         source: std::io::Error,
     },
+    /// `[diagnosis]` asked of a daemon started without a diagnosis to run.
+    #[error("[diagnosis]: this program runs the loop without diagnosis; remove [diagnosis] from the config or run it with `valve-bridge run`")]
+    NoDiagnosis,
     /// A thread, runtime or signal handler could not be set up.
     #[error("cannot start the {what}: {source}")]
     Thread {

@@ -16,7 +16,7 @@
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
 //! plots each figure against its baseline and limit, drawn from the CSV by
-//! [`crate::report::health`]; an alarm is a warning in the log, the
+//! the [`PlotHealth`] the daemon was handed; an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
 //! bit [`HEALTH_ALARM_BIT`] of its status word. With `[diagnosis]`, the thread also feeds the
 //! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
@@ -28,6 +28,7 @@ use std::sync::mpsc::{Receiver, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
+use super::analysis::PlotHealth;
 use super::config::HealthConfig;
 use super::diagnosis::Feed;
 use super::error::DaemonError;
@@ -73,6 +74,7 @@ struct Monitor {
     metrics: Option<HealthMetrics>,
     /// The process controller's register bank of the valve, for the alarm bit.
     status: Option<Arc<RegisterBank>>,
+    plot: Option<PlotHealth>,
 }
 
 /// The header of the health CSV: the figures, the alarm, each figure's baseline and limit
@@ -108,6 +110,8 @@ pub struct Watched {
     pub baseline_model: Option<Valve>,
     pub metrics: Option<HealthMetrics>,
     pub status: Option<Arc<RegisterBank>>,
+    /// Draws `health*.svg` from the CSV at the end (none: no plot).
+    pub plot: Option<PlotHealth>,
 }
 
 /// The running health thread: where the loggers send rows (with the valve's index), and the
@@ -157,6 +161,7 @@ pub fn start(
             csv,
             metrics: w.metrics,
             status: w.status,
+            plot: w.plot,
         });
     }
     // Bounded like the loggers' queues; a logger waits for the health thread, never the loop.
@@ -309,7 +314,13 @@ impl Monitor {
     /// `health*.svg` beside the CSV, drawn from it (nothing when no window was estimated).
     fn plot(&self) -> Result<(), DaemonError> {
         let file = &self.report.file;
-        let svg = crate::report::health::svg(&self.name, file).map_err(|e| write_error(file, e))?;
+        let Some(plot) = self.plot else {
+            return Ok(());
+        };
+        let svg = plot(&self.name, file).map_err(|e| DaemonError::LogWrite {
+            path: file.clone(),
+            source: std::io::Error::other(e),
+        })?;
         if svg.is_empty() {
             return Ok(());
         }

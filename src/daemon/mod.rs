@@ -27,8 +27,10 @@
 //! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread; [`error`] the errors; this file holds the options and [`run`]
 //! (signals and progress display).
 //!
-//! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis.
+//! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis (the
+//! daemon runs diagnosis and plotting only as the [`Analysis`] it is handed).
 
+pub mod analysis;
 mod compensation;
 pub mod config;
 mod control;
@@ -54,6 +56,7 @@ use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+pub use analysis::Analysis;
 pub use compensation::CompensationReport;
 pub use config::Config;
 pub use error::DaemonError;
@@ -73,6 +76,8 @@ pub struct RunOptions {
     /// Refuse to start when a Modbus device cannot be reached (otherwise the loop starts and
     /// retries the link).
     pub require_device: bool,
+    /// The diagnosis and plotting the daemon may run beside the loop.
+    pub analysis: Analysis,
 }
 
 /// Runs until SIGINT/SIGTERM, `--duration` or the end of the source, showing progress.

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use super::analysis::{DiagnoseWindow, PlotHealth};
 use super::compensation::Compensation;
 use super::config::{ClockKind, Config};
 use super::control::{self, Lane, Loop, LoopEnd};
@@ -46,6 +47,11 @@ pub struct Running {
 /// Starts the loop and logger threads; the loop runs until stopped, the duration or a source ends.
 pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let clock = checked_clock(&config, &opts)?;
+    // `[diagnosis]` in a daemon handed no diagnosis is refused before anything is opened.
+    let diagnose = match &config.diagnosis {
+        Some(_) => Some(opts.analysis.diagnose.ok_or(DaemonError::NoDiagnosis)?),
+        None => None,
+    };
     let rate_hz = config.loop_.rate_hz;
     let period = config.loop_.period();
     // Sockets are bound before the valves are opened, so a taken port stops the start first.
@@ -81,7 +87,13 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
-    let (health, diagnosis) = start_health(&config, &dir, metrics.as_ref(), &sources)?;
+    let (health, diagnosis) = start_health(
+        &config,
+        &dir,
+        metrics.as_ref(),
+        &sources,
+        (diagnose, opts.analysis.plot_health),
+    )?;
     let mut lanes = Vec::with_capacity(config.valves.len());
     let mut loggers = Vec::with_capacity(config.valves.len());
     for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
@@ -198,6 +210,7 @@ fn start_health(
     dir: &std::path::Path,
     metrics: Option<&LoopMetrics>,
     sources: &[Source],
+    (diagnose, plot): (Option<DiagnoseWindow>, Option<PlotHealth>),
 ) -> Result<(Option<health::Health>, Option<diagnosis::Thread>), DaemonError> {
     let Some(cfg) = &config.health else {
         return Ok((None, None));
@@ -228,10 +241,11 @@ fn start_health(
             baseline_model,
             metrics: metrics.and_then(|m| m.health(i)),
             status: sources.get(i).and_then(Source::served_bank).cloned(),
+            plot,
         });
     }
-    let (feed, diagnosis) = match &config.diagnosis {
-        Some(d) => {
+    let (feed, diagnosis) = match (&config.diagnosis, diagnose) {
+        (Some(d), Some(diagnose)) => {
             let m = metrics
                 .map(|m| DiagnosisMetrics::register(m.registry()))
                 .transpose()?;
@@ -241,10 +255,10 @@ fn start_health(
                     metrics: m.clone(),
                 })
                 .collect();
-            let (feed, handle) = diagnosis::start(d, dir, period_s, valves)?;
+            let (feed, handle) = diagnosis::start(d, dir, period_s, valves, diagnose)?;
             (Some(feed), Some(handle))
         }
-        None => (None, None),
+        _ => (None, None),
     };
     let health = health::start(cfg, dir, period_s, watched, feed)?;
     Ok((Some(health), diagnosis))

@@ -19,30 +19,14 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
 
 use super::facts::Facts;
 use super::scorer::Scorer;
 use super::tuning::Tuning;
 use crate::metrics::stats;
+pub use crate::model::composed::Size;
 use crate::model::composed::{self, Effect, Knob};
 use crate::model::ModelSpec;
-
-/// An effect's size, with its interval and its weight against what is worth maintenance.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Size {
-    /// What the number is (`friction_band_pct`, `dead_time_s`, ...).
-    pub name: &'static str,
-    pub unit: &'static str,
-    pub value: f64,
-    /// 90 % interval (block bootstrap over the held-out blocks); the value itself when none
-    /// was computed.
-    pub low: f64,
-    pub high: f64,
-    /// How the size compares with what is worth maintenance: 1 at the threshold, above 1
-    /// beyond it (for a stroke speed, the threshold over the speed).
-    pub worth: f64,
-}
 
 /// Grid points of a profile on each side of the fitted value.
 const PROFILE_SIDE: i32 = 6;

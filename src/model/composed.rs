@@ -13,6 +13,22 @@ use serde::Serialize;
 
 use super::{Effects, ModelKind, ModelSpec, PinCart2Params};
 
+/// An effect's size, with its interval and its weight against what is worth maintenance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Size {
+    /// What the number is (`friction_band_pct`, `dead_time_s`, ...).
+    pub name: &'static str,
+    pub unit: &'static str,
+    pub value: f64,
+    /// 90 % interval (block bootstrap over the held-out blocks); the value itself when none
+    /// was computed.
+    pub low: f64,
+    pub high: f64,
+    /// How the size compares with what is worth maintenance: 1 at the threshold, above 1
+    /// beyond it (for a stroke speed, the threshold over the speed).
+    pub worth: f64,
+}
+
 /// The physics diagnosis can name; the JSON names are the vocabulary of the issue tracker.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]

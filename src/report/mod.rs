@@ -10,6 +10,8 @@
 //! - [`plot`]: the SVG charts.
 //! - [`chart`]: the interactive time-series charts (uPlot, embedded), the SVG kept for a page
 //!   without scripts.
+//! - [`live`]: the analysis the daemon runs beside its loop (a window's diagnosis and report,
+//!   the health plot), handed to it as a [`crate::daemon::Analysis`].
 //!
 //! The pages share one skeleton ([`page`]); [`write_files`] saves a report's files. This module
 //! only formats results; it computes nothing about the valve.
@@ -20,6 +22,7 @@ pub mod fleet;
 pub mod fleet_table;
 pub mod health;
 pub mod identify;
+pub mod live;
 pub mod plot;
 pub mod readme;
 pub mod verdict;

@@ -4,57 +4,8 @@
 //!
 //! Not here: the evidence of each finding or the notes (`report::diagnose`).
 
-use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Size, Trace};
-
-/// What a size's name means to a person, and the unit it is printed in.
-pub fn label(name: &str) -> (&'static str, &'static str) {
-    match name {
-        "dead_time_s" => ("dead time", " s"),
-        "friction_band_pct" => ("friction band", " %"),
-        "open_vs_closed" => ("fully open slower than closed by", " times"),
-        "crossing_open_s" => ("crossing time fully open", " s"),
-        "stroke_speed_pct_per_s" => ("stroke speed at half travel", " %/s"),
-        "speed_ratio" => ("one direction faster than the other by", " times"),
-        "min_speed_pct_per_s" => ("minimum speed", " %/s"),
-        "slip_pct" => ("slip", " %"),
-        "deadband_pct" => ("deadband", " %"),
-        "stop_pct" => ("travel stop at", " %"),
-        "lattice_pct" => ("sensor lattice", " %"),
-        "reading_error_pct" => ("reading error", " %"),
-        _ => ("size", ""),
-    }
-}
-
-/// A number with three significant figures (at least two decimals below 1).
-pub fn num(x: f64) -> String {
-    let a = x.abs();
-    let decimals = if a >= 100.0 {
-        0
-    } else if a >= 10.0 {
-        1
-    } else if a >= 0.1 || a == 0.0 {
-        2
-    } else {
-        3
-    };
-    format!("{x:.decimals$}")
-}
-
-/// A size with its interval: `friction band 1.40 % (1.10-1.80)`.
-pub fn size(s: &Size) -> String {
-    size_text(s.name, s.value, s.low, s.high)
-}
-
-/// The size named `name` (as in the `--json` document) of `value` within `low`-`high`, as
-/// [`size`] words it.
-pub fn size_text(name: &str, value: f64, low: f64, high: f64) -> String {
-    let (what, unit) = label(name);
-    if low < high {
-        format!("{what} {}{unit} ({}-{})", num(value), num(low), num(high))
-    } else {
-        format!("{what} {}{unit}", num(value))
-    }
-}
+use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Trace};
+pub use crate::human::{sig3 as num, size_label as label, size_text, size_words as size};
 
 /// The measure a finding improved, in words.
 pub fn measure(m: &Measure) -> String {
@@ -173,24 +124,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn sizes_read_with_their_intervals() {
-        let s = Size {
-            name: "friction_band_pct",
-            unit: "%",
-            value: 1.4,
-            low: 1.1,
-            high: 1.8,
-            worth: 4.7,
-        };
-        assert_eq!(size(&s), "friction band 1.40 % (1.10-1.80)");
-        let exact = Size {
-            low: 1.4,
-            high: 1.4,
-            ..s
-        };
-        assert_eq!(size(&exact), "friction band 1.40 %");
-        assert_eq!(num(0.05), "0.050");
-        assert_eq!(num(123.4), "123");
+    fn measures_read_with_their_change() {
         assert_eq!(
             measure(&Measure::HeldoutSse {
                 before: 200.0,

@@ -9,7 +9,7 @@
 //! alarming one window in twenty), towards worse (its weight against what is worth maintenance
 //! rose), by a change itself worth maintenance (the weight rose by 1 or more). A size that
 //! shrank, a size of another quantity (an effect can be sized by the quantity the recording
-//! shows best, see [`crate::diagnose::size`]) and traces (immaterial) never alarm. An effect
+//! shows best, see `diagnose::size`) and traces (immaterial) never alarm. An effect
 //! past the baseline alarms once the next diagnosis confirms it (since the first): a healthy
 //! valve's diagnoses differ from window to window more than their intervals say.
 //!
@@ -17,8 +17,8 @@
 
 use serde::Serialize;
 
-use crate::diagnose::{Diagnosis, Effect, Size};
-use crate::report::verdict;
+use crate::human::{sig3, size_label, size_words};
+use crate::model::composed::{Effect, Size};
 
 /// One effect in a diagnosis: a finding (material) or a trace.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -49,21 +49,6 @@ pub struct Record {
     pub report: Option<String>,
     /// Why the window could not be diagnosed (then nothing else is filled in).
     pub error: Option<String>,
-}
-
-/// The effects of `d`: findings, then traces.
-pub fn entries(d: &Diagnosis) -> Vec<Entry> {
-    let findings = d.findings.iter().map(|f| Entry {
-        effect: f.effect,
-        finding: true,
-        size: f.size,
-    });
-    let traces = d.traces.iter().map(|t| Entry {
-        effect: t.effect,
-        finding: false,
-        size: t.size,
-    });
-    findings.chain(traces).collect()
 }
 
 /// The baseline of a valve and the alarms standing against it.
@@ -135,19 +120,19 @@ fn grew(then: &Size, now: &Size) -> bool {
 /// `backlash: friction band 0.40 % → 1.30 % since 1:32 h`, or for an effect the baseline did
 /// not show, `backlash: new, friction band 1.30 % (1.10-1.50) since 1:32 h`.
 fn message(e: &Entry, then: Option<&Entry>, since_s: f64) -> String {
-    let (what, unit) = verdict::label(e.size.name);
+    let (what, unit) = size_label(e.size.name);
     let since = clock(since_s);
     match then {
         Some(b) => format!(
             "{}: {what} {}{unit} → {}{unit} since {since}",
             e.effect.name(),
-            verdict::num(b.size.value),
-            verdict::num(e.size.value)
+            sig3(b.size.value),
+            sig3(e.size.value)
         ),
         None => format!(
             "{}: new, {} since {since}",
             e.effect.name(),
-            verdict::size(&e.size)
+            size_words(&e.size)
         ),
     }
 }

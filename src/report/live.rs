@@ -1,0 +1,46 @@
+//! The analysis the daemon runs beside its loop ([`crate::daemon::Analysis`]): live diagnosis
+//! of a valve's window (its verdict, its effects and its report) and the health plot.
+//!
+//! Not here: when windows are diagnosed, the history and its alarms (`daemon::diagnosis`).
+
+use std::path::Path;
+
+use crate::daemon::analysis::{Analysis, WindowDiagnosis};
+use crate::daemon::diagnosis::history::Entry;
+use crate::diagnose::{diagnose, Diagnosis};
+use crate::recording::RecordingView;
+
+/// Everything the daemon can run beside its loop.
+pub fn analysis() -> Analysis {
+    Analysis {
+        diagnose: Some(diagnose_window),
+        plot_health: Some(|valve: &str, csv: &Path| {
+            super::health::svg(valve, csv).map_err(|e| e.to_string())
+        }),
+    }
+}
+
+/// Diagnoses a window as `diagnose` does a recording; with `title`, its report's files too.
+fn diagnose_window(rec: &RecordingView, title: Option<&str>) -> Result<WindowDiagnosis, String> {
+    let d = diagnose(rec, None, &|_, _| {}).map_err(|e| e.to_string())?;
+    Ok(WindowDiagnosis {
+        verdict: super::verdict::verdict(&d),
+        effects: entries(&d),
+        report: title.map_or_else(Vec::new, |t| super::diagnose::files(t, rec, &d).to_vec()),
+    })
+}
+
+/// The effects of `d`: findings, then traces.
+fn entries(d: &Diagnosis) -> Vec<Entry> {
+    let findings = d.findings.iter().map(|f| Entry {
+        effect: f.effect,
+        finding: true,
+        size: f.size,
+    });
+    let traces = d.traces.iter().map(|t| Entry {
+        effect: t.effect,
+        finding: false,
+        size: t.size,
+    });
+    findings.chain(traces).collect()
+}
