@@ -7,7 +7,7 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::{free_port, Sim};
-use valve_bridge::modbus::client::{Fault, Link, ModbusValve, Reading};
+use valve_bridge::modbus::client::{Fault, Link, ModbusValve, Reading, ReplyError, Timeout};
 use valve_bridge::modbus::link::{RtuLink, TcpLink};
 use valve_bridge::modbus::map::{RegisterMap, StatusRegister, Table};
 
@@ -54,8 +54,8 @@ async fn kinds(v: &mut ModbusValve, n: usize, pause: Duration) -> Vec<(&'static 
         let r = v.transact(30.0 + k as f64).await;
         out.push(match r {
             Ok(_) => ("ok", String::new()),
-            Err(Fault::Timeout(m)) => ("timeout", m),
-            Err(Fault::Error(m)) => ("error", m),
+            Err(Fault::Timeout(t)) => ("timeout", t.to_string()),
+            Err(Fault::Error(e)) => ("error", e.to_string()),
             Err(Fault::Disconnected(m)) => ("disconnected", m),
         });
         tokio::time::sleep(pause).await;
@@ -181,7 +181,16 @@ async fn late_replies_are_timeouts_and_keep_the_connection() {
     let r = v.transact(50.0).await;
     assert_eq!(
         r,
-        Err(Fault::Timeout("no reply to FC 23 within 20 ms".into()))
+        Err(Fault::Timeout(Timeout {
+            fc: 23,
+            ms: 20,
+            partial: None,
+            late_replies: 0
+        }))
+    );
+    assert_eq!(
+        r.unwrap_err().to_string(),
+        "timeout: no reply to FC 23 within 20 ms"
     );
     assert!(
         t0.elapsed() < Duration::from_millis(35),
@@ -318,9 +327,17 @@ async fn out_of_range_set_point_keeps_last_value_and_is_reported() {
     // 120 % is raw 1200: a valid u16 on the wire, refused by the device (keeps 60 %).
     let err = v.transact(120.0).await.unwrap_err();
     assert!(
-        matches!(&err, Fault::Error(m) if m.contains("status 0x0001")),
+        matches!(
+            err,
+            Fault::Error(ReplyError::Refused {
+                word: 1,
+                bit: 0,
+                ..
+            })
+        ),
         "{err}"
     );
+    assert!(err.to_string().contains("status 0x0001"), "{err}");
     tokio::time::sleep(Duration::from_millis(30)).await;
     let r = v
         .transact(55.0)

@@ -19,8 +19,7 @@ use tokio_modbus::client::{rtu, tcp, Context, Reader, Writer};
 use tokio_modbus::slave::SlaveContext;
 use tokio_modbus::Slave;
 
-use super::{Fault, Link, FIRST_BACKOFF, MAX_BACKOFF, SILENT_LINK};
-use crate::modbus::exception;
+use super::{Fault, Link, ReplyError, Timeout, FIRST_BACKOFF, MAX_BACKOFF, SILENT_LINK};
 use crate::modbus::map::Table;
 use crate::modbus::plan::Transaction;
 use crate::modbus::wire::{rtu_frame_fault, RtuWire, TcpWire, WireState};
@@ -221,10 +220,7 @@ impl Connection {
             }
             Ok(Ok(Err(code))) => {
                 self.heard();
-                Err(Fault::Error(format!(
-                    "device answered FC {fc} with {}",
-                    exception::explain(code)
-                )))
+                Err(Fault::Error(ReplyError::Exception { fc, code }))
             }
             Err(_) => {
                 let mut fault = self.classify_silence(timeout, t);
@@ -236,13 +232,8 @@ impl Connection {
                     self.late_seen = late;
                     self.last_answer = Instant::now();
                 }
-                if late > 0 {
-                    if let Fault::Timeout(m) = &mut fault {
-                        m.push_str(&format!(
-                            " (the device does answer, later: {late} replies came after their \
-                             deadline; a longer timeout_ms may fit the loop period)"
-                        ));
-                    }
+                if let Fault::Timeout(t) = &mut fault {
+                    t.late_replies = late;
                 }
                 let silent = Instant::now() - self.last_answer;
                 if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
@@ -260,7 +251,9 @@ impl Connection {
                 let (fault, broken) = self.classify_transport(who, t, e);
                 if broken {
                     let why = match &fault {
-                        Fault::Disconnected(m) | Fault::Error(m) | Fault::Timeout(m) => m.clone(),
+                        Fault::Disconnected(m) => m.clone(),
+                        Fault::Error(e) => e.to_string(),
+                        Fault::Timeout(t) => t.to_string(),
                     };
                     if garbled {
                         self.drop_garbled(who, why);
@@ -273,10 +266,14 @@ impl Connection {
             Ok(Err(tokio_modbus::Error::Protocol(e))) => {
                 // With the wire's transaction filter a mismatch means the stream is out of
                 // step: on TCP it is reopened. RTU has nothing to resynchronise.
+                let fault = ReplyError::Unusable {
+                    fc,
+                    why: e.to_string(),
+                };
                 if matches!(self.link, Link::Tcp(_)) {
-                    self.drop_garbled(who, format!("FC {fc}: {e}"));
+                    self.drop_garbled(who, fault.to_string());
                 }
-                Err(Fault::Error(format!("FC {fc}: {e}")))
+                Err(Fault::Error(fault))
             }
         }
     }
@@ -290,25 +287,27 @@ impl Connection {
 
     /// What a missed deadline means: silence, a partial reply, or a reply with a bad CRC.
     fn classify_silence(&self, timeout: Duration, t: Transaction) -> Fault {
-        let ms = timeout.as_millis();
-        let fc = t.function_code();
+        let timed_out = |partial| {
+            Fault::Timeout(Timeout {
+                fc: t.function_code(),
+                ms: timeout.as_millis(),
+                partial,
+                late_replies: 0,
+            })
+        };
         if !matches!(self.link, Link::Rtu(_)) {
             return match self.wire.malformed() {
-                Some(m) => Fault::Error(m.to_string()),
-                None => Fault::Timeout(format!("no reply to FC {fc} within {ms} ms")),
+                Some(m) => Fault::Error(ReplyError::Malformed(m)),
+                None => timed_out(None),
             };
         }
         let rx = self.wire.received();
         if rx.is_empty() {
-            return Fault::Timeout(format!("no reply to FC {fc} within {ms} ms"));
+            return timed_out(None);
         }
         match rtu_frame_fault(&rx, &t) {
-            Some(message) => Fault::Error(message),
-            None => Fault::Timeout(format!(
-                "reply to FC {fc} incomplete within {ms} ms: {} of {} bytes",
-                rx.len(),
-                t.rtu_response_bytes()
-            )),
+            Some(bad) => Fault::Error(ReplyError::Frame(bad)),
+            None => timed_out(Some((rx.len(), t.rtu_response_bytes()))),
         }
     }
 
@@ -320,11 +319,12 @@ impl Connection {
         let rtu = matches!(self.link, Link::Rtu(_));
         if e.kind() == io::ErrorKind::InvalidData {
             if rtu {
-                if let Some(message) = rtu_frame_fault(&self.wire.received(), &t) {
-                    return (Fault::Error(message), false);
+                if let Some(bad) = rtu_frame_fault(&self.wire.received(), &t) {
+                    return (Fault::Error(ReplyError::Frame(bad)), false);
                 }
             }
-            return (Fault::Error(format!("FC {fc}: unusable reply: {e}")), !rtu);
+            let why = format!("unusable reply: {e}");
+            return (Fault::Error(ReplyError::Unusable { fc, why }), !rtu);
         }
         // tokio-modbus reports a stream that ended with the thread's last errno, which says
         // nothing about it (`Operation now in progress`): the wire knows what happened.

@@ -27,6 +27,7 @@
 //! counts what it receives), and any notion of the loop's clock.
 
 mod connection;
+mod fault;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -39,6 +40,7 @@ pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction, MAX_JOINED_SPAN};
 use connection::Connection;
+pub use fault::{Fault, ReplyError, Timeout};
 
 /// Wait after a failed connection attempt; doubles with each further one, up to [`MAX_BACKOFF`].
 pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
@@ -48,20 +50,6 @@ pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
 pub const SILENT_LINK: Duration = Duration::from_secs(3);
 /// How long the first connection at start-up may take.
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(3);
-
-/// Why a cycle gave no V_P.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum Fault {
-    /// No complete reply in time.
-    #[error("timeout: {0}")]
-    Timeout(String),
-    /// An exception, CRC or framing error, or an unusable value.
-    #[error("error: {0}")]
-    Error(String),
-    /// The link is down (and being reopened).
-    #[error("disconnected: {0}")]
-    Disconnected(String),
-}
 
 /// A valve that cannot be used at start-up.
 #[derive(Debug, thiserror::Error)]
@@ -353,13 +341,13 @@ impl ModbusValve {
         let setpoint = self
             .map
             .encode_setpoint(op_pct)
-            .map_err(|e| Fault::Error(e.to_string()))?;
+            .map_err(|e| Fault::Error(e.into()))?;
         // What the device makes of the words: the O_P after scaling and rounding.
         let sent = self
             .map
             .setpoint
             .decode("set-point", &setpoint, self.map.word_order)
-            .map_err(|e| Fault::Error(e.to_string()))?;
+            .map_err(|e| Fault::Error(e.into()))?;
         let deadline = Instant::now() + self.timeout;
         let mut conn = self.conn.lock().await;
         if !conn.is_connected() {
@@ -410,7 +398,7 @@ impl ModbusValve {
         let words = self
             .map
             .encode_setpoint(pct)
-            .map_err(|e| Fault::Error(e.to_string()))?;
+            .map_err(|e| Fault::Error(e.into()))?;
         let deadline = Instant::now() + self.timeout;
         let mut conn = self.conn.lock().await;
         if !conn.is_connected() {
@@ -428,7 +416,7 @@ impl ModbusValve {
         self.map
             .setpoint
             .decode("set-point", &words, self.map.word_order)
-            .map_err(|e| Fault::Error(e.to_string()))
+            .map_err(|e| Fault::Error(e.into()))
     }
 
     fn decode(&self, replies: &[Vec<u16>], op_pct: f64, sent: f64) -> Result<Reading, Fault> {
@@ -439,11 +427,11 @@ impl ModbusValve {
                 Transaction::ReadWrite { read_count, .. } => read_count,
             };
             if words.len() != usize::from(want) {
-                return Err(Fault::Error(format!(
-                    "FC {}: {} registers in reply, {want} asked",
-                    t.function_code(),
-                    words.len()
-                )));
+                return Err(Fault::Error(ReplyError::Registers {
+                    fc: t.function_code(),
+                    got: words.len(),
+                    want,
+                }));
             }
         }
         let at = |slot: super::plan::Slot| {
@@ -455,14 +443,15 @@ impl ModbusValve {
         let vp_pct = self
             .map
             .decode_position(at(self.plan.position))
-            .map_err(|e| Fault::Error(e.to_string()))?;
+            .map_err(|e| Fault::Error(e.into()))?;
         let status = self.plan.status.and_then(|s| at(s).first().copied());
         if let (Some(word), Some(reg)) = (status, self.map.status) {
             if word & reg.error_mask() != 0 {
-                return Err(Fault::Error(format!(
-                    "device flags the set-point as refused (status 0x{word:04X}, bit {}) after O_P {op_pct:.2} %",
-                    reg.setpoint_error_bit
-                )));
+                return Err(Fault::Error(ReplyError::Refused {
+                    word,
+                    bit: reg.setpoint_error_bit,
+                    op_pct,
+                }));
             }
         }
         Ok(Reading {

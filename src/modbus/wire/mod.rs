@@ -20,7 +20,7 @@ mod tcp;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
 
-pub use rtu::{rtu_frame_fault, RtuWire};
+pub use rtu::{rtu_frame_fault, BadFrame, RtuWire};
 pub use tcp::TcpWire;
 
 const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);

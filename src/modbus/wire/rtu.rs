@@ -388,9 +388,25 @@ impl AsyncWrite for RtuWire {
     }
 }
 
-/// The fault of a complete but unusable RTU reply `rx` to `t`, or None if the reply is
+/// A complete RTU reply that is no answer to its request.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BadFrame {
+    /// Its CRC is not the one computed over its body.
+    #[error("CRC error in reply to FC {fc}: received 0x{received:04X}, computed 0x{computed:04X} over {body:02X?}")]
+    Crc {
+        fc: u8,
+        received: u16,
+        computed: u16,
+        body: Vec<u8>,
+    },
+    /// Its CRC is good, but tokio-modbus refused it.
+    #[error("unexpected reply to FC {fc}: {frame:02X?}")]
+    Unexpected { fc: u8, frame: Vec<u8> },
+}
+
+/// What is wrong with a complete but unusable RTU reply `rx` to `t`, or None if the reply is
 /// incomplete.
-pub fn rtu_frame_fault(rx: &[u8], t: &Transaction) -> Option<String> {
+pub fn rtu_frame_fault(rx: &[u8], t: &Transaction) -> Option<BadFrame> {
     let fc = t.function_code();
     let len = match rx.get(1) {
         Some(&f) if f == fc | 0x80 => 5,
@@ -398,12 +414,20 @@ pub fn rtu_frame_fault(rx: &[u8], t: &Transaction) -> Option<String> {
     };
     let frame = rx.get(..len)?;
     let (body, crc) = frame.split_at(len - 2);
-    let got = u16::from_le_bytes([crc[0], crc[1]]);
-    let want = MODBUS_CRC.checksum(body);
-    Some(if got != want {
-        format!("CRC error in reply to FC {fc}: received 0x{got:04X}, computed 0x{want:04X} over {body:02X?}")
+    let received = u16::from_le_bytes([crc[0], crc[1]]);
+    let computed = MODBUS_CRC.checksum(body);
+    Some(if received != computed {
+        BadFrame::Crc {
+            fc,
+            received,
+            computed,
+            body: body.to_vec(),
+        }
     } else {
-        format!("unexpected reply to FC {fc}: {frame:02X?}")
+        BadFrame::Unexpected {
+            fc,
+            frame: frame.to_vec(),
+        }
     })
 }
 
@@ -538,14 +562,20 @@ mod tests {
         let frame = frame(&[1u8, 3, 2, 0x01, 0xF4]);
         assert!(rtu_frame_fault(&frame[..5], &t).is_none(), "incomplete");
         let ok = rtu_frame_fault(&frame, &t).unwrap();
-        assert!(ok.starts_with("unexpected reply"), "{ok}");
+        assert!(matches!(ok, BadFrame::Unexpected { fc: 3, .. }), "{ok}");
+        assert!(ok.to_string().starts_with("unexpected reply"), "{ok}");
         let mut frame = frame;
         frame[6] ^= 0xFF;
         let bad = rtu_frame_fault(&frame, &t).unwrap();
-        assert!(bad.starts_with("CRC error in reply to FC 3"), "{bad}");
+        assert!(matches!(bad, BadFrame::Crc { fc: 3, .. }), "{bad}");
+        assert!(
+            bad.to_string().starts_with("CRC error in reply to FC 3"),
+            "{bad}"
+        );
         // An exception reply is 5 bytes.
         let mut exc = vec![1u8, 0x83, 2];
         exc.extend_from_slice(&(MODBUS_CRC.checksum(&exc) ^ 1).to_le_bytes());
-        assert!(rtu_frame_fault(&exc, &t).unwrap().starts_with("CRC error"));
+        let exc = rtu_frame_fault(&exc, &t).unwrap();
+        assert!(exc.to_string().starts_with("CRC error"), "{exc}");
     }
 }
