@@ -103,6 +103,16 @@ fn each_valve_gets_a_history_of_sized_effects_the_same_on_every_run() {
         healthy.iter().all(|l| l["trigger"] == "every_s"),
         "{healthy:?}"
     );
+    // The first whole window is diagnosed from scratch; the next starts from its final model.
+    let started_from: Vec<String> = (healthy.iter())
+        .map(|l| {
+            let report = a.path().join(l["report"].as_str().unwrap());
+            let json = std::fs::read_to_string(report.with_file_name("diagnosis.json")).unwrap();
+            let doc: Value = serde_json::from_str(&json).unwrap();
+            doc["baseline"]["model"].as_str().unwrap().to_string()
+        })
+        .collect();
+    assert_eq!(started_from, ["fopdt", "pincart2 (given)"]);
 }
 
 #[test]

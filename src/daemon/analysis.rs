@@ -8,6 +8,7 @@
 use std::path::Path;
 
 use super::diagnosis::history::Entry;
+use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 
 /// What one diagnosis of a window found.
@@ -19,11 +20,15 @@ pub struct WindowDiagnosis {
     pub effects: Vec<Entry>,
     /// The report's files (name, text), when one was asked for.
     pub report: Vec<(&'static str, String)>,
+    /// The final model: the starting model of the valve's later windows once this diagnosis
+    /// is its baseline.
+    pub model: ModelSpec,
 }
 
-/// Diagnoses one valve's window; with a title, also renders its report. `Err`: why the
-/// window could not be diagnosed.
-pub type DiagnoseWindow = fn(&RecordingView, Option<&str>) -> Result<WindowDiagnosis, String>;
+/// Diagnoses one valve's window, from the given model (the baseline's) or from scratch; with a
+/// title, also renders its report. `Err`: why the window could not be diagnosed.
+pub type DiagnoseWindow =
+    fn(&RecordingView, Option<&ModelSpec>, Option<&str>) -> Result<WindowDiagnosis, String>;
 
 /// Draws a valve's health CSV as SVG (empty when it holds no estimated window).
 pub type PlotHealth = fn(&str, &Path) -> Result<String, String>;

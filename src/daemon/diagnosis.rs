@@ -38,6 +38,7 @@ use super::analysis::DiagnoseWindow;
 use super::config::DiagnosisConfig;
 use super::DaemonError;
 use crate::model::composed::Effect;
+use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 use history::{Baseline, Record};
 
@@ -236,6 +237,7 @@ pub fn start(
             file,
             dir: dir.to_path_buf(),
             baseline: Baseline::default(),
+            model: None,
             last: None,
             metrics: w.metrics,
             diagnose,
@@ -271,6 +273,8 @@ struct History {
     file: File,
     dir: PathBuf,
     baseline: Baseline,
+    /// The baseline diagnosis's final model, which later windows start from.
+    model: Option<ModelSpec>,
     last: Option<Record>,
     metrics: Option<DiagnosisMetrics>,
     diagnose: DiagnoseWindow,
@@ -343,7 +347,8 @@ impl History {
         };
         let rel = format!("diagnosis-{}/{:.0}", self.name, job.t_s);
         let title = format!("valve {}: live diagnosis at {:.0} s", self.name, job.t_s);
-        let d = match (self.diagnose)(&rec, cfg.reports.then_some(title.as_str())) {
+        let base = self.model.as_ref();
+        let d = match (self.diagnose)(&rec, base, cfg.reports.then_some(title.as_str())) {
             Ok(d) => d,
             Err(e) => {
                 tracing::warn!(valve = %self.name, t_s = job.t_s, "live diagnosis failed: {e}");
@@ -355,6 +360,9 @@ impl History {
         record.effects = d.effects;
         let whole = job.trigger == "every_s";
         let (standing, raised) = self.baseline.compare(job.t_s, whole, &record.effects);
+        if self.model.is_none() && self.baseline.is_set() {
+            self.model = Some(d.model);
+        }
         for a in &raised {
             tracing::warn!(valve = %self.name, t_s = job.t_s, "diagnosis alarm: {a}");
             self.report.first_alarm_t_s.get_or_insert(job.t_s);

@@ -8,6 +8,7 @@ use std::path::Path;
 use crate::daemon::analysis::{Analysis, WindowDiagnosis};
 use crate::daemon::diagnosis::history::Entry;
 use crate::diagnose::{diagnose, Diagnosis};
+use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 
 /// Everything the daemon can run beside its loop.
@@ -20,13 +21,19 @@ pub fn analysis() -> Analysis {
     }
 }
 
-/// Diagnoses a window as `diagnose` does a recording; with `title`, its report's files too.
-fn diagnose_window(rec: &RecordingView, title: Option<&str>) -> Result<WindowDiagnosis, String> {
-    let d = diagnose(rec, None, &|_, _| {}).map_err(|e| e.to_string())?;
+/// Diagnoses a window as `diagnose` (with `--model base`) does a recording; with `title`, its
+/// report's files too.
+fn diagnose_window(
+    rec: &RecordingView,
+    base: Option<&ModelSpec>,
+    title: Option<&str>,
+) -> Result<WindowDiagnosis, String> {
+    let d = diagnose(rec, base, &|_, _| {}).map_err(|e| e.to_string())?;
     Ok(WindowDiagnosis {
         verdict: super::verdict::verdict(&d),
         effects: entries(&d),
         report: title.map_or_else(Vec::new, |t| super::diagnose::files(t, rec, &d).to_vec()),
+        model: d.final_model.spec,
     })
 }
 

@@ -2,7 +2,11 @@
 //! time, trigger, verdict, every finding and trace with its size, unit and 90 % interval), the
 //! baseline (the first diagnosis) and the alarms against it.
 //!
-//! The baseline is the first diagnosis of a whole window. An alarm names its effect: a finding
+//! The baseline is the first diagnosis of a whole window, and its final model is where every
+//! later window's diagnosis starts (as `diagnose --model` does): a finding then is physics the
+//! valve did not show at the baseline, or an effect of it that had to be refitted, so look-alike
+//! effects that take turns from one window to the next on a healthy valve (a crossing time here,
+//! a dead time there) are not found anew. An alarm names its effect: a finding
 //! whose effect the baseline did not show at all, not even as a trace (a new effect), or whose
 //! size grew out of the baseline's: its interval no longer overlaps the baseline's (requiring
 //! the intervals to part, not only the value to leave, keeps a healthy valve's scatter from
@@ -64,6 +68,11 @@ pub struct Baseline {
 }
 
 impl Baseline {
+    /// A whole window's diagnosis has become the baseline.
+    pub fn is_set(&self) -> bool {
+        self.effects.is_some()
+    }
+
     /// Compares the effects of the diagnosis at loop time `t_s` with the baseline (the first
     /// of a `whole` window makes them the baseline) and returns the standing alarms and those
     /// newly raised.
