@@ -6,8 +6,6 @@
 //! for messages, warnings and tables. An effect's size is worded here too (`friction band
 //! 1.40 % (1.10-1.80)`), the same in a diagnosis report and in a live alarm.
 
-use crate::model::composed::Size;
-
 /// `x` rounded to six significant digits, shortest form (`0.01`, `3600`, `1.5e-9`), `inf`,
 /// `-inf`, or `n/a` for NaN.
 pub fn num(x: f64) -> String {
@@ -70,13 +68,8 @@ pub fn sig3(x: f64) -> String {
     format!("{x:.decimals$}")
 }
 
-/// A size with its interval: `friction band 1.40 % (1.10-1.80)`.
-pub fn size_words(s: &Size) -> String {
-    size_text(s.name, s.value, s.low, s.high)
-}
-
 /// The size named `name` (as in the `--json` document) of `value` within `low`-`high`, as
-/// [`size_words`] words it.
+/// `Size::words` words it.
 pub fn size_text(name: &str, value: f64, low: f64, high: f64) -> String {
     let (what, unit) = size_label(name);
     if low < high {
@@ -96,22 +89,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn sizes_read_with_their_intervals() {
-        let s = Size {
-            name: "friction_band_pct",
-            unit: "%",
-            value: 1.4,
-            low: 1.1,
-            high: 1.8,
-            worth: 4.7,
-        };
-        assert_eq!(size_words(&s), "friction band 1.40 % (1.10-1.80)");
-        let exact = Size {
-            low: 1.4,
-            high: 1.4,
-            ..s
-        };
-        assert_eq!(size_words(&exact), "friction band 1.40 %");
+    fn three_figures() {
         assert_eq!(sig3(0.05), "0.050");
         assert_eq!(sig3(123.4), "123");
     }

@@ -47,11 +47,7 @@ pub struct Running {
 /// Starts the loop and logger threads; the loop runs until stopped, the duration or a source ends.
 pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let clock = checked_clock(&config, &opts)?;
-    // `[diagnosis]` in a daemon handed no diagnosis is refused before anything is opened.
-    let diagnose = match &config.diagnosis {
-        Some(_) => Some(opts.analysis.diagnose.ok_or(DaemonError::NoDiagnosis)?),
-        None => None,
-    };
+    let diagnose = checked_diagnosis(&config, &opts)?;
     let rate_hz = config.loop_.rate_hz;
     let period = config.loop_.period();
     // Sockets are bound before the valves are opened, so a taken port stops the start first.
@@ -262,6 +258,18 @@ fn start_health(
     };
     let health = health::start(cfg, dir, period_s, watched, feed)?;
     Ok((Some(health), diagnosis))
+}
+
+/// The diagnosis `[diagnosis]` asks for; refused before anything is opened when the daemon was
+/// handed none.
+fn checked_diagnosis(
+    config: &Config,
+    opts: &RunOptions,
+) -> Result<Option<DiagnoseWindow>, DaemonError> {
+    match &config.diagnosis {
+        Some(_) => Some(opts.analysis.diagnose.ok_or(DaemonError::NoDiagnosis)).transpose(),
+        None => Ok(None),
+    }
 }
 
 /// The clock the loop runs on, after checking that `--duration` and the clock fit the config.

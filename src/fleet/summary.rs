@@ -64,9 +64,7 @@ impl ValveSummary {
             stroke_speed_open_pct_per_s: finite(f.opening_speed_pct_per_s),
             stroke_speed_close_pct_per_s: finite(f.closing_speed_pct_per_s),
             findings: d.findings.iter().map(|f| f.effect.name().into()).collect(),
-            sizes: (d.findings.iter())
-                .map(|f| crate::report::verdict::size(&f.size))
-                .collect(),
+            sizes: (d.findings.iter()).map(|f| f.size.words()).collect(),
             verdict: Some(crate::report::diagnose::verdict(d)),
             heldout_sse_before: finite(d.baseline.heldout_sse),
             heldout_sse_after: finite(d.final_model.heldout_sse),

@@ -29,6 +29,13 @@ pub struct Size {
     pub worth: f64,
 }
 
+impl Size {
+    /// The size with its interval, in words: `friction band 1.40 % (1.10-1.80)`.
+    pub fn words(&self) -> String {
+        crate::human::size_text(self.name, self.value, self.low, self.high)
+    }
+}
+
 /// The physics diagnosis can name; the JSON names are the vocabulary of the issue tracker.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -363,6 +370,25 @@ pub fn compose(base: &ModelSpec, dt: f64) -> ModelSpec {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn sizes_read_with_their_intervals() {
+        let s = Size {
+            name: "friction_band_pct",
+            unit: "%",
+            value: 1.4,
+            low: 1.1,
+            high: 1.8,
+            worth: 4.7,
+        };
+        assert_eq!(s.words(), "friction band 1.40 % (1.10-1.80)");
+        let exact = Size {
+            low: 1.4,
+            high: 1.4,
+            ..s
+        };
+        assert_eq!(exact.words(), "friction band 1.40 %");
+    }
     use super::*;
     use crate::model::{bundled, Valve};
 

@@ -14,7 +14,7 @@ use super::chart::Dataset;
 use super::identify::fmt_param;
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 pub use super::verdict::verdict;
-use super::verdict::{figures, measure, size, trace};
+use super::verdict::{figures, measure, trace};
 use super::{esc, page, row};
 use crate::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
 use crate::diagnose::locate::{Context, Window};
@@ -419,7 +419,7 @@ pub fn text(d: &Diagnosis) -> String {
             let names: Vec<&str> = f.alternatives.iter().map(|e| e.name()).collect();
             let _ = writeln!(o, "  or, as well: {} (see the notes)", names.join(", "));
         }
-        let _ = writeln!(o, "  size: {} (90 % interval)", size(&f.size));
+        let _ = writeln!(o, "  size: {} (90 % interval)", f.size.words());
         let _ = writeln!(o, "  evidence: {}", evidence(f));
         let _ = writeln!(o, "  parameters:");
         for (name, value, unit) in finding_params(f) {
@@ -507,7 +507,7 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
             h,
             "<h3>{}{alternatives}</h3><p><b>{}</b> (90 % interval)</p><p>{}</p>{}<p>Improved: {}, ΔBIC {:.0}</p>",
             f.effect.name(),
-            esc(&size(&f.size)),
+            esc(&f.size.words()),
             esc(&evidence(f)),
             params_html(f),
             esc(&measure(&f.measure)),

@@ -5,7 +5,7 @@
 //! Not here: the evidence of each finding or the notes (`report::diagnose`).
 
 use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Trace};
-pub use crate::human::{sig3 as num, size_label as label, size_text, size_words as size};
+pub use crate::human::{sig3 as num, size_label as label, size_text};
 
 /// The measure a finding improved, in words.
 pub fn measure(m: &Measure) -> String {
@@ -38,7 +38,7 @@ pub fn trace(t: &Trace) -> String {
     format!(
         "{} ({}, {:.0} % of the held-out error)",
         t.effect.name(),
-        size(&t.size),
+        t.size.words(),
         100.0 * t.heldout_share
     )
 }
@@ -88,7 +88,7 @@ pub fn verdict(d: &Diagnosis) -> String {
             ..
         } => {
             let named: Vec<String> = (d.findings.iter())
-                .map(|f| format!("{} ({})", f.effect.name(), size(&f.size)))
+                .map(|f| format!("{} ({})", f.effect.name(), f.size.words()))
                 .collect();
             let by_sse: Vec<&str> = (d.findings.iter())
                 .filter(|f| matches!(f.measure, Measure::HeldoutSse { .. }))

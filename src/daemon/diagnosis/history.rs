@@ -21,7 +21,7 @@
 
 use serde::Serialize;
 
-use crate::human::{sig3, size_label, size_words};
+use crate::human::{sig3, size_label};
 use crate::model::composed::{Effect, Size};
 
 /// One effect in a diagnosis: a finding (material) or a trace.
@@ -138,11 +138,7 @@ fn message(e: &Entry, then: Option<&Entry>, since_s: f64) -> String {
             sig3(b.size.value),
             sig3(e.size.value)
         ),
-        None => format!(
-            "{}: new, {} since {since}",
-            e.effect.name(),
-            size_words(&e.size)
-        ),
+        None => format!("{}: new, {} since {since}", e.effect.name(), e.size.words()),
     }
 }
 
