@@ -138,7 +138,7 @@ fn a_daemon_handed_no_diagnosis_refuses_the_diagnosis_table_before_it_starts() {
             ..RunOptions::default()
         },
     );
-    let err = started.err().expect("started without a diagnosis to run");
+    let err = started.expect_err("started without a diagnosis to run");
     assert!(matches!(err, DaemonError::NoDiagnosis), "{err}");
     assert!(err.to_string().starts_with("[diagnosis]: "), "{err}");
     assert!(

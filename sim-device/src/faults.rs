@@ -13,7 +13,7 @@ use rand_chacha::ChaCha8Rng;
 
 /// The fault options of the command line.
 #[derive(Debug, Clone, Default)]
-pub struct FaultConfig {
+pub(crate) struct FaultConfig {
     /// Extra delay before a response (every one, or those of `delay_every`).
     pub delay: Duration,
     /// Delay only the responses to requests whose number is a multiple of this.
@@ -39,7 +39,7 @@ pub struct FaultConfig {
 
 /// The fate of one request: what to answer, and how late.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Decision {
+pub(crate) struct Decision {
     /// What to answer.
     pub action: Action,
     /// Extra delay before answering.
@@ -48,7 +48,7 @@ pub struct Decision {
 
 /// What to do with one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Action {
+pub(crate) enum Action {
     /// Answer normally.
     Answer,
     /// Send nothing.
@@ -65,7 +65,7 @@ pub enum Action {
 
 /// The shared fault state of one device.
 #[derive(Debug)]
-pub struct Faults {
+pub(crate) struct Faults {
     cfg: FaultConfig,
     count: AtomicU64,
     rng: Mutex<ChaCha8Rng>,
@@ -77,7 +77,7 @@ fn hits(every: Option<u64>, n: u64) -> bool {
 
 impl Faults {
     /// Fault state for `cfg`, no request seen yet.
-    pub fn new(cfg: FaultConfig) -> Self {
+    pub(crate) fn new(cfg: FaultConfig) -> Self {
         let rng = Mutex::new(ChaCha8Rng::seed_from_u64(cfg.seed));
         Faults {
             cfg,
@@ -87,12 +87,12 @@ impl Faults {
     }
 
     /// The request count after which a TCP connection is closed.
-    pub fn disconnect_after(&self) -> Option<u64> {
+    pub(crate) fn disconnect_after(&self) -> Option<u64> {
         self.cfg.disconnect_after
     }
 
     /// Numbers the next request and decides its fate.
-    pub fn next(&self) -> Decision {
+    pub(crate) fn next(&self) -> Decision {
         let n = self.count.fetch_add(1, Ordering::Relaxed) + 1;
         let late = self.cfg.delay_every.is_none() || hits(self.cfg.delay_every, n);
         Decision {

@@ -30,6 +30,9 @@
 //! SIGTERM logs what the server went through before exiting. It is a test instrument: no
 //! persistence, no device identification, no coils.
 
+#![warn(missing_debug_implementations, unreachable_pub)]
+#![deny(unsafe_code)]
+
 mod faults;
 mod rtu;
 mod tcp;

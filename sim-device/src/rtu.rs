@@ -29,7 +29,7 @@ const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
 
 /// Line-speed emulation: how long characters take on the emulated wire.
 #[derive(Debug, Clone, Copy)]
-pub struct LineSpeed {
+pub(crate) struct LineSpeed {
     /// Baud rate.
     pub baud: u32,
     /// Bits per character (10 for 8N1, 11 for 8E1 or 8N2).
@@ -40,14 +40,14 @@ pub struct LineSpeed {
 
 impl LineSpeed {
     /// Time for `chars` characters.
-    pub fn chars(&self, chars: usize) -> Duration {
+    pub(crate) fn chars(&self, chars: usize) -> Duration {
         Duration::from_secs_f64(chars as f64 * f64::from(self.bits_per_char) / f64::from(self.baud))
     }
 }
 
 /// Everything the RTU server needs besides the port.
 #[derive(Debug, Clone)]
-pub struct RtuDevice {
+pub(crate) struct RtuDevice {
     /// The registers of each unit, by slave address.
     pub banks: Banks,
     /// Fault injection.
@@ -76,7 +76,7 @@ fn request_len(buf: &[u8]) -> Result<Option<usize>, ()> {
 }
 
 /// Appends the CRC (low byte first) to `adu`, inverted when `corrupt`.
-pub fn seal(mut adu: Vec<u8>, corrupt: bool) -> Vec<u8> {
+pub(crate) fn seal(mut adu: Vec<u8>, corrupt: bool) -> Vec<u8> {
     let crc = MODBUS_CRC.checksum(&adu) ^ if corrupt { 0xFFFF } else { 0 };
     adu.extend_from_slice(&crc.to_le_bytes());
     adu
@@ -85,7 +85,7 @@ pub fn seal(mut adu: Vec<u8>, corrupt: bool) -> Vec<u8> {
 impl RtuDevice {
     /// The reply to one request frame and the injected delay before it, or None when the
     /// device stays silent.
-    pub fn reply(&self, frame: &[u8]) -> Option<(Vec<u8>, Duration)> {
+    pub(crate) fn reply(&self, frame: &[u8]) -> Option<(Vec<u8>, Duration)> {
         if frame.len() < 4 {
             return None;
         }
@@ -126,7 +126,7 @@ impl RtuDevice {
     }
 
     /// Serves requests on `port` until it closes.
-    pub async fn serve(&self, mut port: SerialStream) -> std::io::Result<()> {
+    pub(crate) async fn serve(&self, mut port: SerialStream) -> std::io::Result<()> {
         let mut buf = BytesMut::with_capacity(512);
         loop {
             let n = if buf.is_empty() {

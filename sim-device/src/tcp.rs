@@ -56,7 +56,7 @@ impl Respond for Connection {
 }
 
 /// Serves `banks` over Modbus TCP on `listener` within `limits`, forever.
-pub async fn serve(
+pub(crate) async fn serve(
     listener: TcpListener,
     banks: Banks,
     faults: Arc<Faults>,

@@ -26,11 +26,11 @@ use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
 use valve_bridge::model::{self, Drift, DriftSpec, ModelKind, ModelSpec, Valve};
 
 /// The model's step, 10 ms (100 Hz).
-pub const MODEL_DT: f64 = model::DEFAULT_SAMPLE_PERIOD_S;
+pub(crate) const MODEL_DT: f64 = model::DEFAULT_SAMPLE_PERIOD_S;
 
 /// One `--unit` argument: the address, and what it sets of its own.
 #[derive(Debug, Clone, PartialEq)]
-pub struct UnitArg {
+pub(crate) struct UnitArg {
     /// Slave address / unit id, 1-247.
     pub id: u8,
     /// Its model, when it has its own.
@@ -40,7 +40,7 @@ pub struct UnitArg {
 }
 
 /// Parses `ID` or `ID=MODEL[,KEY=VALUE...]`.
-pub fn parse_unit(s: &str) -> Result<UnitArg, String> {
+pub(crate) fn parse_unit(s: &str) -> Result<UnitArg, String> {
     let (id, rest) = match s.split_once('=') {
         Some((id, rest)) => (id, Some(rest)),
         None => (s, None),
@@ -105,7 +105,7 @@ const KEYS: [&str; 5] = [
 /// The registers every unit serves: a map, and (from a device profile) further registers, read
 /// as 0, and the only function codes answered (empty: all).
 #[derive(Debug, Clone, Default)]
-pub struct Served {
+pub(crate) struct Served {
     pub map: RegisterMap,
     pub others: Vec<(Table, u16)>,
     pub functions: Vec<u8>,
@@ -113,7 +113,7 @@ pub struct Served {
 
 impl Served {
     /// Just `map`.
-    pub fn map(map: RegisterMap) -> Served {
+    pub(crate) fn map(map: RegisterMap) -> Served {
         Served {
             map,
             ..Served::default()
@@ -121,7 +121,7 @@ impl Served {
     }
 
     /// `map` (the profile's, or a config's over it) with `profile`'s registers and functions.
-    pub fn profile(map: RegisterMap, profile: &Profile) -> Served {
+    pub(crate) fn profile(map: RegisterMap, profile: &Profile) -> Served {
         Served {
             map,
             others: (profile.others.iter())
@@ -134,7 +134,7 @@ impl Served {
 
 /// What every unit gets unless it says otherwise (the command line's options).
 #[derive(Debug, Clone)]
-pub struct Defaults {
+pub(crate) struct Defaults {
     pub model: String,
     pub noise_pct: f64,
     pub drift: DriftSpec,
@@ -142,7 +142,7 @@ pub struct Defaults {
 }
 
 /// A unit ready to serve: its address and registers, and its valve until it is started.
-pub struct Unit {
+pub(crate) struct Unit {
     pub id: u8,
     pub bank: Arc<RegisterBank>,
     valve: Valve,
@@ -153,7 +153,7 @@ pub struct Unit {
 
 impl Unit {
     /// The unit `arg` describes, serving `served`, with `defaults` for what it does not set.
-    pub fn new(arg: &UnitArg, defaults: &Defaults, served: &Served) -> anyhow::Result<Unit> {
+    pub(crate) fn new(arg: &UnitArg, defaults: &Defaults, served: &Served) -> anyhow::Result<Unit> {
         let name = arg.model.as_deref().unwrap_or(&defaults.model);
         let spec = load_model(name).with_context(|| format!("unit {}: model `{name}`", arg.id))?;
         let mut noise_pct = defaults.noise_pct;
@@ -192,7 +192,7 @@ impl Unit {
     }
 
     /// A line for the log.
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         let worn = if self.drift.is_some() {
             ", drifting"
         } else {
@@ -207,7 +207,7 @@ impl Unit {
 
     /// Steps the valve at 100 Hz in real time from the bank's set-point and reports its
     /// position, forever (abort the task to stop).
-    pub async fn step(mut self) {
+    pub(crate) async fn step(mut self) {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let op0 = self.bank.setpoint_pct();
         self.valve.reset(op0, 0.0);
@@ -232,16 +232,16 @@ impl Unit {
 
 /// The banks of the units by address, as the servers look them up.
 #[derive(Debug, Clone)]
-pub struct Banks(Vec<(u8, Arc<RegisterBank>)>);
+pub(crate) struct Banks(Vec<(u8, Arc<RegisterBank>)>);
 
 impl Banks {
     /// The banks of `units`.
-    pub fn of(units: &[Unit]) -> Banks {
+    pub(crate) fn of(units: &[Unit]) -> Banks {
         Banks(units.iter().map(|u| (u.id, Arc::clone(&u.bank))).collect())
     }
 
     /// The bank at RTU address `id`, if a unit is there.
-    pub fn at(&self, id: u8) -> Option<&RegisterBank> {
+    pub(crate) fn at(&self, id: u8) -> Option<&RegisterBank> {
         self.0
             .iter()
             .find(|(i, _)| *i == id)
@@ -249,13 +249,13 @@ impl Banks {
     }
 
     /// Every bank (a broadcast reaches them all).
-    pub fn all(&self) -> impl Iterator<Item = &RegisterBank> {
+    pub(crate) fn all(&self) -> impl Iterator<Item = &RegisterBank> {
         self.0.iter().map(|(_, b)| b.as_ref())
     }
 
     /// The bank for Modbus TCP unit id `id`: with one unit, that unit whatever the id (a
     /// device answering on its own address); with several, the unit of that id.
-    pub fn for_tcp(&self, id: u8) -> Option<&RegisterBank> {
+    pub(crate) fn for_tcp(&self, id: u8) -> Option<&RegisterBank> {
         match self.0.as_slice() {
             [(_, only)] => Some(only.as_ref()),
             _ => self.at(id),
@@ -264,7 +264,7 @@ impl Banks {
 }
 
 /// A bundled model by name, or a model file.
-pub fn load_model(name: &str) -> anyhow::Result<ModelSpec> {
+pub(crate) fn load_model(name: &str) -> anyhow::Result<ModelSpec> {
     match name.parse::<ModelKind>() {
         Ok(kind) => Ok(model::bundled(kind)),
         Err(_) => Ok(ModelSpec::load(Path::new(name))?),

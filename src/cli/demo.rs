@@ -17,7 +17,7 @@ use valve_bridge::synth::{self, physical, Excitation};
 
 /// Arguments of `valve-bridge demo`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// Which demo: only `concealed` so far.
     #[arg(value_parser = ["concealed"])]
     which: String,
@@ -44,7 +44,7 @@ fn hidden(effect: Effect, noise: f64, seed: u64) -> ModelSpec {
 }
 
 /// Generates the recording, shows the baseline, runs the diagnosis and prints what it found.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let effect = args.effect;
     let dt = 0.01;
     // A quantizing sensor reports the lattice itself, so that case is recorded without extra noise.

@@ -12,7 +12,7 @@ use super::input::RecordingArgs;
 
 /// Arguments of `valve-bridge diagnose`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The recording to diagnose (t_s,op_pct,vp_pct; see --columns): one file, or several
     /// (rotated logs) or a directory of them, joined in time order.
     #[arg(required = true)]
@@ -31,7 +31,7 @@ pub struct Args {
 }
 
 /// Runs the diagnosis and prints it.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let base = args.model.as_deref().map(ModelSpec::load).transpose()?;
     let bar = super::progress_bar(

@@ -10,7 +10,7 @@ use super::input::RecordingArgs;
 
 /// Arguments of `valve-bridge fleet`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// Directory of recordings (*.csv): one valve per file, or wide exports with --valves.
     dir: PathBuf,
     /// Write index.html, summary.csv, summary.json and valves/<valve>/ (report.html, model.toml,
@@ -26,7 +26,7 @@ pub struct Args {
 }
 
 /// Diagnoses the fleet, writes its summaries and prints the ranking.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let map = args.valves.as_deref().map(ValveMap::load).transpose()?;
     let jobs = fleet::jobs(&args.dir, map.as_ref())?;
     let read = args.read.options()?;

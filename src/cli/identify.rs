@@ -14,7 +14,7 @@ use super::input::RecordingArgs;
 
 /// Arguments of `valve-bridge identify`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The recording to identify (t_s,op_pct,vp_pct; see --columns): one file, or several
     /// (rotated logs) or a directory of them, joined in time order.
     #[arg(required = true)]
@@ -41,7 +41,7 @@ pub struct Args {
 }
 
 /// Runs the identification and prints or writes the results.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let opts = Options {
         windows: args.windows.map(|w| w.0),

@@ -5,7 +5,7 @@ use valve_bridge::recording::{ColumnMap, ReadOptions};
 
 /// How to read the input recording.
 #[derive(clap::Args, Debug, Clone)]
-pub struct RecordingArgs {
+pub(crate) struct RecordingArgs {
     /// Column mapping, e.g. `t=t_s,op=LC74_20CV_pct,vp=LC74_20X_pct` (defaults t_s, op_pct, vp_pct).
     #[arg(long)]
     columns: Option<String>,
@@ -29,7 +29,7 @@ pub struct RecordingArgs {
 
 impl RecordingArgs {
     /// The reader options these flags ask for.
-    pub fn options(&self) -> anyhow::Result<ReadOptions> {
+    pub(crate) fn options(&self) -> anyhow::Result<ReadOptions> {
         let columns = match &self.columns {
             Some(s) => s.parse::<ColumnMap>()?,
             None => ColumnMap::default(),

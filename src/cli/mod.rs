@@ -22,15 +22,15 @@ macro_rules! errln {
     }};
 }
 
-pub mod demo;
-pub mod diagnose;
-pub mod fleet;
-pub mod identify;
-pub mod input;
-pub mod probe;
-pub mod run;
-pub mod simulate;
-pub mod steps;
+pub(crate) mod demo;
+pub(crate) mod diagnose;
+pub(crate) mod fleet;
+pub(crate) mod identify;
+pub(crate) mod input;
+pub(crate) mod probe;
+pub(crate) mod run;
+pub(crate) mod simulate;
+pub(crate) mod steps;
 
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
@@ -38,16 +38,16 @@ use std::process::ExitCode;
 /// Standard output could not be written.
 #[derive(Debug, thiserror::Error)]
 #[error("cannot write to standard output: {0}")]
-pub struct StdoutError(#[source] std::io::Error);
+pub(crate) struct StdoutError(#[source] std::io::Error);
 
 /// Writes `args` to standard output.
-pub fn write_stdout(args: std::fmt::Arguments) -> Result<(), StdoutError> {
+pub(crate) fn write_stdout(args: std::fmt::Arguments) -> Result<(), StdoutError> {
     std::io::stdout().write_fmt(args).map_err(StdoutError)
 }
 
 /// A progress bar of `len` units drawn with `template` (indicatif syntax), only when stderr is
 /// a terminal: piped output and logs stay clean.
-pub fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> {
+pub(crate) fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> {
     std::io::stderr().is_terminal().then(|| {
         let b = indicatif::ProgressBar::new(len);
         b.set_style(
@@ -61,7 +61,7 @@ pub fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> 
 /// Prints an error and its causes on one line, `valve-bridge: error: ...` (each cause once, see
 /// [`valve_bridge::error_line`]), and picks the exit code. A reader that closed the pipe (`|
 /// head`) ends the command quietly and successfully, as Unix tools do.
-pub fn report(result: anyhow::Result<()>) -> ExitCode {
+pub(crate) fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

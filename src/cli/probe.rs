@@ -13,7 +13,7 @@ use valve_bridge::modbus::{probe, profile};
 
 /// Arguments of `valve-bridge probe`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// Daemon config (TOML) with `[valve] kind = "modbus-tcp"` or `"modbus-rtu"`: its link and
     /// its register map (`[valve.registers]`, over its `profile`) are probed; a profile's
     /// registers show their manual names and numbers, and its further registers are read too.
@@ -32,7 +32,7 @@ pub struct Args {
 }
 
 /// Connects, probes and prints the table; fails if a register could not be read.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     if !(args.timeout_ms.is_finite() && (1.0..=60_000.0).contains(&args.timeout_ms)) {
         bail!(
             "--timeout-ms {}: a deadline in ms, 1-60000",

@@ -8,7 +8,7 @@ use valve_bridge::report;
 
 /// Arguments of `valve-bridge run`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// Daemon config (TOML). Default: the embedded config/emulated.toml (emulated pin-cart II,
     /// random steps, logs in ./logs/).
     #[arg(long, value_name = "FILE")]
@@ -31,7 +31,7 @@ pub struct Args {
 
 /// Loads the config, runs the loop and prints the summary on stdout; fails when no cycle read a
 /// V_P.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let config = Config::load(args.config.as_deref())?;
     let summary = daemon::run(
         config,

@@ -12,7 +12,7 @@ use super::input::RecordingArgs;
 
 /// Arguments of `valve-bridge simulate`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// Model parameter file (TOML, e.g. config/models/pincart2.toml).
     #[arg(long)]
     model: PathBuf,
@@ -28,7 +28,7 @@ pub struct Args {
 }
 
 /// Simulates, writes the CSV and prints the Table 1 row against the measurement.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let spec = ModelSpec::load(&args.model)?;
     let rec = recording::read_all(&args.input, &args.read.options()?)?;
     // Built here for its error (a sample period the model cannot run at); the simulation

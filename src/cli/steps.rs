@@ -13,7 +13,7 @@ use super::input::RecordingArgs;
 
 /// Arguments of `valve-bridge steps`.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The recording (t_s,op_pct,vp_pct; see --columns): one file, or several (rotated logs)
     /// or a directory of them, joined in time order.
     #[arg(required = true)]
@@ -38,7 +38,7 @@ pub struct Args {
 }
 
 /// Runs the analysis and prints it.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     let opts = StepOptions::new(args.min_size, args.fraction, args.min_hold)?;
     let rec = recording::read_all(&args.recording, &args.read.options()?)?;
     let a = steps::analyse_recording(&rec.view(), &opts).with_context(|| rec.source.clone())?;

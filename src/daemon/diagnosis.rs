@@ -124,12 +124,14 @@ impl DiagnosisMetrics {
 }
 
 /// One valve to diagnose: its name (label and file names) and its gauges.
+#[derive(Debug)]
 pub struct Watched {
     pub name: String,
     pub metrics: Option<DiagnosisMetrics>,
 }
 
 /// A window to diagnose.
+#[derive(Debug)]
 struct Job {
     valve: usize,
     t_s: f64,
@@ -139,6 +141,7 @@ struct Job {
 }
 
 /// One valve's ring of rows on the health thread.
+#[derive(Debug)]
 struct Ring {
     op: VecDeque<f64>,
     vp: VecDeque<f64>,
@@ -149,6 +152,7 @@ struct Ring {
 }
 
 /// The health thread's side: the rings, and the queue to the diagnosis thread.
+#[derive(Debug)]
 pub struct Feed {
     cfg: DiagnosisConfig,
     cap: usize,
@@ -309,6 +313,7 @@ fn work(
 }
 
 /// Puts the calling thread at the lowest priority: `SCHED_IDLE`, else nice 19.
+#[allow(unsafe_code)]
 fn lowest_priority() {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: plain system calls on the calling thread (pid 0) with a valid parameter.

@@ -104,6 +104,7 @@ pub const HEADER: [&str; 20] = [
 
 /// One valve to watch: its name, its health file's name, its baseline model, its metrics and
 /// the register bank whose status word carries its alarm (a valve a controller drives).
+#[derive(Debug)]
 pub struct Watched {
     pub name: String,
     pub file_name: String,
@@ -116,6 +117,7 @@ pub struct Watched {
 
 /// The running health thread: where the loggers send rows (with the valve's index), and the
 /// thread.
+#[derive(Debug)]
 pub struct Health {
     pub tx: SyncSender<(usize, Sample)>,
     pub handle: JoinHandle<Result<Vec<HealthReport>, DaemonError>>,

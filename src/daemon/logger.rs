@@ -51,6 +51,7 @@ pub type Forward = (usize, SyncSender<(usize, Sample)>);
 pub const QUEUE_ROWS: usize = 4096;
 
 /// The running logger: the channel to send rows on, and its thread.
+#[derive(Debug)]
 pub struct Logger {
     /// Where the loop sends rows.
     pub tx: SyncSender<Sample>,

@@ -121,6 +121,7 @@ fn bind(
 
 /// The network thread (`vb-net`): the process controller's Modbus server and the metrics
 /// endpoint, on a current-thread runtime of their own. It ends when [`Net`] is stopped or dropped.
+#[derive(Debug)]
 pub(super) struct Net {
     stop: tokio::sync::oneshot::Sender<()>,
     handle: JoinHandle<()>,

@@ -29,6 +29,7 @@ use crate::model::{ModelSpec, Valve};
 use crate::net::Health;
 
 /// A started daemon: its threads and the stop flag.
+#[derive(Debug)]
 pub struct Running {
     stop: Arc<AtomicBool>,
     live: Arc<Live>,
@@ -167,6 +168,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
 /// The loop thread and the loggers. Dropped before [`Running::finish`] took them (the calling
 /// thread panicked, or gave up on the daemon), it stops the loop and waits for it and the
 /// loggers: the stop action is applied and its row written whatever happens to the caller.
+#[derive(Debug)]
 struct LoopThreads {
     stop: Arc<AtomicBool>,
     control: Option<JoinHandle<Result<LoopEnd, DaemonError>>>,

@@ -119,6 +119,7 @@ impl Schedule {
 ///
 /// Linux lets a sleeping thread wake up to 50 µs late by default (timer slack) to batch
 /// wake-ups; 1 ns asks for precise wake-ups. Harmless if refused.
+#[allow(unsafe_code)]
 pub fn tighten_timer_slack() {
     #[cfg(target_os = "linux")]
     // SAFETY: PR_SET_TIMERSLACK takes one integer argument and only affects the calling thread.
@@ -129,6 +130,7 @@ pub fn tighten_timer_slack() {
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1-99), so ordinary work on a busy
 /// machine cannot delay its wake-ups. Needs root or CAP_SYS_NICE; the error says so.
+#[allow(unsafe_code)]
 pub fn realtime_priority(priority: u8) -> std::io::Result<()> {
     #[cfg(target_os = "linux")]
     {

@@ -18,10 +18,10 @@ use crate::model::ModelSpec;
 /// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).
 const SLOWEST_PCT_PER_S: f64 = 0.05;
 /// Longest dead time a diagnosis fits, s.
-pub const MAX_DEAD_TIME_S: f64 = 3.0;
+pub(super) const MAX_DEAD_TIME_S: f64 = 3.0;
 /// Largest wind-up past a travel stop, % of travel: a drive can wind from a stop low in the
 /// travel all the way to its supply.
-pub const MAX_WINDUP_PCT: f64 = 100.0;
+pub(super) const MAX_WINDUP_PCT: f64 = 100.0;
 
 /// One effect to refit, from several starts (the knobs and boxes are the same in all).
 #[derive(Debug, Clone)]

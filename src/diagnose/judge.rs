@@ -81,12 +81,12 @@ pub(crate) struct Trial {
 
 impl Trial {
     /// Whether the candidate passes every test.
-    pub fn passes(&self) -> bool {
+    pub(super) fn passes(&self) -> bool {
         self.material && self.significant
     }
 
     /// Whether it is a trace: real and plausible, but not worth maintenance.
-    pub fn trace(&self) -> bool {
+    pub(super) fn trace(&self) -> bool {
         self.significant && self.plausible && !self.material
     }
 }
@@ -111,7 +111,7 @@ pub(crate) struct Judge<'a> {
 impl Judge<'_> {
     /// Scores a refitted candidate (`spec`, whose `free` knobs were refitted, the first `own`
     /// of them the effect's) against the current model.
-    pub fn judge(
+    pub(super) fn judge(
         &self,
         effect: Effect,
         spec: ModelSpec,

@@ -42,7 +42,7 @@ pub(crate) struct Free {
 
 impl Free {
     /// `knob` searched in `lo..=hi` from `init`.
-    pub fn new(knob: Knob, lo: f64, hi: f64, init: f64) -> Self {
+    pub(super) fn new(knob: Knob, lo: f64, hi: f64, init: f64) -> Self {
         Free {
             knob,
             def: ParamDef::new(knob.label(), knob.unit(), lo, hi),
@@ -51,12 +51,12 @@ impl Free {
     }
 
     /// The same knob and box, starting at `init`.
-    pub fn from(self, init: f64) -> Self {
+    pub(super) fn from(self, init: f64) -> Self {
         Free { init, ..self }
     }
 
     /// Whether `other` frees the same knob in the same box.
-    pub fn same_box(&self, other: &Free) -> bool {
+    pub(super) fn same_box(&self, other: &Free) -> bool {
         self.knob == other.knob && self.def.lo == other.def.lo && self.def.hi == other.def.hi
     }
 }

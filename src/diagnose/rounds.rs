@@ -39,7 +39,7 @@ use crate::model::ModelSpec;
 use crate::recording::RecordingView;
 
 /// Most effects one diagnosis adds.
-pub const ROUNDS: usize = 4;
+pub(super) const ROUNDS: usize = 4;
 /// An effect whose best refit removed less held-out error than this share of what remains
 /// after the round's winner is not tried again: to be kept next round it would have to remove
 /// twenty times as much (a tenth of the excess), and each round refits every candidate on the
@@ -97,7 +97,7 @@ pub(crate) struct Search<'a> {
 impl<'a> Search<'a> {
     /// A search from `start`, whose residual has correlation length `corr_len`; effects other
     /// than `dead_time` may use a dead time up to `td_max`.
-    pub fn new(data: Data<'a>, start: ModelSpec, corr_len: f64, td_max: f64) -> Self {
+    pub(super) fn new(data: Data<'a>, start: ModelSpec, corr_len: f64, td_max: f64) -> Self {
         Search {
             held_noise: data.scorer.n_held() as f64 * data.sigma * data.sigma,
             cur: data.scorer.errors(&start),
@@ -114,12 +114,12 @@ impl<'a> Search<'a> {
     }
 
     /// What noise alone leaves on the held-out blocks, %².
-    pub fn held_noise(&self) -> f64 {
+    pub(super) fn held_noise(&self) -> f64 {
         self.held_noise
     }
 
     /// Runs the rounds; `progress(done, total)` after each.
-    pub fn run(&mut self, progress: &(dyn Fn(usize, usize) + Sync)) {
+    pub(super) fn run(&mut self, progress: &(dyn Fn(usize, usize) + Sync)) {
         self.sensor_lattice();
         let total = Effect::ALL.len() * ROUNDS;
         // Effects worth trying this round: all at first, then those that helped enough before.

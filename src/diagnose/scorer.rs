@@ -21,11 +21,11 @@ use crate::recording::RecordingView;
 /// Simulated time before each fit block when refits simulate the fit blocks alone, s: longer
 /// than the longest dead time a diagnosis fits (3 s). Hysteresis that outlives it (a pin left
 /// off-centre) costs the fit a little, never the judgement, which simulates the whole recording.
-pub const WARM_UP_S: f64 = 10.0;
+pub(super) const WARM_UP_S: f64 = 10.0;
 /// Most samples a refit is scored on (the first part of each fit block): fifteen minutes at
 /// 100 Hz give as many; a longer recording adds to what is judged, not to what each refit
 /// simulates.
-pub const MAX_FIT_SAMPLES: usize = 45_000;
+pub(super) const MAX_FIT_SAMPLES: usize = 45_000;
 
 /// The data a refit scores against: O_P, V_P and the alternating fit / held-out blocks.
 pub(crate) struct Scorer<'a> {
@@ -59,7 +59,7 @@ pub(crate) struct Errors {
 impl<'a> Scorer<'a> {
     /// Blocks of a twentieth of the recording (10-120 s, so about ten held-out blocks), the
     /// first second left out.
-    pub fn new(rec: &RecordingView<'a>) -> Self {
+    pub(crate) fn new(rec: &RecordingView<'a>) -> Self {
         let (n, dt) = (rec.len(), rec.dt);
         let block_len = (((n as f64 * dt / 20.0).clamp(10.0, 120.0) / dt) as usize).max(1);
         let skip = (1.0 / dt) as usize;
@@ -97,29 +97,29 @@ impl<'a> Scorer<'a> {
     }
 
     /// Whether sample `k` is scored as held out.
-    pub fn held(&self, k: usize) -> bool {
+    pub(crate) fn held(&self, k: usize) -> bool {
         self.held_mask[k]
     }
 
     /// The held-out samples.
-    pub fn held_mask(&self) -> &[bool] {
+    pub(crate) fn held_mask(&self) -> &[bool] {
         &self.held_mask
     }
 
     /// Fit error alone, what refits minimise (the fit blocks simulated one by one).
-    pub fn fit_error(&self, spec: &ModelSpec) -> f64 {
+    pub(crate) fn fit_error(&self, spec: &ModelSpec) -> f64 {
         self.fit.sse(spec)
     }
 
     /// The fit error on every other fit block, what the short survey of a refit's starts
     /// minimises.
-    pub fn survey_error(&self, spec: &ModelSpec) -> f64 {
+    pub(crate) fn survey_error(&self, spec: &ModelSpec) -> f64 {
         self.survey.sse(spec)
     }
 
     /// Fit and held-out error of `spec` simulated over the whole recording (infinite when it
     /// cannot run).
-    pub fn errors(&self, spec: &ModelSpec) -> Errors {
+    pub(crate) fn errors(&self, spec: &ModelSpec) -> Errors {
         if spec.validate().is_err() {
             return Errors {
                 fit: f64::INFINITY,
@@ -130,7 +130,7 @@ impl<'a> Scorer<'a> {
     }
 
     /// Fit and held-out error of a simulated V_P of the whole recording.
-    pub fn errors_of(&self, sim: &[f64]) -> Errors {
+    pub(crate) fn errors_of(&self, sim: &[f64]) -> Errors {
         let mut sums = [0.0, 0.0];
         for (k, (&m, y)) in self.vp.iter().zip(sim).enumerate() {
             if self.fit_mask[k] {
@@ -148,7 +148,7 @@ impl<'a> Scorer<'a> {
     /// Per held-out block: the drop in squared error from simulation `ya` to `yb` (each from
     /// [`Scorer::simulate`]), and the sum of squared differences between the two (what sets
     /// the noise of that drop).
-    pub fn paired(&self, ya: &[f64], yb: &[f64]) -> Vec<(f64, f64)> {
+    pub(crate) fn paired(&self, ya: &[f64], yb: &[f64]) -> Vec<(f64, f64)> {
         let mut out = vec![(0.0, 0.0); self.n_blocks.div_ceil(2)];
         for (k, &m) in self.vp.iter().enumerate() {
             if self.held_mask[k] {
@@ -161,7 +161,7 @@ impl<'a> Scorer<'a> {
     }
 
     /// The squared error of a simulated V_P `sim` in each held-out block, %².
-    pub fn held_blocks(&self, sim: &[f64]) -> Vec<f64> {
+    pub(crate) fn held_blocks(&self, sim: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.n_blocks.div_ceil(2)];
         for (k, (&m, y)) in self.vp.iter().zip(sim).enumerate() {
             if self.held_mask[k] {
@@ -173,12 +173,12 @@ impl<'a> Scorer<'a> {
 
     /// The free-run V_P of `spec` over the whole recording, from rest at the first measured
     /// sample (and again at each restart).
-    pub fn simulate(&self, spec: &ModelSpec) -> Vec<f64> {
+    pub(crate) fn simulate(&self, spec: &ModelSpec) -> Vec<f64> {
         cost::simulate(spec, &self.view())
     }
 
     /// The recording this scorer scores.
-    pub fn view(&self) -> RecordingView<'a> {
+    pub(crate) fn view(&self) -> RecordingView<'a> {
         RecordingView {
             t: &[],
             op: self.op,
@@ -189,17 +189,17 @@ impl<'a> Scorer<'a> {
     }
 
     /// Number of samples in the fit blocks (what [`Scorer::errors`] sums as `fit`).
-    pub fn n_fit(&self) -> usize {
+    pub(crate) fn n_fit(&self) -> usize {
         self.fit_mask.iter().filter(|&&f| f).count()
     }
 
     /// Number of held-out samples.
-    pub fn n_held(&self) -> usize {
+    pub(crate) fn n_held(&self) -> usize {
         self.held_mask.iter().filter(|&&h| h).count()
     }
 
     /// Number of samples scored, fitted or held out.
-    pub fn n_scored(&self) -> usize {
+    pub(crate) fn n_scored(&self) -> usize {
         self.n_fit() + self.n_held()
     }
 }

@@ -224,7 +224,7 @@ impl Match {
 
     /// More than chance, something real was missing, a real share of it explained, and the
     /// candidate slips like the valve (see the module documentation).
-    pub fn slips_alike(&self) -> bool {
+    pub(crate) fn slips_alike(&self) -> bool {
         let ratio = |a: f64, b: f64| a.max(b) / a.min(b).max(f64::MIN_POSITIVE);
         let ((nm, sm), (ns, ss)) = (self.measured, self.simulated);
         self.p_value < MAX_P
@@ -256,7 +256,7 @@ pub(crate) struct Candidate {
 impl Candidate {
     /// Slips like the valve on the held-out blocks (or are far too many for a smooth valve),
     /// big enough to matter (0.1 %), and bring the slip histograms closer to the measured ones.
-    pub fn passes(&self) -> bool {
+    pub(crate) fn passes(&self) -> bool {
         let size = [Knob::Breakaway, Knob::Stickband]
             .iter()
             .map(|&k| composed::get(&self.spec, k))
@@ -270,7 +270,7 @@ impl Candidate {
     /// The measure it improves ([`Measure::SlipDistance`]): on the held-out pieces when it
     /// does there, else over the whole recording (a valve that hunts at some openings only
     /// may slip mostly in the fit blocks).
-    pub fn distance(&self) -> Measure {
+    pub(crate) fn distance(&self) -> Measure {
         let (before, after) = (self.held.distance_before, self.held.distance_after);
         if after < before {
             Measure::SlipDistance {
@@ -289,7 +289,7 @@ impl Candidate {
 
     /// Median size of the measured slips, %, with its 90 % interval over resamples of the
     /// scorer's blocks (a block bootstrap).
-    pub fn slip_size(&self, scorer: &Scorer) -> (f64, f64, f64) {
+    pub(crate) fn slip_size(&self, scorer: &Scorer) -> (f64, f64, f64) {
         use rand::{Rng, SeedableRng};
         let mut per_block: Vec<Vec<f64>> = vec![Vec::new(); scorer.n_blocks];
         for s in &self.slips_measured {

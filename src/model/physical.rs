@@ -39,12 +39,12 @@ use serde::{Deserialize, Serialize};
 use super::Travel;
 
 /// Lowest chamber pressure, % of travel: atmosphere, below the spring's closed point.
-pub const PRESSURE_MIN_PCT: f64 = -20.0;
+pub(super) const PRESSURE_MIN_PCT: f64 = -20.0;
 /// Highest chamber pressure, % of travel: the supply, above the spring's open point.
-pub const PRESSURE_MAX_PCT: f64 = 120.0;
+pub(super) const PRESSURE_MAX_PCT: f64 = 120.0;
 /// Karnopp's stick-velocity window, %/s: a stem slower than this sticks if static friction
 /// can hold it (a thousandth of a healthy stroke speed).
-pub const STICK_SPEED_PCT_PER_S: f64 = 0.05;
+pub(super) const STICK_SPEED_PCT_PER_S: f64 = 0.05;
 
 /// Parameters of the physical valve (`[physical]`); every key may be left out for its default,
 /// which is a healthy Bürkert-like valve (`config/models/physical.toml`).

@@ -45,7 +45,7 @@ pub(super) struct Columns<'m> {
 impl<'m> Columns<'m> {
     /// Finds the mapped names (and a `status` column, if any) in the header, or lists those
     /// missing. `timestamps`: the time column is known to hold timestamps.
-    pub fn find(
+    pub(super) fn find(
         header: &[String],
         map: &'m ColumnMap,
         timestamps: bool,
@@ -78,7 +78,7 @@ impl<'m> Columns<'m> {
 
     /// One row. With timestamps, t is seconds from the first timestamp read (as written, no
     /// time zone; a trailing `Z` is UTC).
-    pub fn parse(&mut self, record: &csv::ByteRecord, width: usize) -> Result<Row, Problem> {
+    pub(super) fn parse(&mut self, record: &csv::ByteRecord, width: usize) -> Result<Row, Problem> {
         if record.len() < width {
             return Err(Problem::Short {
                 cells: record.len(),
@@ -164,11 +164,11 @@ impl std::fmt::Display for Problem {
 
 impl Problem {
     /// Whether this problem on the last line means the line was cut off mid-write.
-    pub fn looks_cut(&self, ends_with_newline: bool) -> bool {
+    pub(super) fn looks_cut(&self, ends_with_newline: bool) -> bool {
         matches!(self, Problem::Short { .. }) || !ends_with_newline
     }
 
-    pub fn into_error(self, file: &str, line: u64, width: usize) -> RecordingError {
+    pub(super) fn into_error(self, file: &str, line: u64, width: usize) -> RecordingError {
         let file = file.to_string();
         match self {
             Problem::Short { cells } => RecordingError::ShortRow {

@@ -49,7 +49,7 @@ pub(super) struct Rows {
 }
 
 impl Rows {
-    pub fn push(&mut self, line: u64, row: super::cells::Row) {
+    pub(super) fn push(&mut self, line: u64, row: super::cells::Row) {
         self.line.push(line);
         self.t.push(row.t);
         self.op.push(row.op);
@@ -58,7 +58,7 @@ impl Rows {
     }
 
     /// Removes the last row; returns its line.
-    pub fn pop(&mut self) -> u64 {
+    pub(super) fn pop(&mut self) -> u64 {
         self.t.pop();
         self.op.pop();
         self.vp.pop();
@@ -67,7 +67,7 @@ impl Rows {
     }
 
     /// Appends `other` (a later file) after these rows.
-    pub fn append(&mut self, mut other: Rows) {
+    pub(super) fn append(&mut self, mut other: Rows) {
         let at = self.t.len();
         self.files
             .extend(other.files.drain(..).map(|(k, f)| (k + at, f)));
@@ -90,7 +90,7 @@ impl Rows {
     }
 
     /// Reverses a newest-first file when asked, then checks that time increases strictly.
-    pub fn order(&mut self, file: &str, reverse: bool) -> Result<(), RecordingError> {
+    pub(super) fn order(&mut self, file: &str, reverse: bool) -> Result<(), RecordingError> {
         let decreasing = self.t.windows(2).all(|w| w[1] < w[0]);
         let increasing = self.t.windows(2).all(|w| w[1] > w[0]);
         if reverse {
@@ -119,7 +119,7 @@ impl Rows {
 
     /// The recording: gaps filled or kept as restarts, with the warnings (logged too). The rows
     /// are in strictly increasing time, at least two.
-    pub fn into_recording(self, source: String, mut warnings: Vec<String>) -> Recording {
+    pub(super) fn into_recording(self, source: String, mut warnings: Vec<String>) -> Recording {
         let (period, irregular) = sampling(&self.t);
         warnings.extend(irregular);
         if let Some(first) = self.vp.iter().position(|v| v.is_nan()) {

@@ -35,6 +35,7 @@ struct Columns<'a> {
 }
 
 /// Series over one time axis, written once into a page and drawn by its charts.
+#[derive(Debug)]
 pub struct Dataset<'a> {
     id: &'a str,
     t: &'a [f64],

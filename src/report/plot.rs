@@ -14,6 +14,7 @@ use plotters::prelude::*;
 pub const MAX_POINTS: usize = 4000;
 
 /// One named line of a chart.
+#[derive(Debug)]
 pub struct Series<'a> {
     pub name: &'a str,
     pub y: &'a [f64],
