@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use super::analysis::{DiagnoseWindow, PlotHealth};
 use super::compensation::Compensation;
-use super::config::{ClockKind, Config};
+use super::config::{ClockKind, Config, DiagnosisConfig};
 use super::control::{self, Lane, Loop, LoopEnd};
 use super::diagnosis::{self, DiagnosisMetrics};
 use super::error::DaemonError;
@@ -208,7 +208,7 @@ fn start_health(
     dir: &std::path::Path,
     metrics: Option<&LoopMetrics>,
     sources: &[Source],
-    (diagnose, plot): (Option<DiagnoseWindow>, Option<PlotHealth>),
+    (diagnose, plot): (Option<Diagnose<'_>>, Option<PlotHealth>),
 ) -> Result<(Option<health::Health>, Option<diagnosis::Thread>), DaemonError> {
     let Some(cfg) = &config.health else {
         return Ok((None, None));
@@ -242,8 +242,8 @@ fn start_health(
             plot,
         });
     }
-    let (feed, diagnosis) = match (&config.diagnosis, diagnose) {
-        (Some(d), Some(diagnose)) => {
+    let (feed, diagnosis) = match diagnose {
+        Some((d, diagnose)) => {
             let m = metrics
                 .map(|m| DiagnosisMetrics::register(m.registry()))
                 .transpose()?;
@@ -256,20 +256,26 @@ fn start_health(
             let (feed, handle) = diagnosis::start(d, dir, period_s, valves, diagnose)?;
             (Some(feed), Some(handle))
         }
-        _ => (None, None),
+        None => (None, None),
     };
     let health = health::start(cfg, dir, period_s, watched, feed)?;
     Ok((Some(health), diagnosis))
 }
 
+/// `[diagnosis]` with the function that diagnoses a window.
+type Diagnose<'a> = (&'a DiagnosisConfig, DiagnoseWindow);
+
 /// The diagnosis `[diagnosis]` asks for; refused before anything is opened when the daemon was
 /// handed none.
-fn checked_diagnosis(
-    config: &Config,
+fn checked_diagnosis<'a>(
+    config: &'a Config,
     opts: &RunOptions,
-) -> Result<Option<DiagnoseWindow>, DaemonError> {
+) -> Result<Option<Diagnose<'a>>, DaemonError> {
     match &config.diagnosis {
-        Some(_) => Some(opts.analysis.diagnose.ok_or(DaemonError::NoDiagnosis)).transpose(),
+        Some(d) => Ok(Some((
+            d,
+            opts.analysis.diagnose.ok_or(DaemonError::NoDiagnosis)?,
+        ))),
         None => Ok(None),
     }
 }
