@@ -133,6 +133,15 @@ pub enum Note {
         heldout_sse_before: f64,
         heldout_sse_after: f64,
     },
+    /// An effect real beyond chance but too small to be worth maintenance (its trace) was put
+    /// in the model before the others were judged: it explained more of the held-out error
+    /// than any effect worth maintenance did.
+    BelowWorth {
+        effect: Effect,
+        size: Size,
+        heldout_sse_before: f64,
+        heldout_sse_after: f64,
+    },
 }
 
 /// The conclusion of a diagnosis (rendered as `verdict` in `--json`).

@@ -234,7 +234,7 @@ impl<'a> Search<'a> {
         let effects: Vec<Effect> = worth
             .iter()
             .copied()
-            .filter(|e| !self.findings.iter().any(|f| f.effect == *e))
+            .filter(|e| !self.findings.iter().any(|f| f.effect == *e) && !self.absorbed(*e))
             .collect();
         let jobs = candidates::jobs(
             &effects,
@@ -267,37 +267,64 @@ impl<'a> Search<'a> {
             .collect()
     }
 
-    /// The reading's calibration as a nuisance to put in the model unnamed (once): when its
-    /// candidate explains the recording beyond chance but is too small to name, and removes
-    /// more held-out error than the round's winner would. Every sensor reads a few hundredths
-    /// of a percent off; when the valve's errors are that small too, an effect fitted without
-    /// the offset stands in for it (an asymmetric speed limit makes the model lag one way).
+    /// A trace to put in the model unnamed (each effect once): real beyond chance but too small
+    /// to name. A healthy valve's small imperfections (an open valve a little slower than a
+    /// closed one) are real; judged against a model without them, an effect that is there can
+    /// help less than the imperfection it does not describe, and the search would end there.
+    /// So when no candidate passes, the trace that removes the most held-out error is put in
+    /// the model and the round tried again. The reading's calibration goes in even before a
+    /// winner it beats: every sensor reads a few hundredths of a percent off, and an effect
+    /// fitted without the offset stands in for it (an asymmetric speed limit makes the model
+    /// lag one way); other traces never displace a winner, whose look-alike they may be.
     fn nuisance(&self, best: &[&Trial]) -> Option<Trial> {
-        if self
-            .notes
-            .iter()
-            .any(|n| matches!(n, Note::SensorCalibration { .. }))
-        {
-            return None;
-        }
-        let cal = best
-            .iter()
-            .find(|t| t.effect == Effect::Calibration && !t.material && t.significant)?;
-        let winner_held = self.winner(best).map_or(self.cur.held, |w| w.errors.held);
-        (cal.errors.held < winner_held).then(|| (*cal).clone())
+        let winner = self.winner(best);
+        let winner_held = winner.map_or(self.cur.held, |w| w.errors.held);
+        best.iter()
+            .find(|t| {
+                t.trace()
+                    && !self.absorbed(t.effect)
+                    && t.errors.held < winner_held
+                    && (winner.is_none() || t.effect == Effect::Calibration)
+            })
+            .map(|t| (*t).clone())
     }
 
-    /// Puts the nuisance `t` in the current model, unnamed, with a note.
+    /// Whether `effect` was put in the model as a nuisance.
+    fn absorbed(&self, effect: Effect) -> bool {
+        self.notes.iter().any(|n| match n {
+            Note::SensorCalibration { .. } => effect == Effect::Calibration,
+            Note::BelowWorth { effect: e, .. } => *e == effect,
+            _ => false,
+        })
+    }
+
+    /// Puts the nuisance `t` in the current model, unnamed, with a note (an effect stays a
+    /// trace; the calibration's note gives its figures); it is not tried again, its knobs are
+    /// refitted with the model's own.
     fn absorb(&mut self, t: Trial) {
-        self.notes.push(Note::SensorCalibration {
-            gain: composed::get(&t.spec, Knob::CalGain),
-            offset_pct: composed::get(&t.spec, Knob::CalOffset),
-            heldout_sse_before: self.cur.held,
-            heldout_sse_after: t.errors.held,
-        });
+        let (before, after) = (self.cur.held, t.errors.held);
+        let note = match t.effect {
+            Effect::Calibration => Note::SensorCalibration {
+                gain: composed::get(&t.spec, Knob::CalGain),
+                offset_pct: composed::get(&t.spec, Knob::CalOffset),
+                heldout_sse_before: before,
+                heldout_sse_after: after,
+            },
+            effect => {
+                self.trace(&t);
+                Note::BelowWorth {
+                    effect,
+                    size: t.size,
+                    heldout_sse_before: before,
+                    heldout_sse_after: after,
+                }
+            }
+        };
+        self.notes.push(note);
         tracing::debug!(
-            held_after = t.errors.held,
-            "calibration put in the model unnamed"
+            effect = t.effect.name(),
+            held_after = after,
+            "trace put in the model unnamed"
         );
         self.free(&t.free);
         self.current = t.spec;

@@ -314,6 +314,18 @@ pub fn note(n: &Note) -> String {
              error than any effect ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²), and an effect fitted \
              without it would stand in for it"
         ),
+        Note::BelowWorth {
+            effect,
+            size,
+            heldout_sse_before,
+            heldout_sse_after,
+        } => format!(
+            "{} ({}) is real but below what is worth maintenance; it was put in the model before the effects were \
+             judged, not named: it explained more of the held-out error than any effect worth maintenance \
+             ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²), and one judged without it could stand in for it",
+            effect.name(),
+            size.words()
+        ),
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
             experiment(Effect::Backlash, None)
