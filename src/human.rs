@@ -39,6 +39,7 @@ pub fn size_label(name: &str) -> (&'static str, &'static str) {
     match name {
         "dead_time_s" => ("dead time", " s"),
         "friction_band_pct" => ("friction band", " %"),
+        "crossing_half_open_s" => ("crossing time at half travel", " s"),
         "open_vs_closed" => ("fully open slower than closed by", " times"),
         "crossing_open_s" => ("crossing time fully open", " s"),
         "stroke_speed_pct_per_s" => ("stroke speed at half travel", " %/s"),

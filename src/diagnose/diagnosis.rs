@@ -75,7 +75,7 @@ pub struct Figures {
     pub dead_time_s: f64,
     /// Friction band (lost motion on a reversal), %: the model's band, or its crossing time
     /// converted to the band it means in this recording ([`size::friction_band`]); 0 without
-    /// either.
+    /// either; NaN (`null` in JSON) when the recording shows a crossing time but not its band.
     pub friction_band_pct: f64,
     /// Stroke-speed limit opening and closing at half travel, %/s.
     pub opening_speed_pct_per_s: f64,

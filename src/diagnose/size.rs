@@ -5,7 +5,8 @@
 //! **Sizes.** One number per effect, read from the fitted model: `dead_time_s`,
 //! `friction_band_pct` (a pin-cart II crossing time is converted to the band it means: the
 //! O_P travel over that time after the recording's reversals, at most what the valve strokes
-//! in it), `open_vs_closed` (times slower fully open), `stroke_speed_pct_per_s`,
+//! in it; see [`lost_motion`] for when the recording cannot tell a band and the crossing time
+//! itself is quoted as `crossing_half_open_s`), `open_vs_closed` (times slower fully open), `stroke_speed_pct_per_s`,
 //! `speed_ratio` (the faster over the slower direction; stroke speeds at half travel), `min_speed_pct_per_s`, `slip_pct`,
 //! `deadband_pct`, `stop_pct`, `lattice_pct`, `reading_error_pct`.
 //!
@@ -32,6 +33,9 @@ use crate::model::ModelSpec;
 const PROFILE_SIDE: i32 = 6;
 /// Resamples of the held-out blocks.
 const RESAMPLES: usize = 400;
+/// O_P had stopped after the reversals when it moved no more than this many times as far over
+/// twice the crossing time as over the crossing time.
+const SETTLED: f64 = 1.1;
 
 /// The size of `effect` as fitted in `spec` (its interval not yet computed), for a recording
 /// with O_P `op` and the `facts` measured on it.
@@ -47,7 +51,7 @@ pub(crate) fn size(
     let g = |k| composed::get(spec, k);
     let worth = match effect {
         Effect::DeadTime => (value - super::refit::NOMINAL_DEAD_TIME_S) / w.dead_time_excess_s,
-        Effect::Backlash => value / w.friction_band_pct,
+        Effect::Backlash => lost_motion(spec, facts, op).band_bound_pct() / w.friction_band_pct,
         Effect::StateDependentDelay if g(Knob::Slowdown) > 0.0 => (value - 1.0) / w.open_slowdown,
         Effect::StateDependentDelay => (100.0 * g(Knob::CrossingSlope)).abs() / w.crossing_growth_s,
         Effect::SlewRate => w.stroke_speed_pct_per_s / value.max(1e-9),
@@ -79,7 +83,10 @@ fn measure(
     let g = |k| composed::get(spec, k);
     match effect {
         Effect::DeadTime => ("dead_time_s", "s", g(Knob::DeadTime)),
-        Effect::Backlash => ("friction_band_pct", "%", friction_band(spec, facts, op)),
+        Effect::Backlash => match lost_motion(spec, facts, op) {
+            LostMotion::Band(pct) => ("friction_band_pct", "%", pct),
+            LostMotion::Delay { crossing_s, .. } => ("crossing_half_open_s", "s", crossing_s),
+        },
         Effect::StateDependentDelay if g(Knob::Slowdown) > 0.0 => {
             ("open_vs_closed", "times", 1.0 + g(Knob::Slowdown))
         }
@@ -128,30 +135,79 @@ fn measure(
     }
 }
 
-/// The friction band of `spec`, %: its friction-band knob, or its crossing time (at half
-/// travel) converted to the band it means where it was measured: the median travel of O_P over
-/// that time after the recording's reversals ([`Facts::turns`]), at most what the valve
-/// strokes in that time. A crossing time of half a second after slow reversals of a
-/// controller is a small band; after a step, as long as the stroke it delays.
-pub(crate) fn friction_band(spec: &ModelSpec, facts: &Facts, op: &[f64]) -> f64 {
+/// The lost motion of `spec` on a reversal as the recording shows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum LostMotion {
+    /// A friction band, %.
+    Band(f64),
+    /// A crossing time (at half travel, s) whose band the recording cannot tell: it would be
+    /// wider than O_P moved after the reversals, yet the valve followed them. The band is at
+    /// least `band_at_least_pct`, what O_P moved.
+    Delay {
+        crossing_s: f64,
+        band_at_least_pct: f64,
+    },
+}
+
+impl LostMotion {
+    /// The band, or the least it can be.
+    pub(crate) fn band_bound_pct(self) -> f64 {
+        match self {
+            LostMotion::Band(pct) => pct,
+            LostMotion::Delay {
+                band_at_least_pct, ..
+            } => band_at_least_pct,
+        }
+    }
+}
+
+/// The lost motion of `spec`: its friction-band knob, or its crossing time (at half travel)
+/// converted to the band it means where it was measured: the median travel of O_P over that
+/// time after the recording's reversals ([`Facts::turns`]), at most what the valve strokes in
+/// that time. A crossing time of half a second after slow reversals of a controller is a
+/// small band; after a step larger than the band, the stroke the positioner makes in it at
+/// full speed. When that stroke is more than O_P moved after the reversals and O_P had stopped
+/// before the crossing ended (steps smaller than the band it would mean, which the valve still
+/// followed), the O_P travel is the size of the steps, not of the valve: the recording shows
+/// the crossing time alone, and that is what is quoted.
+pub(crate) fn lost_motion(spec: &ModelSpec, facts: &Facts, op: &[f64]) -> LostMotion {
     let g = |k| composed::get(spec, k);
     if g(Knob::FrictionBand) > 0.0 {
-        return g(Knob::FrictionBand);
+        return LostMotion::Band(g(Knob::FrictionBand));
     }
     let slow = composed::half_open(spec);
     let crossing = g(Knob::Crossing) * slow;
     if crossing <= 0.0 {
-        return 0.0;
+        return LostMotion::Band(0.0);
     }
     let stroke = crossing * g(Knob::Slew) / slow;
     let lag = (crossing / facts.dt).round() as usize;
-    let h = ((0.05 / facts.dt).round() as usize).max(1);
-    let mean = |a: usize, b: usize| op[a..b].iter().sum::<f64>() / (b - a).max(1) as f64;
-    let travel: Vec<f64> = (facts.turns.iter())
-        .filter(|&&k| k >= h && k + lag + h < op.len())
-        .map(|&k| (mean(k + lag - h, k + lag + h) - mean(k - h, k + h)).abs())
-        .collect();
-    stats::median(&travel).unwrap_or(0.0).min(stroke)
+    let travel = |lag: usize| {
+        let h = ((0.05 / facts.dt).round() as usize).max(1);
+        let mean = |a: usize, b: usize| op[a..b].iter().sum::<f64>() / (b - a).max(1) as f64;
+        let moved: Vec<f64> = (facts.turns.iter())
+            .filter(|&&k| k >= h && k + lag + h < op.len())
+            .map(|&k| (mean(k + lag - h, k + lag + h) - mean(k - h, k + h)).abs())
+            .collect();
+        stats::median(&moved).unwrap_or(0.0)
+    };
+    let moved = travel(lag);
+    if stroke > moved && travel(2 * lag) <= SETTLED * moved {
+        return LostMotion::Delay {
+            crossing_s: crossing,
+            band_at_least_pct: moved,
+        };
+    }
+    LostMotion::Band(moved.min(stroke))
+}
+
+/// The friction band of `spec` in this recording, %, for the final model's figures; NaN when
+/// the recording shows a crossing time whose band it cannot tell ([`lost_motion`]).
+pub(crate) fn friction_band(spec: &ModelSpec, facts: &Facts, op: &[f64]) -> f64 {
+    match lost_motion(spec, facts, op) {
+        LostMotion::Band(pct) => pct,
+        LostMotion::Delay { .. } => f64::NAN,
+    }
 }
 
 /// The knob whose profile gives the interval of `effect`'s size in `spec`, and whether its
@@ -210,7 +266,14 @@ pub(crate) fn interval(
             let mut s = spec.clone();
             composed::set(&mut s, knob, x);
             let sim = scorer.simulate(&s);
-            let (_, _, value) = measure(effect, &s, facts, op);
+            let value = match (effect, size.name) {
+                // One quantity along the whole profile, whichever way a grid point reads.
+                (Effect::Backlash, "crossing_half_open_s") => {
+                    composed::get(&s, Knob::Crossing) * composed::half_open(&s)
+                }
+                (Effect::Backlash, _) => lost_motion(&s, facts, op).band_bound_pct(),
+                _ => measure(effect, &s, facts, op).2,
+            };
             (value, scorer.held_blocks(&sim))
         })
         .collect();
@@ -314,5 +377,63 @@ mod tests {
             (&facts, &op),
         );
         assert!(s.high > 0.9, "{s:?}");
+    }
+
+    #[test]
+    fn a_crossing_time_is_a_band_only_where_the_recording_can_tell_it() {
+        // Steps of 1-6 % held 4 s, on a valve stroking at 20 %/s.
+        let dt = 0.01;
+        let n = 20_000;
+        let steps: Vec<f64> = (0..n)
+            .map(|k| 50.0 + [0.0, 4.0, 1.0, 6.0, 2.0][(k / 400) % 5])
+            .collect();
+        let read = |op: &[f64]| {
+            let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+            let vp = op.to_vec();
+            let rec = RecordingView {
+                t: &t,
+                op,
+                vp: &vp,
+                restarts: &[],
+                dt,
+            };
+            super::super::facts::measure(&rec, 0.05, 0.0)
+        };
+        let facts = read(&steps);
+        let mut spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        composed::set(&mut spec, Knob::Slew, 20.0);
+        // 0.1 s: the positioner strokes 2 % in it, less than the steps: a 2 % band.
+        composed::set(&mut spec, Knob::Crossing, 0.1);
+        let band = lost_motion(&spec, &facts, &steps);
+        assert!(
+            matches!(band, LostMotion::Band(b) if (b - 2.0).abs() < 0.05),
+            "{band:?}"
+        );
+        // 1 s: a 20 % band the valve would not have followed 1-6 % steps through; O_P had
+        // stopped long before the crossing ended: the crossing time is what is told.
+        composed::set(&mut spec, Knob::Crossing, 1.0);
+        let told = lost_motion(&spec, &facts, &steps);
+        assert!(
+            matches!(told, LostMotion::Delay { crossing_s, band_at_least_pct }
+                if (crossing_s - 1.0).abs() < 1e-9 && band_at_least_pct < 6.0),
+            "{told:?}"
+        );
+        let s = size(Effect::Backlash, &spec, &facts, &steps, &Tuning::default());
+        assert_eq!(
+            (s.name, s.unit, s.value),
+            ("crossing_half_open_s", "s", 1.0)
+        );
+        assert!(friction_band(&spec, &facts, &steps).is_nan());
+        // The same crossing on a triangle of O_P at 1 %/s turning every 5 s: O_P is still
+        // moving when the crossing ends, and what it moved is the band.
+        let ramps: Vec<f64> = (0..n)
+            .map(|k| 50.0 + 2.5 - ((k as f64 * dt) % 10.0 - 5.0).abs())
+            .collect();
+        let facts = read(&ramps);
+        let band = lost_motion(&spec, &facts, &ramps);
+        assert!(
+            matches!(band, LostMotion::Band(b) if (b - 1.0).abs() < 0.1),
+            "{band:?}"
+        );
     }
 }

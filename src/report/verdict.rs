@@ -45,10 +45,14 @@ pub fn trace(t: &Trace) -> String {
 
 /// The figures of the final model in words.
 pub fn figures(f: &Figures) -> String {
+    let band = if f.friction_band_pct.is_finite() {
+        format!("{} %", num(f.friction_band_pct))
+    } else {
+        "not told by these steps (see the crossing time)".into()
+    };
     format!(
-        "dead time {} s, friction band {} %, stroke speed at half travel {} %/s opening and {} %/s closing",
+        "dead time {} s, friction band {band}, stroke speed at half travel {} %/s opening and {} %/s closing",
         num(f.dead_time_s),
-        num(f.friction_band_pct),
         num(f.opening_speed_pct_per_s),
         num(f.closing_speed_pct_per_s)
     )
