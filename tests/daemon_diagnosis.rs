@@ -19,7 +19,11 @@ fn run(dir: &Path, secs: &str) -> String {
     ))
     .unwrap();
     let config = dir.join("c.toml");
-    let text = format!("{base}\n[diagnosis]\nwindow_s = 300.0\nevery_s = 600.0\n");
+    let text = base.replace(
+        "\n[diagnosis]\n",
+        "\n[diagnosis]\nwindow_s = 300.0\nevery_s = 600.0\n",
+    );
+    assert_ne!(text, base, "config/friction-drift.toml has no [diagnosis] table");
     std::fs::write(&config, text).unwrap();
     let out = Command::new(BIN)
         .args(["run", "--config", config.to_str().unwrap()])
@@ -125,7 +129,8 @@ fn a_daemon_handed_no_diagnosis_refuses_the_diagnosis_table_before_it_starts() {
     ))
     .unwrap();
     let path = dir.path().join("c.toml");
-    std::fs::write(&path, format!("{base}\n[diagnosis]\n")).unwrap();
+    assert!(base.contains("\n[diagnosis]\n"));
+    std::fs::write(&path, base).unwrap();
     let config = Config::load(Some(&path)).unwrap();
     let logs = dir.path().join("logs");
     let started = daemon::start(

@@ -4,8 +4,9 @@
 //!   over the baseline (the first window), with a warning naming the dead time and the alarm in
 //!   `health-worn.csv`;
 //! - `config/friction-drift.toml`, a valve whose friction band widens by 3 % per hour beside a
-//!   healthy one, raises the alarm on the reversal delay within the window after it has grown
-//!   past the 0.3 s limit, and the healthy valve raises none;
+//!   healthy one, over 3 hours: raises the alarm on the reversal delay within the window after
+//!   it has grown past the 0.3 s limit, and its live diagnosis alarms with the effect's name
+//!   (`backlash`) before the 3-hour mark, as README quotes it; the healthy valve raises neither;
 //! - `config/two-valves.toml`, two healthy valves, runs 3 simulated hours (180 windows each)
 //!   without an alarm; README shows the 24-hour run.
 
@@ -130,12 +131,12 @@ fn healthy_valves_raise_no_alarm_over_hours() {
 #[test]
 fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run("friction-drift.toml", "3600", dir.path());
+    let out = run("friction-drift.toml", "10800", dir.path());
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stdout}{stderr}");
     let rows = health_rows(&dir.path().join("health-packing.csv"));
-    assert_eq!(rows.len(), 51, "{rows:?}");
+    assert_eq!(rows.len(), 171, "{rows:?}");
     let first = rows.iter().find(|r| r.1).expect("an alarm");
     // The band is 3 % per hour wider: at mid travel eq. 7's crossing (0.5 s for B_L = 1 %)
     // grows by 1.5 s per hour, so the reversal delay passes the first window's (which saw
@@ -149,7 +150,32 @@ fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
     assert!(!first.2.contains("dead time"), "{first:?}");
     assert!(rows.last().unwrap().1, "{rows:?}");
     let healthy = health_rows(&dir.path().join("health-healthy.csv"));
-    assert_eq!(healthy.len(), 51);
+    assert_eq!(healthy.len(), 171);
     assert!(healthy.iter().all(|r| !r.1), "{healthy:?}");
     assert!(stderr.contains("health alarm: reversal delay"), "{stderr}");
+    // The live diagnosis: the packing valve's first alarm names its lost motion before the
+    // 3-hour mark; the healthy valve's diagnoses raise none. README quotes the summary's lines.
+    let (packing, healthy) = stdout.split_once("valve healthy:").unwrap();
+    let alarms: Vec<&str> = (packing.lines())
+        .filter_map(|l| l.trim().strip_prefix("alarm: "))
+        .collect();
+    let first = alarms.first().expect("a diagnosis alarm");
+    assert!(first.starts_with("backlash: "), "{packing}");
+    let since = first.rsplit_once("since ").unwrap().1;
+    let (h, m) = since.trim_end_matches(" h").split_once(':').unwrap();
+    assert!(h.parse::<u32>().unwrap() * 60 + m.parse::<u32>().unwrap() < 180, "{first}");
+    let counts = |text: &str| {
+        let line = text.lines().find(|l| l.trim().starts_with("diagnosis: ")).unwrap();
+        line.trim().split(", in ").next().unwrap().to_string()
+    };
+    assert!(counts(healthy).ends_with(", 0 alarms"), "{healthy}");
+    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
+        .unwrap()
+        .replace("\n", " ");
+    for quoted in alarms.iter().copied().chain([
+        counts(packing).as_str(),
+        counts(healthy).as_str(),
+    ]) {
+        assert!(readme.contains(&format!("`{quoted}`")), "README does not quote `{quoted}`");
+    }
 }
