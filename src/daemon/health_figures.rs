@@ -21,6 +21,55 @@ const DELAY_OPTIONS: StepOptions = StepOptions {
     min_hold_s: 1.0,
 };
 
+/// One figure: its name, its unit, whether its limit is the highest value allowed (not the
+/// lowest), and where it and its limit are.
+struct Figure {
+    name: &'static str,
+    unit: &'static str,
+    highest: bool,
+    get: fn(&Figures) -> Option<f64>,
+    limit: fn(&HealthLimits) -> Option<f64>,
+}
+
+/// The figures, in the order of the health CSV.
+const FIGURES: [Figure; 5] = [
+    Figure {
+        name: "dead time",
+        unit: "s",
+        highest: true,
+        get: |f| f.dead_time_s,
+        limit: |l| l.dead_time_s,
+    },
+    Figure {
+        name: "reversal delay",
+        unit: "s",
+        highest: true,
+        get: |f| f.reversal_delay_s,
+        limit: |l| l.reversal_delay_s,
+    },
+    Figure {
+        name: "opening speed",
+        unit: "%/s",
+        highest: false,
+        get: |f| Some(f.opening_speed_pct_per_s),
+        limit: |l| Some(l.opening_speed_pct_per_s),
+    },
+    Figure {
+        name: "closing speed",
+        unit: "%/s",
+        highest: false,
+        get: |f| Some(f.closing_speed_pct_per_s),
+        limit: |l| Some(l.closing_speed_pct_per_s),
+    },
+    Figure {
+        name: "tracking error",
+        unit: "%",
+        highest: true,
+        get: |f| Some(f.tracking_rms_pct),
+        limit: |l| Some(l.tracking_rms_pct),
+    },
+];
+
 /// What one window shows.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Figures {
@@ -87,66 +136,29 @@ impl Figures {
     }
 
     /// Each figure beside its baseline and limit (each None while there is none), in the order
-    /// dead time, reversal delay, opening speed, closing speed, tracking error.
+    /// of [`FIGURES`].
     pub fn judged(&self, base: Option<&Figures>, lim: Option<&HealthLimits>) -> [Judged; 5] {
-        let judge = |name, unit, highest, now, base: Option<f64>, limit: Option<f64>| {
+        FIGURES.map(|fig| {
+            let (now, base, limit) = (
+                (fig.get)(self),
+                base.and_then(fig.get),
+                lim.and_then(fig.limit),
+            );
             let past = match (now, base, limit) {
-                (Some(now), Some(_), Some(limit)) if highest => now > limit,
+                (Some(now), Some(_), Some(limit)) if fig.highest => now > limit,
                 (Some(now), Some(base), Some(limit)) => base > 0.0 && now < limit,
                 _ => false,
             };
             Judged {
-                name,
-                unit,
+                name: fig.name,
+                unit: fig.unit,
                 now,
                 base,
                 limit,
-                highest,
+                highest: fig.highest,
                 past,
             }
-        };
-        [
-            judge(
-                "dead time",
-                "s",
-                true,
-                self.dead_time_s,
-                base.and_then(|b| b.dead_time_s),
-                lim.and_then(|l| l.dead_time_s),
-            ),
-            judge(
-                "reversal delay",
-                "s",
-                true,
-                self.reversal_delay_s,
-                base.and_then(|b| b.reversal_delay_s),
-                lim.and_then(|l| l.reversal_delay_s),
-            ),
-            judge(
-                "opening speed",
-                "%/s",
-                false,
-                Some(self.opening_speed_pct_per_s),
-                base.map(|b| b.opening_speed_pct_per_s),
-                lim.map(|l| l.opening_speed_pct_per_s),
-            ),
-            judge(
-                "closing speed",
-                "%/s",
-                false,
-                Some(self.closing_speed_pct_per_s),
-                base.map(|b| b.closing_speed_pct_per_s),
-                lim.map(|l| l.closing_speed_pct_per_s),
-            ),
-            judge(
-                "tracking error",
-                "%",
-                true,
-                Some(self.tracking_rms_pct),
-                base.map(|b| b.tracking_rms_pct),
-                lim.map(|l| l.tracking_rms_pct),
-            ),
-        ]
+        })
     }
 
     /// What drifted past its limit against `base`, one phrase each (empty: healthy).
