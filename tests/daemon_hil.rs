@@ -496,11 +496,15 @@ fn http_get(addr: &str, path: &str) -> String {
     body
 }
 
-/// Status line and body of an HTTP GET.
+/// Status line and body of an HTTP GET (read to the end: the request asks the server to close).
 fn http(addr: &str, path: &str) -> (String, String) {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\n\r\n").unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
     let mut reply = String::new();
     s.read_to_string(&mut reply).unwrap();
     let (head, body) = reply.split_once("\r\n\r\n").unwrap_or((&reply, ""));
@@ -543,7 +547,11 @@ fn metrics_endpoint_answers_get_metrics() {
         .and_then(|v| v.parse().ok())
         .unwrap();
     assert!(cycles > 0, "{body}");
-    assert!(http(&addr, "/").0.starts_with("HTTP/1.1 404"));
+    // The live page beside the metrics; other paths are not found.
+    let (status, page) = http(&addr, "/");
+    assert!(status.starts_with("HTTP/1.1 200"), "{status}");
+    assert!(page.contains("valve-bridge: live"), "{page}");
+    assert!(http(&addr, "/nothing").0.starts_with("HTTP/1.1 404"));
     let out = daemon.stop();
     assert!(
         out.stdout.contains("stopped: stop requested"),

@@ -6,8 +6,9 @@
 //!   once connections are gone, and the summary and the metrics report the outage.
 //! - With every slot of the connection limit held by idle sockets, and more arriving, a process
 //!   controller connects and is answered every time (the longest idle makes room, named in the
-//!   log; its watchdog never trips); sim-device the same. Sockets that never send a request are
-//!   closed after `idle_timeout_s` (at most 5 s).
+//!   log; its watchdog never trips); the live page's browser on its kept-alive connection the
+//!   same; sim-device the same. Sockets that never send a request are closed after
+//!   `idle_timeout_s` (at most 5 s).
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
@@ -79,11 +80,15 @@ fn crowd(addr: &str, n: usize) -> Vec<TcpStream> {
         .collect()
 }
 
-/// The body of `GET /metrics`.
+/// The answer to `GET /metrics` (read to the end: the request asks the server to close).
 fn scrape(addr: &str) -> String {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    write!(s, "GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    write!(
+        s,
+        "GET /metrics HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
     let mut reply = String::new();
     s.read_to_string(&mut reply).unwrap();
     reply
@@ -242,6 +247,71 @@ fn idle_connections_cannot_lock_the_controller_out() {
     assert!(
         stderr.contains("at the limit of 8 connections: closed the one from 127.0.0.1:")
             && stderr.contains("(no request, idle for "),
+        "{stderr}"
+    );
+}
+
+/// Asks for `path` on the kept-alive connection `s`: true when the whole answer came, 200.
+fn get_kept(s: &mut TcpStream, path: &str) -> bool {
+    let mut head = Vec::new();
+    let mut byte = [0u8; 1];
+    if write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").is_err() {
+        return false;
+    }
+    while !head.ends_with(b"\r\n\r\n") {
+        if !matches!(s.read(&mut byte), Ok(1)) {
+            return false;
+        }
+        head.push(byte[0]);
+    }
+    let head = String::from_utf8_lossy(&head);
+    let len = (head.lines())
+        .find_map(|l| l.strip_prefix("content-length: "))
+        .and_then(|v| v.trim().parse::<usize>().ok());
+    let mut body = vec![0u8; len.unwrap_or(0)];
+    head.starts_with("HTTP/1.1 200 OK") && len.is_some() && s.read_exact(&mut body).is_ok()
+}
+
+#[test]
+fn idle_connections_cannot_lock_the_live_page_out() {
+    let _turn = real_time_turn();
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = daemon("[metrics]\nlisten = \"127.0.0.1:0\"\n", dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut ends, rest) = endpoints(&mut child, 1);
+    let page = ends.remove(0);
+    // Eight idle sockets take every slot (the default limit); the page's browser polls on one
+    // kept-alive connection while 20 more pile up.
+    let held = crowd(&page, 8);
+    std::thread::sleep(Duration::from_millis(100));
+    let mut browser = TcpStream::connect(&page).unwrap();
+    browser
+        .set_read_timeout(Some(Duration::from_secs(2)))
+        .unwrap();
+    let mut idle = Vec::new();
+    let mut answered = 0;
+    for _ in 0..20 {
+        idle.extend(crowd(&page, 1));
+        answered += usize::from(get_kept(&mut browser, "/api/live"));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(answered, 20);
+    let text = scrape(&page);
+    let evicted: u64 = text
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("valve_bridge_server_connections_evicted_total{server=\"metrics\"} ")
+        })
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(evicted >= 20, "{text}");
+    drop((held, idle, browser));
+    let (_, stderr) = stop(child, rest);
+    assert!(
+        stderr.contains("metrics endpoint: at the limit of 8 connections: closed the one from"),
         "{stderr}"
     );
 }

@@ -123,11 +123,18 @@ impl DiagnosisMetrics {
     }
 }
 
-/// One valve to diagnose: its name (label and file names) and its gauges.
+/// One valve to diagnose: its name (label and file names), its gauges and the count of its
+/// diagnoses the live page reads.
 #[derive(Debug)]
 pub struct Watched {
     pub name: String,
     pub metrics: Option<DiagnosisMetrics>,
+    pub count: Option<Arc<AtomicU64>>,
+}
+
+/// The history of the valve named `valve` in the log directory `dir`.
+pub fn history_file(dir: &Path, valve: &str) -> PathBuf {
+    dir.join(format!("diagnosis-{valve}.jsonl"))
 }
 
 /// A window to diagnose.
@@ -224,7 +231,7 @@ pub fn start(
     let mut histories = Vec::with_capacity(valves.len());
     for w in valves {
         let done = Arc::new(AtomicU64::new(f64::NAN.to_bits()));
-        let path = dir.join(format!("diagnosis-{}.jsonl", w.name));
+        let path = history_file(dir, &w.name);
         let file = File::create(&path).map_err(|source| DaemonError::LogFile {
             path: path.clone(),
             source,
@@ -244,6 +251,7 @@ pub fn start(
             model: None,
             last: None,
             metrics: w.metrics,
+            count: w.count,
             diagnose,
             done_t_s: done,
             report: DiagnosisReport {
@@ -281,6 +289,7 @@ struct History {
     model: Option<ModelSpec>,
     last: Option<Record>,
     metrics: Option<DiagnosisMetrics>,
+    count: Option<Arc<AtomicU64>>,
     diagnose: DiagnoseWindow,
     done_t_s: Arc<AtomicU64>,
     report: DiagnosisReport,
@@ -418,6 +427,9 @@ impl History {
         }
         if record.error.is_none() {
             self.done_t_s.store(record.t_s.to_bits(), Ordering::Relaxed);
+        }
+        if let Some(c) = &self.count {
+            c.fetch_add(1, Ordering::Relaxed);
         }
         self.last = Some(record);
         Ok(())

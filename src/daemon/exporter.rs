@@ -37,10 +37,8 @@
 //! ([`ValveMetrics`]), so the loop updates its own with atomic operations only (no lookup by label, no allocation); the server
 //! figures are copied from their [`Health`] when the endpoint is scraped.
 //!
-//! [`serve`] answers HTTP on the daemon's network thread, as a [`crate::net`] server (accept
-//! errors retried, connections capped): one request per connection (`Connection: close`),
-//! `GET /metrics` gives the text format, other paths 404, other methods 405. Encoding happens
-//! there, never on the loop thread.
+//! Not here: the HTTP server ([`super::http`]), which encodes them ([`LoopMetrics::text`]) for
+//! `GET /metrics` on the network thread, never on the loop thread.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -49,23 +47,17 @@ use prometheus::{
     Gauge, GaugeVec, Histogram, HistogramOpts, IntCounter, IntCounterVec, IntGaugeVec, Opts,
     Registry,
 };
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
 
 use super::health_figures::{Figures, HealthLimits};
 use crate::compensate::Window;
 use crate::modbus::client::LinkStats;
-use crate::net::{self, Health, Limits};
+use crate::net::{self, Health};
 use crate::recording::log_format::{Sample, Status};
 
 /// Upper bounds of the timing-error buckets, s.
 const TIMING_BUCKETS_S: [f64; 12] = [
     10e-6, 20e-6, 50e-6, 100e-6, 200e-6, 500e-6, 1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3,
 ];
-/// Longest request head read, bytes.
-const MAX_HEAD: usize = 8 * 1024;
-/// Time a client gets to send its request head (its connection is closed after it).
-pub const HEAD_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The per-server metrics, by the `server` label.
 #[derive(Debug, Clone)]
@@ -365,6 +357,11 @@ impl LoopMetrics {
         &self.registry
     }
 
+    /// Every metric in the Prometheus text format.
+    pub fn text(&self) -> Result<String, prometheus::Error> {
+        prometheus::TextEncoder::new().encode_to_string(&self.registry.gather())
+    }
+
     /// The handles of the `i`-th valve of the config (None past the last).
     pub fn valve(&self, i: usize) -> Option<ValveMetrics> {
         self.valves.get(i).cloned()
@@ -502,102 +499,6 @@ impl ServerMetrics {
     }
 }
 
-/// Answers `GET /metrics` on `listener` within `limits`, forever (drop the task to stop);
-/// `servers` are the daemon's servers whose figures go into the metrics.
-pub async fn serve(
-    listener: TcpListener,
-    metrics: LoopMetrics,
-    servers: Vec<(&'static str, Arc<Health>)>,
-    limits: Limits,
-    health: Arc<Health>,
-) {
-    let servers = Arc::new(servers);
-    net::serve(
-        "metrics endpoint",
-        listener,
-        limits,
-        health,
-        move |stream, _, activity| {
-            let (metrics, servers) = (metrics.clone(), Arc::clone(&servers));
-            async move {
-                metrics.observe_servers(&servers);
-                answer(stream, metrics.registry(), &activity).await
-            }
-        },
-    )
-    .await
-}
-
-/// Reads one request head (telling `activity`) and writes the response.
-async fn answer(
-    mut stream: TcpStream,
-    registry: &Registry,
-    activity: &net::Activity,
-) -> std::io::Result<()> {
-    let mut head = Vec::with_capacity(512);
-    let mut chunk = [0u8; 1024];
-    let read_head = async {
-        while !head.windows(4).any(|w| w == b"\r\n\r\n") && head.len() < MAX_HEAD {
-            let n = stream.read(&mut chunk).await?;
-            if n == 0 {
-                break;
-            }
-            head.extend_from_slice(&chunk[..n]);
-        }
-        Ok::<_, std::io::Error>(())
-    };
-    tokio::time::timeout(HEAD_TIMEOUT, read_head)
-        .await
-        .map_err(|_| std::io::Error::new(std::io::ErrorKind::TimedOut, "no request head"))??;
-    activity.request();
-    let (status, content_type, body) = respond(&head, registry);
-    let reply = format!(
-        "HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\n\
-         Connection: close\r\n\r\n",
-        body.len()
-    );
-    stream.write_all(reply.as_bytes()).await?;
-    stream.write_all(body.as_bytes()).await?;
-    stream.shutdown().await
-}
-
-/// Status line, content type and body for a request head.
-fn respond(head: &[u8], registry: &Registry) -> (&'static str, &'static str, String) {
-    const TEXT: &str = "text/plain; charset=utf-8";
-    let line = head
-        .split(|&b| b == b'\r' || b == b'\n')
-        .next()
-        .unwrap_or(&[]);
-    let line = String::from_utf8_lossy(line);
-    let mut parts = line.split_whitespace();
-    let (method, target) = (parts.next(), parts.next());
-    let path = target.map(|t| t.split('?').next().unwrap_or(t));
-    match (method, path) {
-        (Some("GET"), Some("/metrics")) => {
-            let encoder = prometheus::TextEncoder::new();
-            match encoder.encode_to_string(&registry.gather()) {
-                Ok(text) => ("200 OK", prometheus::TEXT_FORMAT, text),
-                Err(e) => (
-                    "500 Internal Server Error",
-                    TEXT,
-                    format!("cannot encode the metrics: {e}\n"),
-                ),
-            }
-        }
-        (Some("GET"), Some(_)) => (
-            "404 Not Found",
-            TEXT,
-            "the metrics are at /metrics\n".into(),
-        ),
-        (Some(_), Some(_)) => (
-            "405 Method Not Allowed",
-            TEXT,
-            "only GET /metrics is served\n".into(),
-        ),
-        _ => ("400 Bad Request", TEXT, "not an HTTP request\n".into()),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -638,9 +539,7 @@ mod tests {
         health.idle_closed();
         m.observe_servers(&[("modbus-server", Arc::clone(&health))]);
         m.observe_servers(&[("modbus-server", health)]);
-        let (status, ctype, text) =
-            respond(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n", m.registry());
-        assert_eq!((status, ctype), ("200 OK", prometheus::TEXT_FORMAT));
+        let text = m.text().unwrap();
         for line in [
             "valve_bridge_cycles_total{valve=\"a\"} 2",
             "valve_bridge_cycles_total{valve=\"b\"} 1",
@@ -681,7 +580,7 @@ mod tests {
             tracking_rms_pct: 5.0,
         };
         m.health(0).unwrap().publish(&f, None, false);
-        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        let text = m.text().unwrap();
         assert!(
             text.contains("valve_bridge_health_tracking_error_limit_ratio{valve=\"a\"} NaN"),
             "no baseline, no limit: {text}"
@@ -689,7 +588,7 @@ mod tests {
         // Against a baseline of itself: the limits of the default [health].
         let limits = Figures::limits(&f, &crate::daemon::config::HealthConfig::default());
         m.health(0).unwrap().publish(&f, Some(&limits), true);
-        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        let text = m.text().unwrap();
         for line in [
             "valve_bridge_health_dead_time_limit_seconds{valve=\"a\"} 0.65",
             "valve_bridge_health_reversal_delay_limit_seconds{valve=\"a\"} NaN",
@@ -712,7 +611,7 @@ mod tests {
     #[test]
     fn compensation_gauges_appear_for_compensated_valves_only() {
         let m = LoopMetrics::new(&["a", "b"], false).unwrap();
-        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        let text = m.text().unwrap();
         assert!(
             !text.contains("valve_bridge_compensation_active{"),
             "{text}"
@@ -727,7 +626,7 @@ mod tests {
             ..Window::default()
         };
         b.publish(Some(&w), false);
-        let (_, _, text) = respond(b"GET /metrics HTTP/1.1\r\n\r\n", m.registry());
+        let text = m.text().unwrap();
         for line in [
             "valve_bridge_compensation_active{valve=\"b\"} 0",
             "valve_bridge_compensation_tracking_error_ratio{case=\"with\",valve=\"b\"} 0.005",
@@ -736,18 +635,5 @@ mod tests {
             assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
         }
         assert!(!text.contains("valve_bridge_compensation_active{valve=\"a\"}"));
-    }
-
-    #[test]
-    fn other_requests_are_refused() {
-        let m = LoopMetrics::new(&["valve"], true).unwrap();
-        let r = m.registry();
-        assert_eq!(respond(b"GET /metrics?x=1 HTTP/1.0\r\n\r\n", r).0, "200 OK");
-        assert_eq!(respond(b"GET / HTTP/1.1\r\n\r\n", r).0, "404 Not Found");
-        assert_eq!(
-            respond(b"POST /metrics HTTP/1.1\r\n\r\n", r).0,
-            "405 Method Not Allowed"
-        );
-        assert_eq!(respond(b"\x16\x03\x01", r).0, "400 Bad Request");
     }
 }

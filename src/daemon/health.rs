@@ -18,7 +18,8 @@
 //! plots each figure against its baseline and limit, drawn from the CSV by
 //! the [`PlotHealth`] the daemon was handed; an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
-//! bit [`HEALTH_ALARM_BIT`] of its status word. With `[diagnosis]`, the thread also feeds the
+//! bit [`HEALTH_ALARM_BIT`] of its status word; each window is also on the live page
+//! ([`super::page`]). With `[diagnosis]`, the thread also feeds the
 //! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
 
 use std::collections::VecDeque;
@@ -33,7 +34,8 @@ use super::config::HealthConfig;
 use super::diagnosis::Feed;
 use super::error::DaemonError;
 use super::exporter::HealthMetrics;
-pub use super::health_figures::{Figures, HealthLimits};
+pub use super::health_figures::{Figures, HealthLimits, Judged};
+use super::page::board::{HealthWindow, ValveBoard};
 use crate::modbus::map::HEALTH_ALARM_BIT;
 use crate::modbus::server::RegisterBank;
 use crate::model::Valve;
@@ -75,6 +77,8 @@ struct Monitor {
     /// The process controller's register bank of the valve, for the alarm bit.
     status: Option<Arc<RegisterBank>>,
     plot: Option<PlotHealth>,
+    /// The valve on the live page.
+    board: Option<Arc<ValveBoard>>,
 }
 
 /// The header of the health CSV: the figures, the alarm, each figure's baseline and limit
@@ -102,8 +106,9 @@ pub const HEADER: [&str; 20] = [
     "note",
 ];
 
-/// One valve to watch: its name, its health file's name, its baseline model, its metrics and
-/// the register bank whose status word carries its alarm (a valve a controller drives).
+/// One valve to watch: its name, its health file's name, its baseline model, its metrics, the
+/// register bank whose status word carries its alarm (a valve a controller drives) and its
+/// place on the live page.
 #[derive(Debug)]
 pub struct Watched {
     pub name: String,
@@ -113,6 +118,7 @@ pub struct Watched {
     pub status: Option<Arc<RegisterBank>>,
     /// Draws `health*.svg` from the CSV at the end (none: no plot).
     pub plot: Option<PlotHealth>,
+    pub(crate) board: Option<Arc<ValveBoard>>,
 }
 
 /// The running health thread: where the loggers send rows (with the valve's index), and the
@@ -164,6 +170,7 @@ pub fn start(
             metrics: w.metrics,
             status: w.status,
             plot: w.plot,
+            board: w.board,
         });
     }
     // Bounded like the loggers' queues; a logger waits for the health thread, never the loop.
@@ -330,7 +337,7 @@ impl Monitor {
         std::fs::write(&path, svg).map_err(|source| DaemonError::LogWrite { path, source })
     }
 
-    /// One row of the health CSV, flushed.
+    /// One row of the health CSV, flushed, and the window on the live page.
     fn write(
         &mut self,
         t_s: f64,
@@ -361,6 +368,16 @@ impl Monitor {
             opt(base.map(|b| b.1.tracking_rms_pct)),
             note.to_string(),
         ];
+        if let Some(b) = &self.board {
+            b.health(HealthWindow {
+                t_s,
+                figures: fig.copied(),
+                base: base.map(|b| b.0),
+                limits: base.map(|b| b.1),
+                alarm: self.alarm,
+                note: note.to_string(),
+            });
+        }
         let path = &self.report.file;
         self.csv
             .write_record(&row)

@@ -1,8 +1,10 @@
 //! The figures of one health window (dead time, reversal delay, stroke speeds, tracking error)
 //! and their limits against a baseline: what the health thread estimates and compares, and what
-//! the exporter publishes.
+//! the exporter and the live page publish.
 //!
 //! Not here: the windows, the baseline's choice, the alarm and its outputs ([`super::health`]).
+
+use serde::Serialize;
 
 use super::config::HealthConfig;
 use crate::metrics::stats::median;
@@ -18,6 +20,55 @@ const DELAY_OPTIONS: StepOptions = StepOptions {
     fraction: 0.02,
     min_hold_s: 1.0,
 };
+
+/// One figure: its name, its unit, whether its limit is the highest value allowed (not the
+/// lowest), and where it and its limit are.
+struct Figure {
+    name: &'static str,
+    unit: &'static str,
+    highest: bool,
+    get: fn(&Figures) -> Option<f64>,
+    limit: fn(&HealthLimits) -> Option<f64>,
+}
+
+/// The figures, in the order of the health CSV.
+const FIGURES: [Figure; 5] = [
+    Figure {
+        name: "dead time",
+        unit: "s",
+        highest: true,
+        get: |f| f.dead_time_s,
+        limit: |l| l.dead_time_s,
+    },
+    Figure {
+        name: "reversal delay",
+        unit: "s",
+        highest: true,
+        get: |f| f.reversal_delay_s,
+        limit: |l| l.reversal_delay_s,
+    },
+    Figure {
+        name: "opening speed",
+        unit: "%/s",
+        highest: false,
+        get: |f| Some(f.opening_speed_pct_per_s),
+        limit: |l| Some(l.opening_speed_pct_per_s),
+    },
+    Figure {
+        name: "closing speed",
+        unit: "%/s",
+        highest: false,
+        get: |f| Some(f.closing_speed_pct_per_s),
+        limit: |l| Some(l.closing_speed_pct_per_s),
+    },
+    Figure {
+        name: "tracking error",
+        unit: "%",
+        highest: true,
+        get: |f| Some(f.tracking_rms_pct),
+        limit: |l| Some(l.tracking_rms_pct),
+    },
+];
 
 /// What one window shows.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,66 +135,74 @@ impl Figures {
         }
     }
 
+    /// Each figure beside its baseline and limit (each None while there is none), in the order
+    /// of [`FIGURES`].
+    pub fn judged(&self, base: Option<&Figures>, lim: Option<&HealthLimits>) -> [Judged; 5] {
+        FIGURES.map(|fig| {
+            let (now, base, limit) = (
+                (fig.get)(self),
+                base.and_then(fig.get),
+                lim.and_then(fig.limit),
+            );
+            let past = match (now, base, limit) {
+                (Some(now), Some(_), Some(limit)) if fig.highest => now > limit,
+                (Some(now), Some(base), Some(limit)) => base > 0.0 && now < limit,
+                _ => false,
+            };
+            Judged {
+                name: fig.name,
+                unit: fig.unit,
+                now,
+                base,
+                limit,
+                highest: fig.highest,
+                past,
+            }
+        })
+    }
+
     /// What drifted past its limit against `base`, one phrase each (empty: healthy).
     pub fn drifts(&self, base: &Figures, cfg: &HealthConfig) -> Vec<String> {
         let lim = Figures::limits(base, cfg);
-        let mut out = Vec::new();
-        let delays = [
-            (
-                "dead time",
-                self.dead_time_s,
-                base.dead_time_s,
-                lim.dead_time_s,
-                cfg.dead_time_rise_s,
-            ),
-            (
-                "reversal delay",
-                self.reversal_delay_s,
-                base.reversal_delay_s,
-                lim.reversal_delay_s,
-                cfg.reversal_delay_rise_s,
-            ),
+        // How far each limit lies from the baseline, in the order of `judged`.
+        let speed = format!("-{:.0} %", cfg.speed_drop * 100.0);
+        let rules = [
+            format!("+{} s", cfg.dead_time_rise_s),
+            format!("+{} s", cfg.reversal_delay_rise_s),
+            speed.clone(),
+            speed,
+            format!("+{:.0} %", cfg.tracking_rise * 100.0),
         ];
-        for (what, now, then, limit, rise) in delays {
-            if let (Some(now), Some(then), Some(limit)) = (now, then, limit) {
-                if now > limit {
-                    out.push(format!(
-                        "{what} {now:.3} s against {then:.3} s (limit +{rise} s)"
-                    ));
-                }
-            }
-        }
-        let speeds = [
-            (
-                "opening",
-                self.opening_speed_pct_per_s,
-                base.opening_speed_pct_per_s,
-                lim.opening_speed_pct_per_s,
-            ),
-            (
-                "closing",
-                self.closing_speed_pct_per_s,
-                base.closing_speed_pct_per_s,
-                lim.closing_speed_pct_per_s,
-            ),
-        ];
-        for (what, now, then, limit) in speeds {
-            if then > 0.0 && now < limit {
-                out.push(format!(
-                    "{what} speed {now:.2} %/s against {then:.2} %/s (limit -{:.0} %)",
-                    cfg.speed_drop * 100.0
-                ));
-            }
-        }
-        let (now, then) = (self.tracking_rms_pct, base.tracking_rms_pct);
-        if now > lim.tracking_rms_pct {
-            out.push(format!(
-                "tracking error {now:.2} % against {then:.2} % (limit +{:.0} %)",
-                cfg.tracking_rise * 100.0
-            ));
-        }
-        out
+        (self.judged(Some(base), Some(&lim)).iter().zip(rules))
+            .filter(|(j, _)| j.past)
+            .map(|(j, rule)| {
+                let digits = if j.unit == "s" { 3 } else { 2 };
+                let (now, then) = (j.now.unwrap_or(f64::NAN), j.base.unwrap_or(f64::NAN));
+                format!(
+                    "{} {now:.digits$} {unit} against {then:.digits$} {unit} (limit {rule})",
+                    j.name,
+                    unit = j.unit
+                )
+            })
+            .collect()
     }
+}
+
+/// One figure of a window beside its baseline and limit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Judged {
+    /// `dead time`, `opening speed`, ...
+    pub name: &'static str,
+    /// `s`, `%/s` or `%`.
+    pub unit: &'static str,
+    pub now: Option<f64>,
+    pub base: Option<f64>,
+    pub limit: Option<f64>,
+    /// The limit is the highest value allowed (a delay, the tracking error), not the lowest (a
+    /// stroke speed).
+    pub highest: bool,
+    /// Past its limit: a drift the alarm is raised for.
+    pub past: bool,
 }
 
 /// The limit of each figure against a baseline (a delay's: none while the baseline has none);

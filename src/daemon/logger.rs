@@ -13,7 +13,8 @@
 //! The row, its columns and their precision are the log format
 //! ([`crate::recording::log_format`]); this module writes them.
 //!
-//! Rows written are passed on to the health thread when there is one ([`Forward`]).
+//! Rows written are passed on to the health thread when there is one ([`Forward`]), and to
+//! the valve's trace on the live page when there is one ([`TraceFeed`]).
 //!
 //! This module does not decide what is logged; the loop does.
 
@@ -30,6 +31,7 @@ use time::OffsetDateTime;
 
 use super::config::LogConfig;
 use super::error::DaemonError;
+use super::page::board::TraceFeed;
 use crate::recording::gzip;
 use crate::recording::log_format::{Sample, HEADER};
 
@@ -246,11 +248,11 @@ impl Logger {
     ///
     /// On a write error the thread logs it, sets `stop` (the loop then ends cleanly) and keeps
     /// draining the channel so the loop never blocks; the error is returned by the join.
-    pub fn start(
+    pub(crate) fn start(
         cfg: &LogConfig,
         dir: &Path,
         name: Option<&str>,
-        forward: Option<Forward>,
+        (forward, trace): (Option<Forward>, Option<TraceFeed>),
         stop: Arc<AtomicBool>,
     ) -> Result<Logger, DaemonError> {
         std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
@@ -273,7 +275,7 @@ impl Logger {
         let (tx, rx) = mpsc::sync_channel(QUEUE_ROWS);
         let handle = std::thread::Builder::new()
             .name("vb-logger".into())
-            .spawn(move || write_all(rx, files, flush_every, forward, &stop))
+            .spawn(move || write_all(rx, files, flush_every, (forward, trace), &stop))
             .map_err(|source| DaemonError::Thread {
                 what: "logger",
                 source,
@@ -287,7 +289,7 @@ fn write_all(
     rx: Receiver<Sample>,
     mut files: Files,
     flush_every: Duration,
-    forward: Option<Forward>,
+    (forward, mut trace): (Option<Forward>, Option<TraceFeed>),
     stop: &AtomicBool,
 ) -> Result<LogReport, DaemonError> {
     let mut next_flush = Instant::now() + flush_every;
@@ -303,6 +305,9 @@ fn write_all(
                     if let Some((i, tx)) = &forward {
                         // The health thread only hangs up by failing; its join says why.
                         let _ = tx.send((*i, *sample));
+                    }
+                    if let Some(t) = &mut trace {
+                        t.row(sample);
                     }
                 }
                 if done {
@@ -364,7 +369,7 @@ mod tests {
             &cfg,
             dir.path(),
             None,
-            None,
+            (None, None),
             Arc::new(AtomicBool::new(false)),
         )
         .unwrap();
@@ -416,7 +421,7 @@ mod tests {
             ..LogConfig::default()
         };
         let stop = Arc::new(AtomicBool::new(false));
-        let logger = Logger::start(&cfg, dir.path(), Some("level"), None, stop).unwrap();
+        let logger = Logger::start(&cfg, dir.path(), Some("level"), (None, None), stop).unwrap();
         for k in 0..250u32 {
             let vp = Some(f64::from(k) / 10.0);
             let row = sample(f64::from(k) / 100.0, Status::Ok, vp);
@@ -459,7 +464,7 @@ mod tests {
             &cfg,
             dir.path(),
             None,
-            None,
+            (None, None),
             Arc::new(AtomicBool::new(false)),
         )
         .unwrap();

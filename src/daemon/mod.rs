@@ -13,9 +13,10 @@
 //! thread, and passes the rows on to the health thread (`vb-health`, with `[health]`,
 //! [`health`]), which estimates each valve's health off the loop and, with `[diagnosis]`,
 //! hands windows to the diagnosis thread (`vb-diagnosis`, [`diagnosis`]). The network thread (`vb-net`, only when there is something to serve) runs the
-//! process controller's Modbus server ([`hil`]) and the Prometheus endpoint ([`exporter`]) on a
-//! runtime of its own: the loop shares only a register bank and atomic metric handles with it and
-//! never waits on a socket. The calling thread waits for signals (tokio), drives the progress
+//! process controller's Modbus server ([`hil`]) and the HTTP server ([`http`]) of the Prometheus
+//! metrics ([`exporter`]) and the live page ([`page`]) on a runtime of its own: the loop shares
+//! only a register bank and atomic metric handles with it and never waits on a socket; the page
+//! reads what the logger, health and diagnosis threads put on its board. The calling thread waits for signals (tokio), drives the progress
 //! display, talks to systemd when run as a service ([`service`]) and joins.
 //!
 //! Sample convention (as [`crate::model::Valve::simulate_into`]): in slot `k` the valve gets
@@ -40,8 +41,10 @@ pub mod exporter;
 pub mod health;
 mod health_figures;
 pub mod hil;
+mod http;
 pub mod logger;
 mod net;
+mod page;
 mod running;
 pub mod schedule;
 pub mod service;

@@ -1,5 +1,6 @@
 //! The network thread (`vb-net`): the process controller's Modbus server ([`super::hil`]) and
-//! the Prometheus endpoint ([`super::exporter`]), on a current-thread runtime of their own.
+//! the HTTP server of the metrics and the live page ([`super::http`]), on a current-thread
+//! runtime of their own.
 //!
 //! [`Listeners`] binds the sockets at start-up (before the valve is opened, so a taken port stops
 //! the start first); [`Net`] serves them until stopped, each as a [`crate::net`] server that
@@ -13,8 +14,10 @@ use std::thread::JoinHandle;
 use super::config::Config;
 use super::control::current_thread_runtime;
 use super::error::DaemonError;
-use super::exporter::{self, LoopMetrics};
+use super::exporter::LoopMetrics;
 use super::hil;
+use super::http::{self, Site};
+use super::page::board::Board;
 use super::source::Source;
 use crate::modbus::blocks::Blocks;
 use crate::net::{Health, Limits};
@@ -31,16 +34,17 @@ struct Served<T> {
 /// The listening sockets of a daemon, bound, with what each serves.
 pub(super) struct Listeners {
     modbus: Option<Served<Arc<Blocks>>>,
-    exporter: Option<Served<LoopMetrics>>,
+    exporter: Option<Served<(LoopMetrics, Arc<Board>)>>,
 }
 
 impl Listeners {
     /// Binds the Modbus server (when `sources`, the valves' in order, serve banks: one block
-    /// each) and the metrics endpoint (when there are `metrics`).
+    /// each) and the HTTP server of the metrics and the live page (when there are `metrics`
+    /// and a `board`).
     pub(super) fn bind(
         config: &Config,
         sources: &[Source],
-        metrics: Option<&LoopMetrics>,
+        (metrics, board): (Option<&LoopMetrics>, Option<&Arc<Board>>),
     ) -> Result<Listeners, DaemonError> {
         let banks: Vec<_> = sources
             .iter()
@@ -62,18 +66,18 @@ impl Listeners {
             }
             None => None,
         };
-        let exporter = match (&config.metrics, metrics) {
-            (Some(cfg), Some(m)) => {
+        let exporter = match (&config.metrics, metrics, board) {
+            (Some(cfg), Some(m), Some(board)) => {
                 let (listener, addr) = bind("[metrics] listen", cfg.listen.0)?;
                 Some(Served {
                     listener,
                     addr,
                     limits: Limits {
                         max_connections: cfg.max_connections,
-                        idle_timeout: exporter::HEAD_TIMEOUT,
+                        idle_timeout: http::HEAD_TIMEOUT,
                     },
                     health: Arc::default(),
-                    what: m.clone(),
+                    what: (m.clone(), Arc::clone(board)),
                 })
             }
             _ => None,
@@ -113,14 +117,14 @@ fn bind(
         tracing::warn!(
             %addr,
             "{key} is not a loopback address: other machines can reach it, and neither Modbus \
-             nor the metrics endpoint has any authentication"
+             nor the metrics endpoint and live page has any authentication"
         );
     }
     Ok((listener, bound))
 }
 
-/// The network thread (`vb-net`): the process controller's Modbus server and the metrics
-/// endpoint, on a current-thread runtime of their own. It ends when [`Net`] is stopped or dropped.
+/// The network thread (`vb-net`): the process controller's Modbus server and the HTTP server,
+/// on a current-thread runtime of their own. It ends when [`Net`] is stopped or dropped.
 #[derive(Debug)]
 pub(super) struct Net {
     stop: tokio::sync::oneshot::Sender<()>,
@@ -160,8 +164,9 @@ impl Net {
                 }
             };
             let metrics = async {
-                if let Some((listener, limits, health, metrics)) = exporter {
-                    exporter::serve(listener, metrics, servers, limits, health).await;
+                if let Some((listener, limits, health, (metrics, board))) = exporter {
+                    let site = Site::new(metrics, servers, board);
+                    http::serve(listener, site, limits, health).await;
                 }
             };
             tokio::select! {

@@ -6,6 +6,7 @@
 //! Not here: what the loop does each slot ([`super::control`]), serving ([`super::net`]).
 
 use std::net::SocketAddr;
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -21,6 +22,7 @@ use super::exporter::LoopMetrics;
 use super::health::{self, HealthReport};
 use super::logger::{LogReport, Logger};
 use super::net::{Listeners, Net};
+use super::page::board::Board;
 use super::source::Source;
 use super::stats::{Live, Summary, ValveSummary};
 use super::valve::BackendError;
@@ -57,13 +59,11 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
             Source::new(config.source_of(v), &config.safety, period.as_secs_f64()).named(v.label())
         })
         .collect();
-    let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
-    let metrics = config
-        .metrics
-        .as_ref()
-        .map(|_| LoopMetrics::new(&names, config.health.is_some()))
-        .transpose()?;
-    let listeners = Listeners::bind(&config, &sources, metrics.as_ref())?;
+    let dir = opts
+        .log_dir
+        .clone()
+        .unwrap_or_else(|| config.log.dir.clone());
+    let (metrics, board, listeners) = bind(&config, &sources, &dir)?;
     // The backends are opened on the loop thread, inside the runtime that will drive their I/O;
     // the rest of the loop is handed over once they are open, so a valve that cannot be reached
     // stops the start before any log file is created.
@@ -80,14 +80,10 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     }
     let stop = Arc::new(AtomicBool::new(false));
     let live = Arc::new(Live::default());
-    let dir = opts
-        .log_dir
-        .clone()
-        .unwrap_or_else(|| config.log.dir.clone());
     let (health, diagnosis) = start_health(
         &config,
         &dir,
-        metrics.as_ref(),
+        (metrics.as_ref(), board.as_deref()),
         &sources,
         (diagnose, opts.analysis.plot_health),
     )?;
@@ -95,11 +91,12 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     let mut loggers = Vec::with_capacity(config.valves.len());
     for (i, (valve, described)) in config.valves.iter().zip(&spawned.valves).enumerate() {
         let forward = health.as_ref().map(|h| (i, h.tx.clone()));
+        let trace = board.as_ref().and_then(|b| b.feed(i, rate_hz));
         let logger = Logger::start(
             &config.log,
             &dir,
             valve.name.as_deref(),
-            forward,
+            (forward, trace),
             stop.clone(),
         )?;
         tracing::info!(
@@ -165,6 +162,24 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     })
 }
 
+/// The metrics and the live page's board (with `[metrics]`), and the servers' sockets, bound.
+type Bound = (Option<LoopMetrics>, Option<Arc<Board>>, Listeners);
+
+/// What [`Bound`] holds for `config` (the daemon's files in `dir`).
+fn bind(config: &Config, sources: &[Source], dir: &Path) -> Result<Bound, DaemonError> {
+    let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
+    let metrics = config
+        .metrics
+        .as_ref()
+        .map(|_| LoopMetrics::new(&names, config.health.is_some()))
+        .transpose()?;
+    let runs = (config.health.is_some(), config.diagnosis.is_some());
+    let board = (config.metrics.as_ref())
+        .map(|_| Arc::new(Board::new(&names, config.loop_.rate_hz, runs, dir)));
+    let listeners = Listeners::bind(config, sources, (metrics.as_ref(), board.as_ref()))?;
+    Ok((metrics, board, listeners))
+}
+
 /// The loop thread and the loggers. Dropped before [`Running::finish`] took them (the calling
 /// thread panicked, or gave up on the daemon), it stops the loop and waits for it and the
 /// loggers: the stop action is applied and its row written whatever happens to the caller.
@@ -200,13 +215,13 @@ impl Drop for LoopThreads {
     }
 }
 
-/// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, and the
-/// alarm bit in the status word of each valve a process controller drives (`sources`); and
-/// with `[diagnosis]`, the diagnosis thread it feeds.
+/// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, the gauges,
+/// the live page's `board`, and the alarm bit in the status word of each valve a process
+/// controller drives (`sources`); and with `[diagnosis]`, the diagnosis thread it feeds.
 fn start_health(
     config: &Config,
-    dir: &std::path::Path,
-    metrics: Option<&LoopMetrics>,
+    dir: &Path,
+    (metrics, board): (Option<&LoopMetrics>, Option<&Board>),
     sources: &[Source],
     (diagnose, plot): (Option<Diagnose<'_>>, Option<PlotHealth>),
 ) -> Result<(Option<health::Health>, Option<diagnosis::Thread>), DaemonError> {
@@ -240,6 +255,7 @@ fn start_health(
             metrics: metrics.and_then(|m| m.health(i)),
             status: sources.get(i).and_then(Source::served_bank).cloned(),
             plot,
+            board: board.and_then(|b| b.valve(i)),
         });
     }
     let (feed, diagnosis) = match diagnose {
@@ -248,9 +264,11 @@ fn start_health(
                 .map(|m| DiagnosisMetrics::register(m.registry()))
                 .transpose()?;
             let valves = (config.valves.iter())
-                .map(|v| diagnosis::Watched {
+                .enumerate()
+                .map(|(i, v)| diagnosis::Watched {
                     name: v.label().to_string(),
                     metrics: m.clone(),
+                    count: board.and_then(|b| b.valve(i)?.diagnoses()),
                 })
                 .collect();
             let (feed, handle) = diagnosis::start(d, dir, period_s, valves, diagnose)?;

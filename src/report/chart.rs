@@ -1,7 +1,8 @@
 //! Interactive time-series charts of the report pages: the series as JSON in the page and the
-//! vendored uPlot (`assets/uplot/`, embedded, no network) drawing them with drag-to-zoom on the
-//! time axis (double-click resets), live values under the cursor, and the static SVG of
-//! [`plot::lines`] kept for a page without scripts.
+//! vendored uPlot (`src/assets/uplot/`, embedded, no network; the daemon's live page embeds the
+//! same files) drawing them with drag-to-zoom on the time axis (double-click resets), live
+//! values under the cursor, and the static SVG of [`plot::lines`] kept for a page without
+//! scripts.
 //!
 //! A [`Dataset`] is written once per page and drawn by any number of charts, each over its own
 //! stretch of time (the whole recording, a worst window), so a zoomed window costs no data.
@@ -21,8 +22,8 @@ use super::plot::{self, Series};
 pub const MAX_SAMPLES: usize = 200_000;
 
 /// The uPlot library, its styles and the script that draws every chart of a page.
-const UPLOT_JS: &str = include_str!("assets/uplot/uPlot.iife.min.js");
-const UPLOT_CSS: &str = include_str!("assets/uplot/uPlot.min.css");
+const UPLOT_JS: &str = include_str!("../assets/uplot/uPlot.iife.min.js");
+const UPLOT_CSS: &str = include_str!("../assets/uplot/uPlot.min.css");
 const CHARTS_JS: &str = include_str!("assets/charts.js");
 
 /// The series of one time axis as the page's charts read them.

@@ -2,11 +2,13 @@
 
 A small driver over Playwright for Python, pointed at the system's Chromium (Debian's
 `chromium`, or the program named by VB_CHROMIUM) with `executable_path`: Playwright's own browser
-download is never used. Each opened page collects its console errors and uncaught exceptions;
-the helpers say whether a chart drew (ink on its canvas, or paths in an SVG), zoom a uPlot chart
-by dragging across it and read its time range, and take screenshots.
+download is never used. A page is a local file (the reports) or a URL (the daemon's live page).
+Each opened page collects its console errors and uncaught exceptions; the helpers say whether a
+chart drew (ink on its canvas, or paths in an SVG), zoom a uPlot chart by dragging across it and
+read its time range, and take screenshots (of the page, or of one chart).
 
-Used by check_reports.py (run by tests/browser_reports.rs); not here: which pages to check.
+Used by check_reports.py (run by tests/browser_reports.rs) and check_live.py (run by
+tests/live_page.rs); not here: which pages to check.
 """
 
 import os
@@ -35,15 +37,19 @@ class Browser:
 
     def open(self, path):
         """The page of the local file `path`, loaded."""
-        return Page(self._browser.new_page(viewport=VIEWPORT), Path(path))
+        return self.visit(Path(path).resolve().as_uri())
+
+    def visit(self, url):
+        """The page at `url`, loaded."""
+        return Page(self._browser.new_page(viewport=VIEWPORT), url)
 
 
 class Page:
     """One loaded page and the errors it logged."""
 
-    def __init__(self, page, path):
+    def __init__(self, page, url):
         self.page = page
-        self.path = path
+        self.url = url
         self.errors = []
         page.on(
             "console",
@@ -52,7 +58,7 @@ class Page:
             else None,
         )
         page.on("pageerror", lambda e: self.errors.append(f"uncaught: {e}"))
-        page.goto(path.resolve().as_uri())
+        page.goto(url)
         page.wait_for_load_state("load")
 
     def charts(self):
@@ -146,6 +152,19 @@ class Page:
             }"""
         )
 
-    def screenshot(self, path):
-        """Saves what the viewport shows as PNG at `path`."""
-        self.page.screenshot(path=str(path))
+    def screenshot(self, path, full_page=False):
+        """Saves what the viewport shows (or the whole page) as PNG at `path`."""
+        self.page.screenshot(path=str(path), full_page=full_page)
+
+    def chart_png(self, i):
+        """A screenshot of chart `i` (its canvas, axes and legend), as PNG bytes."""
+        box = self.page.evaluate(
+            """i => {
+              const r = window.vbCharts[i].root;
+              r.scrollIntoView();
+              const b = r.getBoundingClientRect();
+              return {x: b.x, y: b.y, width: b.width, height: b.height};
+            }""",
+            i,
+        )
+        return self.page.screenshot(clip=box)

@@ -1,0 +1,292 @@
+// The live page of valve-bridge's daemon (src/daemon/page/): every second it asks /api/live for
+// what is new (each valve's trace after the last point it has, its status, its last health
+// window, its count of diagnoses) and draws, per valve, O_P and V_P over the last minutes with
+// uPlot, the health figures against their limits and the alarms; when a valve has a new
+// diagnosis it reads /api/diagnoses/NAME and draws the effect sizes over time (a chart per unit,
+// each size with its 90 % interval) and the table of diagnoses, each linked to its report.
+// Times are the browser's clock: loop time plus the wall-clock time of loop time 0.
+// window.vbCharts holds every chart (each valve's trace first, in the order of the valves);
+// window.vbLive counts the answers drawn (updates) and the polls that failed (failures).
+(function () {
+  "use strict";
+  var POLL_MS = 1000;
+  var COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
+    "#17becf", "#7f7f7f", "#bcbd22"];
+  var BAD = { timeout: 1, error: 1, disconnected: 1 };
+  var live = { started: null, traceS: 300, valves: [], since: null };
+  window.vbCharts = [];
+  window.vbLive = { updates: 0, failures: 0 };
+
+  function el(tag, cls, text) {
+    var e = document.createElement(tag);
+    if (cls) { e.className = cls; }
+    if (text != null) { e.textContent = text; }
+    return e;
+  }
+  function row(cells, cls) {
+    var tr = el("tr", cls);
+    cells.forEach(function (c) {
+      var td = c instanceof Node ? c : el("td", null, c);
+      tr.appendChild(td);
+    });
+    return tr;
+  }
+  function num(v, digits) { return v == null ? "–" : v.toFixed(digits); }
+  function clock(unix) { return new Date(unix * 1000).toLocaleTimeString(); }
+  function words(name) { return name.replace(/_/g, " "); }
+  // A size's name without its unit: friction_band_pct is the friction band.
+  function sizeName(name) { return words(name.replace(/_(pct_per_s|pct|s)$/, "")); }
+  function width(div) { return Math.max(320, div.clientWidth); }
+  function charts() {
+    var all = live.valves.map(function (v) { return v.chart; });
+    live.valves.forEach(function (v) { all = all.concat(v.sizeCharts); });
+    window.vbCharts = all;
+  }
+
+  // A valve's section, made the first time the valve is seen.
+  function section(name) {
+    var sec = el("section", "valve");
+    sec.id = "valve-" + name;
+    var h2 = el("h2", null, name + " ");
+    var v = {
+      name: name, section: sec, status: el("span", "badge status"),
+      alarmBadge: el("span", "badge bad in-alarm", "in alarm"), alarms: el("ul", "alarms"),
+      trace: el("div", "vb-chart trace"), health: el("div", "health"), diag: el("div", "diagnoses"),
+      sizes: el("div", "sizes"), data: [[], [], []], lastT: null, count: undefined, history: [],
+      healthAlarm: null, sizeCharts: []
+    };
+    v.alarmBadge.hidden = true;
+    h2.appendChild(v.status);
+    h2.appendChild(v.alarmBadge);
+    [h2, v.alarms, v.trace, v.health, el("h3", null, "Diagnoses"), v.sizes, v.diag]
+      .forEach(function (e) { sec.appendChild(e); });
+    document.getElementById("valves").appendChild(sec);
+    v.chart = new uPlot({
+      title: "O_P and V_P, the last " + Math.round(live.traceS / 60) + " minutes",
+      width: width(v.trace), height: 260,
+      scales: { x: { time: true }, y: { range: function (u, lo, hi) {
+        return [Math.min(0, lo == null ? 0 : lo), Math.max(100, hi == null ? 100 : hi)];
+      } } },
+      series: [{}, { label: "O_P (%)", stroke: COLORS[0], width: 1.5 },
+        { label: "V_P (%)", stroke: COLORS[1], width: 1.5 }],
+      axes: [{}, { label: "%" }]
+    }, v.data, v.trace);
+    live.valves.push(v);
+    charts();
+    return v;
+  }
+
+  function valve(name) {
+    for (var i = 0; i < live.valves.length; i++) {
+      if (live.valves[i].name === name) { return live.valves[i]; }
+    }
+    return section(name);
+  }
+
+  // Appends the points after the last one shown and keeps the last minutes.
+  function addTrace(v, tr) {
+    var d = v.data;
+    var last = d[0].length ? d[0][d[0].length - 1] : -Infinity;
+    for (var k = 0; k < tr.t.length; k++) {
+      var x = live.started + tr.t[k];
+      if (x <= last) { continue; }
+      d[0].push(x);
+      d[1].push(tr.op[k]);
+      d[2].push(tr.vp[k]);
+      v.lastT = tr.t[k];
+    }
+    if (!d[0].length) { return; }
+    var from = d[0][d[0].length - 1] - live.traceS, cut = 0;
+    while (cut < d[0].length && d[0][cut] < from) { cut++; }
+    if (cut) { d.forEach(function (c) { c.splice(0, cut); }); }
+    v.chart.setData(d);
+  }
+
+  function showStatus(v, j) {
+    var s = j.status || "no data yet";
+    v.status.textContent = s + (j.t_s == null ? "" : " at loop time " + j.t_s.toFixed(1) + " s");
+    v.status.className = "badge status" + (BAD[s] ? " bad" : s === "ok" ? "" : " warn");
+  }
+
+  function showHealth(v, h) {
+    var box = v.health;
+    box.textContent = "";
+    v.healthAlarm = h && h.alarm ? h.note : null;
+    if (h == null) {
+      box.appendChild(el("p", "note", "No health check: the config has no [health]."));
+      return;
+    }
+    if (h.t_s == null) {
+      box.appendChild(el("p", "note", "Health: waiting for the first window."));
+      return;
+    }
+    var t = el("table", "health-figures");
+    t.appendChild(el("caption", null, "Health over the window ending at loop time " +
+      h.t_s.toFixed(1) + " s" + (h.alarm ? ": in alarm" : "")));
+    var head = row([], null);
+    ["figure", "now", "baseline", "limit"].forEach(function (c) { head.appendChild(el("th", null, c)); });
+    t.appendChild(head);
+    h.figures.forEach(function (f) {
+      var d = f.unit === "s" ? 3 : 2;
+      var limit = f.limit == null ? "–" : (f.highest ? "at most " : "at least ") + num(f.limit, d);
+      t.appendChild(row([f.name + " (" + f.unit + ")", el("td", "num", num(f.now, d)),
+        el("td", "num", num(f.base, d)), el("td", "num", limit)], f.past ? "past" : null));
+    });
+    box.appendChild(t);
+    if (h.note) { box.appendChild(el("p", "note", h.note)); }
+  }
+
+  function showAlarms(v) {
+    var items = [];
+    if (v.healthAlarm != null) { items.push("health alarm: " + v.healthAlarm); }
+    var last = v.history.length ? v.history[v.history.length - 1] : null;
+    (last && last.alarms || []).forEach(function (a) { items.push("diagnosis alarm: " + a); });
+    v.alarms.textContent = "";
+    items.forEach(function (a) { v.alarms.appendChild(el("li", null, a)); });
+    v.alarmBadge.hidden = items.length === 0;
+  }
+
+  function loadDiagnoses(v) {
+    fetch("/api/diagnoses/" + encodeURIComponent(v.name), { cache: "no-store" })
+      .then(function (r) {
+        if (!r.ok) { throw new Error("HTTP " + r.status); }
+        return r.json();
+      })
+      .then(function (list) { v.history = list; drawDiagnoses(v); showAlarms(v); })
+      .catch(function () { v.count = undefined; });  // asked again with the next answer
+  }
+
+  // One chart per unit: each effect's size over time, its 90 % interval as a band.
+  function sizeCharts(v) {
+    v.sizeCharts.forEach(function (c) { c.destroy(); });
+    v.sizeCharts = [];
+    v.sizes.textContent = "";
+    var done = v.history.filter(function (r) { return !r.error; });
+    var units = {};
+    done.forEach(function (r) {
+      r.effects.forEach(function (e) {
+        var u = units[e.size.unit] = units[e.size.unit] || {};
+        u[e.effect + ": " + sizeName(e.size.name)] = true;
+      });
+    });
+    Object.keys(units).forEach(function (unit) {
+      var keys = Object.keys(units[unit]);
+      var data = [done.map(function (r) { return live.started + r.t_s; })];
+      var series = [{}], bands = [];
+      keys.forEach(function (key, i) {
+        var pick = function (f) {
+          return done.map(function (r) {
+            var e = r.effects.find(function (e) { return e.effect + ": " + sizeName(e.size.name) === key; });
+            return e ? f(e.size) : null;
+          });
+        };
+        var color = COLORS[i % COLORS.length];
+        data.push(pick(function (s) { return s.value; }), pick(function (s) { return s.low; }),
+          pick(function (s) { return s.high; }));
+        series.push({ label: words(key), stroke: color, width: 1.5, points: { show: true, size: 7 } },
+          { label: "low", stroke: color, width: 0.5, dash: [4, 4], points: { show: false } },
+          { label: "high", stroke: color, width: 0.5, dash: [4, 4], points: { show: false } });
+        bands.push({ series: [3 * i + 3, 3 * i + 2], fill: color + "22" });
+      });
+      var div = el("div", "vb-chart sizes-" + unit.replace(/[^a-z]/gi, ""));
+      v.sizes.appendChild(div);
+      v.sizeCharts.push(new uPlot({
+        title: "Effect sizes (" + unit + "), 90 % intervals", width: Math.min(width(v.sizes), 620),
+        height: 220, scales: { x: { time: true } }, bands: bands, series: series,
+        axes: [{}, { label: unit }]
+      }, data, div));
+    });
+    charts();
+  }
+
+  function drawDiagnoses(v) {
+    sizeCharts(v);
+    var box = v.diag;
+    box.textContent = "";
+    if (!v.history.length) {
+      box.appendChild(el("p", "note", "No diagnosis yet."));
+      return;
+    }
+    var t = el("table", "diagnosis-history");
+    var head = row([], null);
+    ["time", "trigger", "verdict", "effects (90 % interval)", "alarms", ""]
+      .forEach(function (c) { head.appendChild(el("th", null, c)); });
+    t.appendChild(head);
+    v.history.slice(-50).reverse().forEach(function (r) {
+      var when = clock(live.started + r.t_s) + " (loop " + Math.round(r.t_s) + " s)";
+      var effects = el("td");
+      (r.effects || []).forEach(function (e) {
+        var s = e.size, line = el(e.finding ? "b" : "span", null, words(e.effect) + ": " +
+          s.value.toPrecision(3) + " " + s.unit + " (" + s.low.toPrecision(3) + "–" +
+          s.high.toPrecision(3) + ")" + (e.finding ? "" : ", trace"));
+        effects.appendChild(line);
+        effects.appendChild(el("br"));
+      });
+      var link = el("td");
+      if (r.report) {
+        var a = el("a", null, "report");
+        a.href = "/reports/" + r.report;
+        link.appendChild(a);
+      }
+      t.appendChild(row([when, r.trigger, el("td", "verdict", r.error ? "failed: " + r.error : r.verdict),
+        effects, (r.alarms || []).join("; "), link], null));
+    });
+    box.appendChild(t);
+  }
+
+  function update(j) {
+    if (live.started != null && j.started_unix_s != null &&
+        Math.abs(j.started_unix_s - live.started) > 1) {
+      location.reload();  // another run of the daemon: start over
+      return;
+    }
+    live.started = j.started_unix_s;
+    live.traceS = j.trace_s;
+    j.valves.forEach(function (vj) {
+      var v = valve(vj.name);
+      if (live.started != null) { addTrace(v, vj.trace); }
+      showStatus(v, vj);
+      showHealth(v, vj.health);
+      if (vj.diagnoses !== v.count) {
+        v.count = vj.diagnoses;
+        if (vj.diagnoses == null) {
+          v.diag.textContent = "";
+          v.diag.appendChild(el("p", "note", "No live diagnosis: the config has no [diagnosis]."));
+        } else {
+          loadDiagnoses(v);
+        }
+      }
+      showAlarms(v);
+    });
+    // The points after the earliest last point of a valve (a logger may lag the others).
+    var lasts = live.valves.map(function (v) { return v.lastT; });
+    live.since = lasts.some(function (t) { return t == null; }) ? null : Math.min.apply(null, lasts);
+    window.vbLive.updates++;
+  }
+
+  function connected(ok, why) {
+    var c = document.getElementById("conn");
+    c.textContent = ok ? "updated " + new Date().toLocaleTimeString()
+      : "the daemon does not answer (" + why + "); trying again every second";
+    c.className = ok ? "" : "down";
+  }
+
+  function poll() {
+    var url = "/api/live" + (live.since == null ? "" : "?since=" + live.since);
+    fetch(url, { cache: "no-store" })
+      .then(function (r) {
+        if (!r.ok) { throw new Error("HTTP " + r.status); }
+        return r.json();
+      })
+      .then(function (j) { update(j); connected(true); })
+      .catch(function (e) { window.vbLive.failures++; connected(false, e.message); })
+      .then(function () { setTimeout(poll, POLL_MS); });
+  }
+
+  window.addEventListener("resize", function () {
+    live.valves.forEach(function (v) {
+      v.chart.setSize({ width: width(v.trace), height: 260 });
+    });
+  });
+  poll();
+})();

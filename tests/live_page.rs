@@ -1,0 +1,144 @@
+//! The daemon's live page in a real browser: `valve-bridge run` on two emulated valves in real
+//! time (a worn one whose dead time grows by 0.05 s every second, a healthy one; both against
+//! the bundled pin-cart II model as their health baseline, 24 s windows every second, so the
+//! worn valve's alarm comes with the first window and is diagnosed at once), with `[metrics]` on
+//! a free loopback port. `tests/browser/check_live.py` (Playwright for Python driving Debian's
+//! Chromium, like the reports' test) loads `/` and fails on a console error, a trace chart that
+//! drew nothing or did not move on between two screenshots, the worn valve's alarm not shown
+//! (or one shown for the healthy valve), or the alarm's diagnosis not listed with a report that
+//! opens.
+//!
+//! With `VB_SCREENSHOTS=DIR` the page's screenshot is saved as `DIR/live-page.png` (README's
+//! with `VB_SCREENSHOTS=docs`). Without Chromium or Playwright the test is a visible skip, or a
+//! failure under `VB_REQUIRE_TOOLS=1`.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+mod common;
+
+use common::sim::BIN;
+use common::tools;
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+
+/// Two valves on small random steps, a worn one and a healthy one, checked against the model.
+fn config() -> String {
+    let model = format!("{ROOT}/config/models/pincart2.toml");
+    let valve = |name: &str, seed: u32, drift: &str| {
+        format!(
+            "[[valve]]\nname = \"{name}\"\nkind = \"emulated\"\n\
+             health_baseline_model = \"{model}\"\n\
+             [valve.emulated]\nmodel = \"pincart2\"\nnoise_std_pct = 0.05\n\
+             noise_seed = {seed}\n{drift}\
+             [valve.source]\nkind = \"random-steps\"\n\
+             [valve.source.random-steps]\nseed = {seed}\nmin_pct = 40.0\nmax_pct = 60.0\n\
+             hold_min_s = 1.5\nhold_max_s = 3.0\n"
+        )
+    };
+    valve(
+        "worn",
+        6,
+        "dead_time_drift_s_per_h = 180.0\ndead_time_drift_max_s = 2.0\n",
+    ) + &valve("healthy", 4, "")
+        + "[health]\nwindow_s = 24.0\nevery_s = 1.0\nmin_steps = 2\n\
+           [diagnosis]\nwindow_s = 60.0\nevery_s = 60.0\n\
+           [metrics]\nlisten = \"127.0.0.1:0\"\n"
+}
+
+/// The daemon, stopped with SIGTERM when dropped (the test failing or not).
+struct Daemon(Child);
+
+impl Daemon {
+    /// SIGTERM, then its exit and the rest of its stdout (the summary).
+    fn stop(&mut self) -> (bool, String) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            // SAFETY: kill(2) on our own child's pid, not yet reaped, with a standard signal.
+            unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
+        }
+        let ok = self.0.wait().is_ok_and(|s| s.success());
+        let mut rest = String::new();
+        if let Some(mut out) = self.0.stdout.take() {
+            let _ = out.read_to_string(&mut rest);
+        }
+        (ok, rest)
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.stop();
+    }
+}
+
+#[test]
+fn the_live_page_updates_and_shows_the_drift_alarm_in_chromium() {
+    if !tools::have_browser() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("live.toml");
+    std::fs::write(&cfg, config()).unwrap();
+    let log = std::fs::File::create(dir.path().join("daemon.log")).unwrap();
+    let child = Command::new(BIN)
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .arg("--log-dir")
+        .arg(dir.path().join("logs"))
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::piped())
+        .stderr(log)
+        .spawn()
+        .unwrap();
+    let mut daemon = Daemon(child);
+    let mut stdout = BufReader::new(daemon.0.stdout.take().unwrap());
+    let mut line = String::new();
+    stdout.read_line(&mut line).unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("metrics: ")
+        .expect("the metrics address");
+    daemon.0.stdout = Some(stdout.into_inner());
+
+    let mut cmd = Command::new("python3");
+    cmd.arg(format!("{ROOT}/tests/browser/check_live.py"))
+        .arg(format!("http://{addr}/"))
+        .args(["--valves", "2", "--alarm", "worn", "--healthy", "healthy"])
+        .args(["--diagnosis", "--wait", "90"])
+        .env("VB_CHROMIUM", tools::chromium())
+        // Nothing written beside the scripts: the test writes only in its own directory.
+        .env("PYTHONDONTWRITEBYTECODE", "1");
+    if let Ok(shots) = std::env::var("VB_SCREENSHOTS") {
+        // Relative to the checkout, like README's command.
+        cmd.arg("--screenshots").arg(Path::new(ROOT).join(shots));
+    }
+    let out = cmd.output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    let (stopped, summary) = daemon.stop();
+    let log = std::fs::read_to_string(dir.path().join("daemon.log")).unwrap_or_default();
+    assert!(
+        out.status.success(),
+        "the live page failed in Chromium:\n{text}\ndaemon log:\n{log}"
+    );
+    assert!(text.contains("worn: health alarm: "), "{text}");
+    assert!(
+        stopped,
+        "the daemon did not exit cleanly:\n{summary}\n{log}"
+    );
+    // The summary agrees: the worn valve's alarm, none for the healthy one.
+    let health = |file: &str| {
+        (summary.lines())
+            .find(|l| l.contains(file))
+            .unwrap_or_else(|| panic!("no {file} in the summary:\n{summary}"))
+            .to_string()
+    };
+    assert!(
+        health("health-worn.csv").contains(" 1 alarms (first at"),
+        "{summary}"
+    );
+    assert!(
+        health("health-healthy.csv").contains(" 0 alarms,"),
+        "{summary}"
+    );
+}
