@@ -23,7 +23,10 @@ fn run(dir: &Path, secs: &str) -> String {
         "\n[diagnosis]\n",
         "\n[diagnosis]\nwindow_s = 300.0\nevery_s = 600.0\n",
     );
-    assert_ne!(text, base, "config/friction-drift.toml has no [diagnosis] table");
+    assert_ne!(
+        text, base,
+        "config/friction-drift.toml has no [diagnosis] table"
+    );
     std::fs::write(&config, text).unwrap();
     let out = Command::new(BIN)
         .args(["run", "--config", config.to_str().unwrap()])

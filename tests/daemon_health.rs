@@ -163,19 +163,29 @@ fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
     assert!(first.starts_with("backlash: "), "{packing}");
     let since = first.rsplit_once("since ").unwrap().1;
     let (h, m) = since.trim_end_matches(" h").split_once(':').unwrap();
-    assert!(h.parse::<u32>().unwrap() * 60 + m.parse::<u32>().unwrap() < 180, "{first}");
+    assert!(
+        h.parse::<u32>().unwrap() * 60 + m.parse::<u32>().unwrap() < 180,
+        "{first}"
+    );
     let counts = |text: &str| {
-        let line = text.lines().find(|l| l.trim().starts_with("diagnosis: ")).unwrap();
+        let line = text
+            .lines()
+            .find(|l| l.trim().starts_with("diagnosis: "))
+            .unwrap();
         line.trim().split(", in ").next().unwrap().to_string()
     };
     assert!(counts(healthy).ends_with(", 0 alarms"), "{healthy}");
     let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
         .unwrap()
         .replace("\n", " ");
-    for quoted in alarms.iter().copied().chain([
-        counts(packing).as_str(),
-        counts(healthy).as_str(),
-    ]) {
-        assert!(readme.contains(&format!("`{quoted}`")), "README does not quote `{quoted}`");
+    for quoted in alarms
+        .iter()
+        .copied()
+        .chain([counts(packing).as_str(), counts(healthy).as_str()])
+    {
+        assert!(
+            readme.contains(&format!("`{quoted}`")),
+            "README does not quote `{quoted}`"
+        );
     }
 }

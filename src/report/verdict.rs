@@ -83,8 +83,13 @@ pub fn verdict(d: &Diagnosis) -> String {
             "Nothing significant is missing: the residual is consistent with measurement noise.{traces}"
         ),
         Outcome::NotSignificant { windows } => format!(
-            "Nothing worth maintenance is missing from the vocabulary: {windows} windows stand above the noise floor, but no \
-             effect improves the held-out fit by more than chance and by a size worth maintenance.{traces}"
+            "Nothing worth maintenance is missing from the vocabulary: {} above the noise floor, but no \
+             effect improves the held-out fit by more than chance and by a size worth maintenance.{traces}",
+            if *windows == 1 {
+                "1 window stands".to_string()
+            } else {
+                format!("{windows} windows stand")
+            }
         ),
         Outcome::Missing {
             heldout_sse_before: before,
