@@ -196,6 +196,13 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     for t in traces.iter_mut() {
         t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
     }
+    let (findings, shrunk) = worth_maintenance(findings, &final_spec);
+    traces.extend(shrunk);
+    let final_spec = if findings.is_empty() {
+        baseline.spec.clone()
+    } else {
+        final_spec
+    };
     let figures = figures(&final_spec, data.facts, rec.op);
     let sim_after = scorer.simulate(&final_spec);
     let residual_after: Vec<f64> = rec.vp.iter().zip(&sim_after).map(|(m, s)| m - s).collect();
@@ -249,6 +256,27 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     }
 }
 
+/// The findings still worth maintenance by their size in the final model `spec`, and those
+/// the joint refit of the others shrank below that, as traces (they stay in the model).
+/// Stick-slip judged by its slips is sized by them, as it was judged, and stays.
+fn worth_maintenance(findings: Vec<Finding>, spec: &ModelSpec) -> (Vec<Finding>, Vec<Trace>) {
+    let (kept, shrunk): (Vec<Finding>, Vec<Finding>) = findings
+        .into_iter()
+        .partition(|f| f.size.worth >= 1.0 || !matches!(f.measure, Measure::HeldoutSse { .. }));
+    let traces = shrunk
+        .into_iter()
+        .map(|f| Trace {
+            effect: f.effect,
+            size: f.size,
+            heldout_share: (f.heldout_sse_before - f.heldout_sse_after)
+                / f.heldout_sse_before.max(1e-12),
+            params: f.params,
+            spec: spec.clone(),
+        })
+        .collect();
+    (kept, traces)
+}
+
 /// The figures of the final model `spec` (see [`Figures`]).
 fn figures(spec: &ModelSpec, facts: &facts::Facts, op: &[f64]) -> Figures {
     use composed::Knob;
@@ -284,5 +312,70 @@ fn outcome(
         Outcome::NotSignificant {
             windows: windows.len(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{bundled, ModelKind};
+
+    #[test]
+    fn a_finding_the_final_model_shrank_below_worth_is_a_trace() {
+        let dt = 0.01;
+        let op: Vec<f64> = (0..3000)
+            .map(|k| 40.0 + 10.0 * ((k / 500) % 2) as f64)
+            .collect();
+        let t: Vec<f64> = (0..op.len()).map(|k| k as f64 * dt).collect();
+        let rec = RecordingView {
+            t: &t,
+            op: &op,
+            vp: &op,
+            restarts: &[],
+            dt,
+        };
+        let facts = facts::measure(&rec, 0.05, 0.0);
+        let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        let finding = |effect, worth, measure| Finding {
+            effect,
+            facts: evidence::Evidence::of(effect, &spec, &spec, &facts, &[], 0.05),
+            params: serde_json::Map::new(),
+            alternatives: vec![],
+            heldout_sse_before: 100.0,
+            heldout_sse_after: 80.0,
+            delta_bic: -10.0,
+            support: None,
+            size: Size {
+                name: "slip_pct",
+                unit: "%",
+                value: 0.1 * worth,
+                low: 0.1 * worth,
+                high: 0.1 * worth,
+                worth,
+            },
+            measure,
+            knobs: vec![],
+        };
+        let sse = Measure::HeldoutSse {
+            before: 100.0,
+            after: 80.0,
+        };
+        let (kept, traces) = worth_maintenance(
+            vec![
+                finding(Effect::Backlash, 2.0, sse),
+                finding(Effect::Stiction, 0.6, sse),
+            ],
+            &spec,
+        );
+        assert_eq!(
+            kept.iter().map(|f| f.effect).collect::<Vec<_>>(),
+            [Effect::Backlash]
+        );
+        assert_eq!(traces.len(), 1);
+        assert_eq!(
+            (traces[0].effect, traces[0].size.worth),
+            (Effect::Stiction, 0.6)
+        );
+        assert!((traces[0].heldout_share - 0.2).abs() < 1e-12);
     }
 }
