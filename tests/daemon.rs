@@ -102,10 +102,6 @@ fn default_config_runs_in_real_time_with_one_row_per_slot() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("samples: 200 (200 ok, 0 timeout, 0 error, 0 disconnected)"),
-        "{stdout}"
-    );
-    assert!(
         stdout.contains("timing error |actual - scheduled|: p50"),
         "{stdout}"
     );
@@ -125,8 +121,16 @@ fn default_config_runs_in_real_time_with_one_row_per_slot() {
     common::assert_for_people(&stdout);
     assert_on_grid(&rows);
     let (cycles, safe) = rows.split_at(200);
+    // Every slot ran but those a stalled machine made the loop miss, which the summary counts.
     let missed = cycles.iter().filter(|r| r.status == "skipped").count();
     assert!(missed <= 2, "{missed} missed cycles in 2 s");
+    let ran = 200 - missed;
+    for line in [
+        format!("samples: {ran} ({ran} ok, 0 timeout, 0 error, 0 disconnected)"),
+        format!("missed cycles: {missed}"),
+    ] {
+        assert!(stdout.contains(&line), "{line}\n{stdout}");
+    }
     for r in cycles.iter().filter(|r| r.status == "ok") {
         let (op, vp) = (r.op_pct.unwrap(), r.vp_pct.unwrap());
         assert!((20.0..=97.0).contains(&op), "random steps in 20-97 %: {op}");
