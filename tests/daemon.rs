@@ -81,11 +81,22 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// Checks the slots are 0, 1, 2, ... on the 100 Hz grid.
+/// Checks the cycles' slots are 0, 1, 2, ... on the 100 Hz grid, and the stop action's row on
+/// the grid after them.
 fn assert_on_grid(rows: &[Row]) {
-    for (k, row) in rows.iter().enumerate() {
+    let (stop, cycles) = rows.split_last().unwrap();
+    for (k, row) in cycles.iter().enumerate() {
         assert_eq!(row.t_s, k as f64 / 100.0, "row {k}");
     }
+    // The stop action takes the first slot that runs after the last cycle: the next one, or a
+    // later one where a stalled machine made the loop miss the slots in between (not logged,
+    // the run is over).
+    let slot = stop.t_s * 100.0;
+    assert!(
+        (slot - slot.round()).abs() < 1e-6 && slot.round() as usize >= cycles.len(),
+        "stop action's row at {} s",
+        stop.t_s
+    );
 }
 
 #[test]
