@@ -2,7 +2,9 @@
 //! allocates nothing: reading the controller's set-point, publishing V_P and status, and
 //! updating the metric handles. Nor does stepping a model (the physical valve, with its internal
 //! steps and seeded sensor noise), nor a drifting one, nor compensating a set-point and judging
-//! its guard windows. A counting global allocator (this test binary only) counts the
+//! its guard windows. A Modbus cycle, over TCP and over RTU against sim-device, allocates no
+//! more than tokio-modbus's own call does (its request future and the reply's words, which
+//! its API allocates). A counting global allocator (this test binary only) counts the
 //! allocations made on the calling thread around those calls.
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -10,12 +12,15 @@ use std::cell::Cell;
 use std::path::Path;
 use std::time::Duration;
 
-use tokio_modbus::Request;
+use tokio_modbus::client::Reader;
+use tokio_modbus::{Request, Slave};
+use tokio_serial::SerialPortBuilderExt;
 use valve_bridge::compensate::{CompensationConfig, Compensator};
 use valve_bridge::daemon::config::Config;
 use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::source::Source;
-use valve_bridge::modbus::client::LinkStats;
+use valve_bridge::modbus::client::{LinkStats, ModbusValve};
+use valve_bridge::modbus::link::{Link, RtuLink, TcpLink};
 use valve_bridge::model::{bundled, Drift, DriftSpec, ModelKind, Valve};
 use valve_bridge::recording::log_format::{Sample, Status};
 
@@ -183,4 +188,81 @@ fn compensating_a_set_point_does_not_allocate() {
         windows >= 50 && kicked > 0,
         "{windows} windows, {kicked} kicks"
     );
+}
+
+mod common;
+
+/// A Modbus cycle of the shipped sim-device configs (one FC 23 transaction: write the
+/// set-point, read set-point, position and status) against sim-device over `args`: the
+/// allocations of each of 40 cycles through [`ModbusValve::cycle`], and of 40 bare tokio-modbus
+/// calls of the same transaction on the same device.
+fn modbus_cycle_allocations(args: &[&str]) -> (Vec<u64>, Vec<u64>) {
+    let dev = common::sim::SimDevice::start(args);
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join(dev.shipped.0);
+    let cfg = Config::load(Some(&shipped)).unwrap();
+    let valve_cfg = &cfg.valves[0];
+    // A deadline no stall of a loaded machine reaches: a timeout would allocate its message.
+    let link = match (&valve_cfg.tcp, &valve_cfg.rtu) {
+        (Some(tcp), _) => Link::Tcp(TcpLink {
+            address: dev.endpoint.clone(),
+            timeout_ms: Some(900.0),
+            ..tcp.clone()
+        }),
+        (_, Some(rtu)) => Link::Rtu(RtuLink {
+            port: dev.endpoint.clone(),
+            timeout_ms: Some(900.0),
+            ..rtu.clone()
+        }),
+        _ => panic!("{} names no Modbus link", dev.shipped.0),
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let mut valve = ModbusValve::new(link.clone(), valve_cfg.registers, 1.0).unwrap();
+    rt.block_on(valve.connect_now()).unwrap();
+    let mut cycle = |k: u64| {
+        let c = rt.block_on(valve.cycle(40.0 + (k % 3) as f64));
+        assert!(c.vp_pct.is_ok(), "cycle {k}: {c:?}");
+    };
+    // The first cycles size what is kept from cycle to cycle.
+    (0..5).for_each(&mut cycle);
+    let ours = (5..45).map(|k| allocations(|| cycle(k))).collect();
+    drop(valve);
+    let mut ctx = match &link {
+        Link::Tcp(l) => {
+            let addr = l.address.parse().unwrap();
+            rt.block_on(tokio_modbus::client::tcp::connect_slave(addr, Slave(1)))
+                .unwrap()
+        }
+        Link::Rtu(l) => {
+            let port = rt
+                .block_on(async { tokio_serial::new(&l.port, l.baud).open_native_async() })
+                .unwrap();
+            tokio_modbus::client::rtu::attach_slave(port, Slave(l.slave_id))
+        }
+    };
+    let mut bare = |k: u16| {
+        let words = [400 + k % 3];
+        let r = rt.block_on(ctx.read_write_multiple_registers(0, 3, 0, &words));
+        assert!(matches!(r, Ok(Ok(_))), "bare call {k}: {r:?}");
+    };
+    (0..5).for_each(&mut bare);
+    let floor = (5..45).map(|k| allocations(|| bare(k))).collect();
+    (ours, floor)
+}
+
+/// A Modbus cycle allocates nothing of its own: no more than tokio-modbus itself allocates for
+/// the transaction (its request future and the reply's words), over TCP and over RTU on a
+/// pseudo-terminal.
+#[test]
+fn a_modbus_cycle_allocates_only_what_tokio_modbus_does() {
+    for args in [&["--tcp", "127.0.0.1:0"][..], &["--pty"][..]] {
+        let (ours, floor) = modbus_cycle_allocations(args);
+        let most = floor.iter().copied().max().unwrap();
+        assert!(
+            most > 0 && ours.iter().all(|&n| n <= most),
+            "{args:?}: allocations per cycle {ours:?}, tokio-modbus alone {floor:?}"
+        );
+    }
 }

@@ -28,6 +28,7 @@
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
+use smallvec::{smallvec, SmallVec};
 
 use crate::toml_file::{self, TomlError};
 
@@ -49,6 +50,10 @@ impl std::fmt::Display for Table {
         })
     }
 }
+
+/// The register words of one value: one or two (a 32-bit format), kept inline so that
+/// encoding the set-point every cycle allocates nothing.
+pub type Words = SmallVec<[u16; 2]>;
 
 /// How a value is stored in one or two registers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -172,7 +177,7 @@ impl StatusRegister {
 /// // The default map: O_P written and V_P read in per mille of travel.
 /// let map = RegisterMap::default();
 /// let words = map.encode_setpoint(45.67)?;
-/// assert_eq!(words, [457]);
+/// assert_eq!(*words, [457]);
 /// assert!((map.decode_position(&[457])? - 45.7).abs() < 1e-9);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
@@ -351,7 +356,7 @@ impl Register {
         what: &'static str,
         pct: f64,
         order: WordOrder,
-    ) -> Result<Vec<u16>, ValueError> {
+    ) -> Result<Words, ValueError> {
         let raw = (pct - self.offset) / self.scale;
         let raw = if self.format == Format::F32 {
             raw
@@ -376,7 +381,7 @@ impl Register {
 
     /// Like [`Register::encode`] but saturates at the format's limits (a device reporting a
     /// position never fails; NaN reads as 0).
-    pub fn encode_saturating(&self, pct: f64, order: WordOrder) -> Vec<u16> {
+    pub fn encode_saturating(&self, pct: f64, order: WordOrder) -> Words {
         let raw = (pct - self.offset) / self.scale;
         let raw = if self.format == Format::F32 {
             raw
@@ -388,18 +393,18 @@ impl Register {
         self.raw_to_words(raw, order)
     }
 
-    fn raw_to_words(&self, raw: f64, order: WordOrder) -> Vec<u16> {
+    fn raw_to_words(&self, raw: f64, order: WordOrder) -> Words {
         // `raw` is inside the format's range here, so the casts are exact (or f32 rounding).
-        let pair = |v: u32| -> Vec<u16> {
+        let pair = |v: u32| -> Words {
             let (hi, lo) = ((v >> 16) as u16, v as u16);
             match order {
-                WordOrder::Big => vec![hi, lo],
-                WordOrder::Little => vec![lo, hi],
+                WordOrder::Big => smallvec![hi, lo],
+                WordOrder::Little => smallvec![lo, hi],
             }
         };
         match self.format {
-            Format::U16 => vec![raw as u16],
-            Format::I16 => vec![raw as i16 as u16],
+            Format::U16 => smallvec![raw as u16],
+            Format::I16 => smallvec![raw as i16 as u16],
             Format::U32 => pair(raw as u32),
             Format::F32 => pair((raw as f32).to_bits()),
         }
@@ -551,7 +556,7 @@ impl MapViolation {
 
 impl RegisterMap {
     /// The set-point as register words.
-    pub fn encode_setpoint(&self, pct: f64) -> Result<Vec<u16>, ValueError> {
+    pub fn encode_setpoint(&self, pct: f64) -> Result<Words, ValueError> {
         self.setpoint.encode("set-point", pct, self.word_order)
     }
 
@@ -594,9 +599,9 @@ mod tests {
     fn defaults_are_burkert_per_mille() {
         let m = parse("[registers]\n").unwrap();
         assert_eq!(m, RegisterMap::default());
-        assert_eq!(m.encode_setpoint(50.0).unwrap(), vec![500]);
-        assert_eq!(m.encode_setpoint(100.0).unwrap(), vec![1000]);
-        assert_eq!(m.encode_setpoint(12.34).unwrap(), vec![123]);
+        assert_eq!(*m.encode_setpoint(50.0).unwrap(), [500]);
+        assert_eq!(*m.encode_setpoint(100.0).unwrap(), [1000]);
+        assert_eq!(*m.encode_setpoint(12.34).unwrap(), [123]);
         // POS is an INT: slightly below 0 reads as a negative per-mille value.
         assert!((m.decode_position(&[(-3i16) as u16]).unwrap() + 0.3).abs() < 1e-12);
         assert!((m.decode_position(&[1004]).unwrap() - 100.4).abs() < 1e-12);
@@ -631,18 +636,18 @@ mod tests {
             offset: 0.0,
         };
         assert_eq!(
-            r.encode("x", 70.0, WordOrder::Big).unwrap(),
-            vec![0x0001, 0x1170]
+            *r.encode("x", 70.0, WordOrder::Big).unwrap(),
+            [0x0001, 0x1170]
         );
         assert_eq!(
-            r.encode("x", 70.0, WordOrder::Little).unwrap(),
-            vec![0x1170, 0x0001]
+            *r.encode("x", 70.0, WordOrder::Little).unwrap(),
+            [0x1170, 0x0001]
         );
         assert!((r.decode("x", &[0x1170, 0x0001], WordOrder::Little).unwrap() - 70.0).abs() < 1e-9);
         r.format = Format::F32;
         r.scale = 1.0;
         let w = r.encode("x", 42.5, WordOrder::Big).unwrap();
-        assert_eq!(w, vec![0x422A, 0x0000]);
+        assert_eq!(*w, [0x422A, 0x0000]);
         assert_eq!(r.decode("x", &w, WordOrder::Big).unwrap(), 42.5);
         let nan = f32::NAN.to_bits();
         let err = r
@@ -659,14 +664,11 @@ mod tests {
     fn saturating_encode_never_fails() {
         let m = RegisterMap::default();
         assert_eq!(
-            m.position.encode_saturating(-5000.0, WordOrder::Big),
-            vec![i16::MIN as u16]
+            *m.position.encode_saturating(-5000.0, WordOrder::Big),
+            [i16::MIN as u16]
         );
-        assert_eq!(
-            m.position.encode_saturating(f64::NAN, WordOrder::Big),
-            vec![0]
-        );
-        assert_eq!(m.setpoint.encode_saturating(-1.0, WordOrder::Big), vec![0]);
+        assert_eq!(*m.position.encode_saturating(f64::NAN, WordOrder::Big), [0]);
+        assert_eq!(*m.setpoint.encode_saturating(-1.0, WordOrder::Big), [0]);
     }
 
     #[test]
@@ -679,7 +681,7 @@ mod tests {
             scale: 100.0 / 16000.0,
             offset: -25.0,
         };
-        assert_eq!(r.encode("x", 0.0, WordOrder::Big).unwrap(), vec![4000]);
+        assert_eq!(*r.encode("x", 0.0, WordOrder::Big).unwrap(), [4000]);
         assert!((r.decode("x", &[20000], WordOrder::Big).unwrap() - 100.0).abs() < 1e-9);
     }
 

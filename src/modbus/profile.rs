@@ -267,7 +267,7 @@ mod tests {
     fn the_belimo_gateway_map_is_in_hundredths_of_a_percent_and_fc6() {
         let p = shipped("belimo-uk24mod");
         assert_eq!((p.map.setpoint.address, p.map.position.address), (0, 3));
-        assert_eq!(p.map.encode_setpoint(42.37).unwrap(), vec![4237]);
+        assert_eq!(*p.map.encode_setpoint(42.37).unwrap(), [4237]);
         assert!((p.map.decode_position(&[10_000]).unwrap() - 100.0).abs() < 1e-9);
         assert!(p.map.decode_position(&[10_001]).is_err(), "past 0...10,000");
         assert!(p.map.fc6 && !p.map.fc23);

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use tokio_modbus::{ExceptionCode, Request, Response};
 
-use super::map::{RegisterMap, Table};
+use super::map::{RegisterMap, Table, Words};
 
 /// Largest register count of a read (FC 3/4/23), from the Modbus application protocol.
 pub const MAX_READ: u16 = 125;
@@ -207,7 +207,7 @@ impl RegisterBank {
         }
         let st = self.state();
         let m = &self.map;
-        let mut values: Vec<(std::ops::Range<u32>, Vec<u16>)> = Vec::with_capacity(3);
+        let mut values: Vec<(std::ops::Range<u32>, Words)> = Vec::with_capacity(3);
         if m.setpoint.table == table {
             values.push((
                 m.setpoint.span(),
@@ -222,10 +222,10 @@ impl RegisterBank {
         }
         if let Some(s) = m.status.filter(|s| s.table == table) {
             let a = u32::from(s.address);
-            values.push((a..a + 1, vec![st.status]));
+            values.push((a..a + 1, smallvec::smallvec![st.status]));
         }
         for &(_, a) in self.others.iter().filter(|(t, _)| *t == table) {
-            values.push((u32::from(a)..u32::from(a) + 1, vec![0]));
+            values.push((u32::from(a)..u32::from(a) + 1, smallvec::smallvec![0]));
         }
         let start = u32::from(start);
         (start..start + u32::from(count))
@@ -494,7 +494,7 @@ mod tests {
             Err(ExceptionCode::IllegalDataAddress)
         );
         let w = m.setpoint.encode("x", 33.5, WordOrder::Little).unwrap();
-        b.handle(&Request::WriteMultipleRegisters(10, Cow::Owned(w)))
+        b.handle(&Request::WriteMultipleRegisters(10, Cow::Owned(w.to_vec())))
             .unwrap();
         assert_eq!(b.setpoint_pct(), 33.5);
         // NaN is out of range: kept, and refused (no status register to flag it in).

@@ -123,6 +123,9 @@ pub struct ModbusValve {
     /// The link, this valve's alone or its bus's. Locked for a transaction; never contended,
     /// since the valves of a bus take turns on one thread.
     conn: Arc<Mutex<Connection>>,
+    /// The words of each of the cycle's replies, as tokio-modbus returns them (one `Vec` per
+    /// read, which it allocates); the list itself is kept from cycle to cycle.
+    replies: Vec<Vec<u16>>,
 }
 
 impl std::fmt::Debug for ModbusValve {
@@ -209,6 +212,7 @@ impl ModbusValve {
         Ok(ModbusValve {
             link,
             map,
+            replies: Vec::with_capacity(plan.transactions.len()),
             plan,
             timeout,
             budget,
@@ -353,18 +357,16 @@ impl ModbusValve {
         if !conn.is_connected() {
             conn.reconnect(&self.link, deadline).await?;
         }
-        let mut replies: Vec<Vec<u16>> = Vec::with_capacity(self.plan.transactions.len());
+        self.replies.clear();
         for i in 0..self.plan.transactions.len() {
             let t = self.plan.transactions[i];
-            replies.push(
-                conn.exchange(&self.link, self.timeout, t, &setpoint, deadline)
-                    .await?,
-            );
+            let words = (conn.exchange(&self.link, self.timeout, t, &setpoint, deadline)).await?;
+            self.replies.push(words);
             if !matches!(t, Transaction::Read { .. }) {
                 *sent_pct = Some(sent);
             }
         }
-        let reading = self.decode(&replies, op_pct, sent);
+        let reading = self.decode(&self.replies, op_pct, sent);
         if reading.is_err() {
             *sent_pct = None;
         }
