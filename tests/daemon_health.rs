@@ -8,7 +8,9 @@
 //!   it has grown past the 0.3 s limit, and its live diagnosis alarms with the effect's name
 //!   (`backlash`) before the 3-hour mark, as README quotes it; the healthy valve raises neither;
 //! - `config/two-valves.toml`, two healthy valves, runs 3 simulated hours (180 windows each)
-//!   without an alarm; README shows the 24-hour run.
+//!   without an alarm; README shows the 24-hour run;
+//! - `config/healthy-valve.toml`, a healthy valve with live diagnosis, runs 24 simulated hours:
+//!   48 diagnoses, no alarm, as README quotes it.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -167,25 +169,51 @@ fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
         h.parse::<u32>().unwrap() * 60 + m.parse::<u32>().unwrap() < 180,
         "{first}"
     );
-    let counts = |text: &str| {
-        let line = text
-            .lines()
-            .find(|l| l.trim().starts_with("diagnosis: "))
-            .unwrap();
-        line.trim().split(", in ").next().unwrap().to_string()
-    };
-    assert!(counts(healthy).ends_with(", 0 alarms"), "{healthy}");
-    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
-        .unwrap()
-        .replace("\n", " ");
+    assert!(diagnoses(healthy).ends_with(", 0 alarms"), "{healthy}");
     for quoted in alarms
         .iter()
         .copied()
-        .chain([counts(packing).as_str(), counts(healthy).as_str()])
+        .chain([diagnoses(packing).as_str(), diagnoses(healthy).as_str()])
     {
-        assert!(
-            readme.contains(&format!("`{quoted}`")),
-            "README does not quote `{quoted}`"
-        );
+        assert_quoted(quoted);
     }
+}
+
+#[test]
+fn a_healthy_valve_raises_no_alarm_in_a_day_of_live_diagnosis() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("healthy-valve.toml", "86400", dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    // A window every 30 minutes once the first 20 are logged: 48 in a day, none alarmed.
+    let summary = diagnoses(&stdout);
+    assert_eq!(summary, "diagnosis: 48 diagnoses, 0 alarms", "{stdout}");
+    assert_quoted(&summary);
+    let history = std::fs::read_to_string(dir.path().join("diagnosis-healthy.jsonl")).unwrap();
+    assert_eq!(history.lines().count(), 48);
+    let rows = health_rows(&dir.path().join("health-healthy.csv"));
+    assert!(rows.iter().all(|r| !r.1), "{rows:?}");
+    for warning in ["health alarm", "diagnosis alarm"] {
+        assert!(!stderr.contains(warning), "{stderr}");
+    }
+}
+
+/// The `diagnosis: N diagnoses, M alarms` line of a valve's summary in `text`.
+fn diagnoses(text: &str) -> String {
+    let line = (text.lines())
+        .find(|l| l.trim().starts_with("diagnosis: "))
+        .unwrap_or_else(|| panic!("no diagnosis line in {text}"));
+    line.trim().split(", in ").next().unwrap().to_string()
+}
+
+/// Panics unless README quotes `quoted` as code.
+fn assert_quoted(quoted: &str) {
+    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
+        .unwrap()
+        .replace("\n", " ");
+    assert!(
+        readme.contains(&format!("`{quoted}`")),
+        "README does not quote `{quoted}`"
+    );
 }
