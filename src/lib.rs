@@ -23,7 +23,7 @@
 
 // Lints of the field, as tokio-modbus keeps them: every public type can be printed, nothing is
 // `pub` that cannot be reached from outside, and `unsafe` only in the system calls that say why.
-#![warn(missing_debug_implementations, unreachable_pub)]
+#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
 #![deny(unsafe_code)]
 
 pub mod compensate;

@@ -30,7 +30,7 @@
 //! SIGTERM logs what the server went through before exiting. It is a test instrument: no
 //! persistence, no device identification, no coils.
 
-#![warn(missing_debug_implementations, unreachable_pub)]
+#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
 #![deny(unsafe_code)]
 
 mod faults;
@@ -256,7 +256,9 @@ fn main() -> std::process::ExitCode {
 fn announce(line: &str) {
     let mut out = std::io::stdout().lock();
     // A closed stdout only loses the announcement; serving goes on.
-    let _ = writeln!(out, "{line}").and_then(|()| out.flush());
+    if let Err(e) = writeln!(out, "{line}").and_then(|()| out.flush()) {
+        tracing::debug!("{line:?} not announced on stdout: {e}");
+    }
 }
 
 /// Refuses option combinations that cannot work, with the option to change.

@@ -99,8 +99,8 @@ impl RtuDevice {
         if slave == 0 {
             if let Ok(req) = &request {
                 for bank in self.banks.all() {
-                    // Unanswered: an exception has nowhere to go.
-                    let _ = bank.handle(req);
+                    // Unanswered: the reply, or an exception, has nowhere to go.
+                    drop(bank.handle(req));
                 }
             }
             return None;

@@ -130,11 +130,13 @@ pub fn run(config: Config, opts: RunOptions) -> Result<Summary, DaemonError> {
 /// Prints one `name: ADDR` line per endpoint on stdout, at once (a client may be waiting for it).
 fn announce(endpoints: &[(&'static str, SocketAddr)]) {
     let mut out = std::io::stdout().lock();
-    for (name, addr) in endpoints {
-        // A closed stdout only loses the announcement; the daemon runs on.
-        let _ = writeln!(out, "{name}: {addr}");
+    let written = (endpoints.iter())
+        .try_for_each(|(name, addr)| writeln!(out, "{name}: {addr}"))
+        .and_then(|()| out.flush());
+    // A closed stdout only loses the announcement; the daemon runs on.
+    if let Err(e) = written {
+        tracing::debug!("endpoints not announced on stdout: {e}");
     }
-    let _ = out.flush();
 }
 
 fn progress_bar(enabled: bool) -> ProgressBar {

@@ -155,11 +155,17 @@ impl Fleet {
 
     /// `summary.csv`: one row per valve in rank order ([`CSV_HEADER`]), findings joined by `;`.
     pub fn csv(&self) -> String {
+        // Writing to memory cannot fail: csv's errors are the writer's I/O and serialisation,
+        // and every field here is already a string.
+        self.write_csv().unwrap_or_default()
+    }
+
+    fn write_csv(&self) -> Result<String, Box<dyn std::error::Error>> {
         let num = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
         let mut w = csv::Writer::from_writer(Vec::new());
-        let _ = w.write_record(CSV_HEADER);
+        w.write_record(CSV_HEADER)?;
         for (i, v) in self.valves.iter().enumerate() {
-            let _ = w.write_record([
+            w.write_record([
                 (i + 1).to_string(),
                 v.valve.clone(),
                 format!("{:.3}", v.attention),
@@ -177,8 +183,8 @@ impl Fleet {
                 v.report.clone().unwrap_or_default(),
                 v.error.clone().unwrap_or_default(),
                 v.sizes.join(";"),
-            ]);
+            ])?;
         }
-        String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
+        Ok(String::from_utf8(w.into_inner()?)?)
     }
 }

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{AFTER, BEFORE, GREY};
+use super::plot::{drawn, AFTER, BEFORE, GREY};
 
 /// One panel: its title, unit and the CSV columns of the figure, its baseline and its limit.
 const PANELS: [(&str, &str, [&str; 3]); 5] = [
@@ -127,7 +127,7 @@ pub fn svg(valve: &str, csv_path: &Path) -> Result<String, csv::Error> {
         let height = PANEL_H * PANELS.len() as u32 + 40;
         let root =
             SVGBackend::with_string(&mut svg, (PLOT_W + LEGEND_W, height)).into_drawing_area();
-        let _ = root.fill(&WHITE);
+        drawn(root.fill(&WHITE));
         let root = root.titled(
             &format!(
                 "valve {valve}: health figures, their baseline and alarm limit; shaded: in alarm"
@@ -142,7 +142,7 @@ pub fn svg(valve: &str, csv_path: &Path) -> Result<String, csv::Error> {
             let (plot, side) = area.split_horizontally(PLOT_W);
             draw_panel(&plot, &side, &table, &spans, panel);
         }
-        let _ = root.present();
+        drawn(root.present());
     }
     Ok(svg)
 }
@@ -177,16 +177,18 @@ fn draw_panel<DB: DrawingBackend>(
     let Ok(mut chart) = chart else {
         return;
     };
-    let _ = chart
-        .configure_mesh()
-        .x_desc("loop time (h)")
-        .y_desc(unit)
-        .light_line_style(WHITE.mix(0.0))
-        .draw();
-    let shade = BEFORE.mix(0.15).filled();
-    let _ = chart.draw_series(
-        (spans.iter()).map(|&(a, b)| Rectangle::new([(a, lo - pad), (b, hi + pad)], shade)),
+    drawn(
+        chart
+            .configure_mesh()
+            .x_desc("loop time (h)")
+            .y_desc(unit)
+            .light_line_style(WHITE.mix(0.0))
+            .draw(),
     );
+    let shade = BEFORE.mix(0.15).filled();
+    drawn(chart.draw_series(
+        (spans.iter()).map(|&(a, b)| Rectangle::new([(a, lo - pad), (b, hi + pad)], shade)),
+    ));
     let styles = [
         ("figure", AFTER.stroke_width(2)),
         ("baseline", GREY.stroke_width(1)),
@@ -199,17 +201,17 @@ fn draw_panel<DB: DrawingBackend>(
             if v.is_finite() {
                 run.push((t[k], v));
             } else if !run.is_empty() {
-                let _ = chart.draw_series(LineSeries::new(std::mem::take(&mut run), style));
+                drawn(chart.draw_series(LineSeries::new(std::mem::take(&mut run), style)));
             }
         }
-        let _ = chart.draw_series(LineSeries::new(run, style));
+        drawn(chart.draw_series(LineSeries::new(run, style)));
     }
     let mut entries: Vec<(&str, ShapeStyle)> = styles.to_vec();
     entries.push(("in alarm", shade));
     for (i, (name, style)) in entries.iter().enumerate() {
         let y = 40 + 20 * i as i32;
-        let _ = side.draw(&Rectangle::new([(4, y - 4), (22, y + 4)], *style));
-        let _ = side.draw(&Text::new(*name, (28, y - 6), ("sans-serif", 12)));
+        drawn(side.draw(&Rectangle::new([(4, y - 4), (22, y + 4)], *style)));
+        drawn(side.draw(&Text::new(*name, (28, y - 6), ("sans-serif", 12))));
     }
 }
 

@@ -70,6 +70,14 @@ fn legend_layout(entries: &[Entry], width: i32) -> (Vec<(i32, i32)>, i32) {
     (at, height)
 }
 
+/// Logs a drawing step that failed; the rest of the plot is still drawn. The SVG backend
+/// writes into a string, so only a coordinate or layout plotters refuses can fail a step.
+pub(crate) fn drawn<T, E: std::fmt::Debug>(step: Result<T, E>) {
+    if let Err(e) = step {
+        tracing::warn!("a part of a plot could not be drawn: {e:?}");
+    }
+}
+
 /// An SVG chart of `size` px with `entries` as a legend in a band below it; `draw` draws the
 /// chart in the area above the band.
 fn with_legend(
@@ -82,25 +90,25 @@ fn with_legend(
     {
         let root = SVGBackend::with_string(&mut svg, (size.0, size.1 + band.max(0) as u32))
             .into_drawing_area();
-        let _ = root.fill(&WHITE);
+        drawn(root.fill(&WHITE));
         let (chart, legend) = root.split_vertically(size.1);
         draw(&chart);
         for (e, &(x, y)) in entries.iter().zip(&at) {
             let mid = y + LEGEND_ROW / 2;
-            let _ = match e.mark {
+            drawn(match e.mark {
                 Mark::Line => legend.draw(&PathElement::new(
                     vec![(x, mid), (x + 20, mid)],
                     e.color.stroke_width(2),
                 )),
                 Mark::Dot => legend.draw(&Circle::new((x + 10, mid), 3, e.color.filled())),
-            };
-            let _ = legend.draw(&Text::new(
+            });
+            drawn(legend.draw(&Text::new(
                 e.name,
                 (x + 26, mid - 7),
                 ("sans-serif", 13).into_font(),
-            ));
+            )));
         }
-        let _ = root.present();
+        drawn(root.present());
     }
     svg
 }
@@ -182,18 +190,20 @@ pub fn lines(
         let Ok(mut chart) = chart else {
             return;
         };
-        let _ = chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .light_line_style(WHITE.mix(0.0))
-            .draw();
+        drawn(
+            chart
+                .configure_mesh()
+                .x_desc(x_label)
+                .y_desc(y_label)
+                .light_line_style(WHITE.mix(0.0))
+                .draw(),
+        );
         for s in series.iter().filter(|s| s.y.len() >= range.end) {
             let idx = thin(s.y, range.clone());
-            let _ = chart.draw_series(LineSeries::new(
+            drawn(chart.draw_series(LineSeries::new(
                 idx.iter().map(|&k| (t[k], s.y[k])),
                 s.color.stroke_width(1),
-            ));
+            )));
         }
     })
 }
@@ -248,19 +258,21 @@ pub fn scatter_lines(
         let Ok(mut chart) = chart else {
             return;
         };
-        let _ = chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .draw();
+        drawn(
+            chart
+                .configure_mesh()
+                .x_desc(x_label)
+                .y_desc(y_label)
+                .draw(),
+        );
         for (_, color, points) in curves {
-            let _ = chart.draw_series(LineSeries::new(
+            drawn(chart.draw_series(LineSeries::new(
                 points.iter().copied(),
                 color.stroke_width(2),
-            ));
+            )));
         }
         for (_, color, points) in groups {
-            let _ = chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())));
+            drawn(chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled()))));
         }
     })
 }
@@ -336,17 +348,19 @@ pub fn curves(
         let Ok(mut chart) = chart else {
             return;
         };
-        let _ = chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .light_line_style(WHITE.mix(0.0))
-            .draw();
+        drawn(
+            chart
+                .configure_mesh()
+                .x_desc(x_label)
+                .y_desc(y_label)
+                .light_line_style(WHITE.mix(0.0))
+                .draw(),
+        );
         for (color, points) in curves {
-            let _ = chart.draw_series(LineSeries::new(
+            drawn(chart.draw_series(LineSeries::new(
                 points.iter().copied(),
                 color.mix(0.8).stroke_width(1),
-            ));
+            )));
         }
     })
 }
