@@ -363,7 +363,132 @@ pub fn speed_ratio(op: &[f64], vp: &[f64], dt: f64, sigma: f64, span: (f64, f64)
 /// The smallest nonzero change of V_P that occurs at least three times is the candidate
 /// spacing; V_P is on a lattice when at least 95 % of its measured values sit within 2 % of a
 /// spacing of a multiple of it. Spacings below 0.01 % (a file's number formatting) do not count.
+/// That lattice may be the log's rather than the sensor's: a sensor with a coarser lattice,
+/// logged per mille, reads on the log's grid too, and its steps of one sensor spacing show as
+/// one or two grid steps; [`coarser_lattice`] finds the sensor's spacing then.
 pub fn lattice(vp: &[f64]) -> f64 {
+    let grid = grid_lattice(vp);
+    let written = if grid > 0.0 { grid } else { decimal_grid(vp) };
+    if written > 0.0 {
+        coarser_lattice(vp, written).unwrap_or(grid)
+    } else {
+        grid
+    }
+}
+
+/// Fewest distinct values of V_P for [`coarser_lattice`] to judge a spacing by.
+const COARSER_MIN_VALUES: usize = 6;
+/// Share of the readings, and of the distinct values read, a coarser spacing must explain.
+const COARSER_EXPLAINED: f64 = 0.98;
+/// Most of the grid cells (between the lowest and highest read) a coarser spacing may predict
+/// readings in: a spacing that leaves no tenth of them empty cannot be told from the grid.
+const COARSER_DENSITY: f64 = 0.9;
+/// How far, in grid steps, a reading may lie from a multiple of the spacing: half a step of
+/// rounding, and a hundredth for the search's resolution and ties that round either way.
+const COARSER_TOLERANCE: f64 = 0.51;
+
+/// The decimal step every reading is written on (0.1 for a per-mille log), or 0.
+fn decimal_grid(vp: &[f64]) -> f64 {
+    [0.1, 0.05, 0.01]
+        .into_iter()
+        .find(|&g| {
+            (vp.iter().filter(|v| v.is_finite())).all(|v| (v / g - (v / g).round()).abs() < 1e-6)
+        })
+        .unwrap_or(0.0)
+}
+
+/// The sensor's spacing `q` when V_P, read on a lattice of spacing `q` and written on a grid
+/// of spacing `grid`, explains at least 98 % of the readings and of the distinct values read:
+/// each is within half a grid step of a multiple of `q`. A grid finer than the sensor leaves
+/// grid values unvisited in a pattern only the sensor's spacing explains; a sensor as fine as
+/// the grid visits them all, which no spacing past 1.2 grid steps explains without predicting
+/// readings in nine cells in ten as well (a spacing of 1.5 grid steps, whose multiples tie
+/// between two cells, predicts every cell: such a sensor cannot be told from the grid). Of
+/// the spacings that explain the readings, the widest is the sensor's (half of it explains
+/// them too; a multiple of it only a share), searched from 20 grid steps down in steps that
+/// move the largest reading's multiple by a hundredth of a grid step; the middle of the band
+/// of spacings next to it that explain the readings as well is returned. None when fewer than
+/// six distinct values were read.
+fn coarser_lattice(vp: &[f64], grid: f64) -> Option<f64> {
+    let mut cells: Vec<i64> = (vp.iter().filter(|v| v.is_finite()))
+        .map(|v| (v / grid).round() as i64)
+        .collect();
+    cells.sort_unstable();
+    let mut counts: Vec<(i64, usize)> = Vec::new();
+    for c in cells {
+        match counts.last_mut() {
+            Some((last, n)) if *last == c => *n += 1,
+            _ => counts.push((c, 1)),
+        }
+    }
+    if counts.len() < COARSER_MIN_VALUES {
+        return None;
+    }
+    let (first, last) = (counts[0].0, counts[counts.len() - 1].0);
+    let total: usize = counts.iter().map(|&(_, n)| n).sum();
+    let misses_allowed = ((1.0 - COARSER_EXPLAINED) * total as f64) as usize;
+    let values_missable = ((1.0 - COARSER_EXPLAINED) * counts.len() as f64) as usize;
+    // The most read values first, so a spacing that misses them is refused early.
+    counts.sort_by(|a, b| b.1.cmp(&a.1));
+    let explains = |q: f64| {
+        let (mut missed, mut values_missed) = (0, 0);
+        for &(c, n) in &counts {
+            let v = c as f64 * grid;
+            if (v - (v / q).round() * q).abs() > COARSER_TOLERANCE * grid {
+                missed += n;
+                values_missed += 1;
+                if missed > misses_allowed || values_missed > values_missable {
+                    return false;
+                }
+            }
+        }
+        true
+    };
+    // Each step moves the multiple of q at the largest reading by a hundredth of a grid step.
+    let largest = (first.abs().max(last.abs()).max(1)) as f64 * grid;
+    let shrink = 1.0 - 0.01 * grid / largest;
+    let fits = |q: f64| explains(q) && predicted_cells(first, last, q / grid) <= COARSER_DENSITY;
+    let mut q = 20.0 * grid;
+    while q >= 1.2 * grid {
+        if fits(q) {
+            // The spacings next to the sensor's explain the readings too, down to where the
+            // largest multiples leave the tolerance: the sensor's is the middle of that band.
+            let widest = q;
+            while fits(q * shrink) {
+                q *= shrink;
+            }
+            return Some(0.5 * (widest + q));
+        }
+        q *= shrink;
+    }
+    None
+}
+
+/// The share of the grid cells `first..=last` a reading on a lattice of `step` grid steps can
+/// fall in: every cell within the tolerance of a multiple, so both neighbours of a tie count.
+fn predicted_cells(first: i64, last: i64, step: f64) -> f64 {
+    let (k0, k1) = (
+        (first as f64 / step).floor() as i64 - 1,
+        (last as f64 / step).ceil() as i64 + 1,
+    );
+    let mut cells = 0usize;
+    let mut prev = i64::MIN;
+    for k in k0..=k1 {
+        let x = k as f64 * step;
+        let (lo, hi) = (
+            (x - COARSER_TOLERANCE).ceil() as i64,
+            (x + COARSER_TOLERANCE).floor() as i64,
+        );
+        for c in lo.max(prev.saturating_add(1)).max(first)..=hi.min(last) {
+            cells += 1;
+            prev = c;
+        }
+    }
+    cells as f64 / (last - first + 1) as f64
+}
+
+/// The lattice V_P's own changes show (see [`lattice`]).
+fn grid_lattice(vp: &[f64]) -> f64 {
     let mut diffs: Vec<f64> = vp
         .windows(2)
         .map(|w| (w[1] - w[0]).abs())
@@ -575,6 +700,28 @@ mod tests {
             .map(|k| 50.0 + 3.0 * (k as f64 * 0.01).sin())
             .collect();
         assert_eq!(lattice(&off), 0.0);
+    }
+
+    #[test]
+    fn a_sensor_lattice_is_found_under_the_logs_grid() {
+        // A sensor reading on a 0.17 % lattice with noise below it, logged per mille: the log's
+        // grid is 0.1 %, the sensor's spacing 0.17 %.
+        let e = noise(20_000, 0.03);
+        let wave = |k: usize| 50.0 + 30.0 * (k as f64 * 0.0007).sin() + e[k];
+        let per_mille = |v: f64| (v * 10.0).round() / 10.0;
+        let coarse: Vec<f64> = (0..e.len())
+            .map(|k| per_mille((wave(k) / 0.17).round() * 0.17))
+            .collect();
+        let q = lattice(&coarse);
+        assert!((q - 0.17).abs() < 0.002, "{q}");
+        // A sensor as fine as the log: the log's grid. Half a grid step of noise fills it.
+        let fine: Vec<f64> = (0..e.len()).map(|k| per_mille(wave(k))).collect();
+        assert!((lattice(&fine) - 0.1).abs() < 1e-9, "{}", lattice(&fine));
+        // A coarser sensor of whole grid steps (0.3 %) is found too.
+        let whole: Vec<f64> = (0..e.len())
+            .map(|k| per_mille((wave(k) / 0.3).round() * 0.3))
+            .collect();
+        assert!((lattice(&whole) - 0.3).abs() < 0.002, "{}", lattice(&whole));
     }
 
     #[test]
