@@ -722,6 +722,22 @@ mod tests {
             .map(|k| per_mille((wave(k) / 0.3).round() * 0.3))
             .collect();
         assert!((lattice(&whole) - 0.3).abs() < 0.002, "{}", lattice(&whole));
+        // Spacings that are no round number of grid steps: a search in coarse steps misses
+        // them (0.3966 % is 0.0034 % from 0.4, which moves its 200th multiple by 0.7 %); the
+        // spacings right next to them explain the log as well, and the sensor's is their middle.
+        for q in [0.193_438, 0.396_587, 0.532_476, 1.460_797] {
+            let read: Vec<f64> = (0..e.len())
+                .map(|k| per_mille((wave(k) / q).round() * q))
+                .collect();
+            let found = lattice(&read);
+            assert!((found - q).abs() < 0.0005 * q.max(1.0), "{q}: {found}");
+        }
+        // Nor is a fine sensor's log taken for a lattice of 1.2-1.5 grid steps: sensor noise
+        // visits every grid value, which only the grid explains.
+        let noisy: Vec<f64> = (0..e.len())
+            .map(|k| per_mille(wave(k) + 3.0 * e[(k * 7) % e.len()]))
+            .collect();
+        assert!((lattice(&noisy) - 0.1).abs() < 1e-9, "{}", lattice(&noisy));
     }
 
     #[test]
