@@ -37,7 +37,7 @@ use std::time::Duration;
 use tokio::net::TcpListener;
 use tokio_modbus::Request;
 
-use super::config::{OnStop, SafetyConfig, SourceConfig};
+use super::config::{ModbusServerConfig, OnStop, SafetyConfig};
 use crate::modbus::blocks::Blocks;
 use crate::modbus::map::{VALVE_FAULT_BIT, WATCHDOG_BIT};
 use crate::modbus::server::{OutOfRange, RegisterBank};
@@ -67,21 +67,20 @@ pub struct Controller {
 }
 
 impl Controller {
-    /// The controller source `[source.modbus-server]` and `[safety]` describe (config checked).
-    pub fn new(source: &SourceConfig, safety: &SafetyConfig) -> Controller {
-        let cfg = &source.modbus_server;
+    /// The controller source `[source.modbus-server]` (`cfg`), `[source]`'s clamp range
+    /// `(op_min_pct, op_max_pct)` and `[safety]` describe.
+    pub fn new(
+        cfg: &ModbusServerConfig,
+        (op_min_pct, op_max_pct): (f64, f64),
+        safety: &SafetyConfig,
+    ) -> Controller {
         let safe_pct = match safety.on_stop {
             OnStop::Hold => None,
             OnStop::GoTo => safety.go_to_pct,
         };
-        let initial = cfg.initial_pct.or(safe_pct).unwrap_or(source.op_min_pct);
-        let bank = RegisterBank::new(
-            cfg.registers,
-            source.op_min_pct,
-            source.op_max_pct,
-            OutOfRange::Exception,
-        )
-        .with_setpoint(initial);
+        let initial = cfg.initial_pct.or(safe_pct).unwrap_or(op_min_pct);
+        let bank = RegisterBank::new(cfg.registers, op_min_pct, op_max_pct, OutOfRange::Exception)
+            .with_setpoint(initial);
         Controller {
             valve: super::config::UNNAMED.to_string(),
             bank: Arc::new(bank),
@@ -195,7 +194,8 @@ mod tests {
             Path::new("t.toml"),
         )
         .unwrap();
-        Controller::new(&cfg.source, &cfg.safety)
+        let server = cfg.source.server().unwrap();
+        Controller::new(server, cfg.source.op_range(), &cfg.safety)
     }
 
     fn write(c: &Controller, per_mille: u16) -> Result<(), ExceptionCode> {

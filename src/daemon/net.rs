@@ -51,10 +51,9 @@ impl Listeners {
             .filter_map(Source::served_bank)
             .cloned()
             .collect();
-        let served = config.controller_source().filter(|_| !banks.is_empty());
+        let served = config.controller_server().filter(|_| !banks.is_empty());
         let modbus = match served {
-            Some(source_cfg) => {
-                let cfg = &source_cfg.modbus_server;
+            Some(cfg) => {
                 let (listener, addr) = bind("[source.modbus-server] listen", cfg.listen.0)?;
                 Some(Served {
                     listener,

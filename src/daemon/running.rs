@@ -102,13 +102,12 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         tracing::info!(
             valve = valve.label(),
             described = %described,
-            source = config.source_of(valve).kind.tag(),
+            source = config.source_of(valve).spec.tag(),
             "valve"
         );
         loggers.push((valve.label().to_string(), logger.handle));
         let source = sources.remove(0);
         let m = metrics.as_ref().and_then(|m| m.valve(i));
-        let source_cfg = config.source_of(valve);
         let comp_metrics = match (&metrics, &valve.compensation) {
             (Some(m), Some(_)) => Some(m.compensation(valve.label())?),
             _ => None,
@@ -116,7 +115,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         let compensation = Compensation::new(
             valve,
             period.as_secs_f64(),
-            (source_cfg.op_min_pct, source_cfg.op_max_pct),
+            config.source_of(valve).op_range(),
             comp_metrics,
         )?;
         lanes.push((
@@ -314,7 +313,7 @@ fn checked_clock(config: &Config, opts: &RunOptions) -> Result<ClockKind, Daemon
     if let (ClockKind::Virtual, Some(v)) = (clock, real) {
         return Err(DaemonError::VirtualClock(v.kind.tag().into()));
     }
-    if clock == ClockKind::Virtual && config.controller_source().is_some() {
+    if clock == ClockKind::Virtual && config.controller_server().is_some() {
         return Err(DaemonError::VirtualClockController);
     }
     Ok(clock)

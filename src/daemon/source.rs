@@ -6,8 +6,9 @@
 //! sources are seeded (ChaCha8) and depend on the time only, not on how often they are asked, so a
 //! skipped cycle does not change what later cycles get. Asking never allocates.
 //!
-//! The generators themselves live in [`crate::signal`] (offline generation uses them too); a
-//! source adds the clamp to `[source]`'s range. Generated sources do not know about valves or
+//! A source is built from a checked [`SourceConfig`], whose [`SourceSpec`] holds the settings of
+//! its kind only. The generators themselves live in [`crate::signal`] (offline generation uses
+//! them too); a source adds the clamp to `[source]`'s range. Generated sources do not know about valves or
 //! timing.
 //! The `modbus-server` source is the exception: its set-points were range-checked when written
 //! (its safe O_P, like the stop action's, is not clamped), and the loop hands it each cycle's row
@@ -15,11 +16,11 @@
 
 use std::sync::Arc;
 
-use super::config::{SafetyConfig, SourceConfig, SourceKind};
+use super::config::{SafetyConfig, SourceConfig, SourceSpec};
 use super::hil::Controller;
 use crate::modbus::server::RegisterBank;
 use crate::recording::log_format::Sample;
-use crate::signal::{Prbs, RandomSteps, Signal, StepsParams};
+use crate::signal::{Prbs, RandomSteps, Signal};
 
 /// An O_P source with its clamp range.
 #[derive(Debug)]
@@ -39,12 +40,22 @@ enum Kind {
 impl Source {
     /// The source `[source]` describes, for a loop of period `period_s` (`[safety]` gives the
     /// safe O_P of the controller's watchdog).
-    ///
-    /// The config must have been checked by [`super::config::Config::load`] (ranges, tables).
     pub fn new(cfg: &SourceConfig, safety: &SafetyConfig, period_s: f64) -> Source {
-        let kind = match cfg.kind {
-            SourceKind::ModbusServer => Kind::Controller(Controller::new(cfg, safety)),
-            _ => Kind::Generated(Box::new(generator(cfg, period_s))),
+        let generated = |signal| Kind::Generated(Box::new(signal));
+        let kind = match &cfg.spec {
+            SourceSpec::RandomSteps(p) => generated(Signal::RandomSteps(RandomSteps::new(p))),
+            SourceSpec::Steps(p) => generated(Signal::Steps(p.clone())),
+            SourceSpec::Ramp(p) => generated(Signal::Ramp(p.clone())),
+            SourceSpec::Sine(p) => generated(Signal::Sine(p.clone())),
+            SourceSpec::Prbs(p) => generated(Signal::Prbs(Prbs::new(p))),
+            SourceSpec::Replay(r) => generated(Signal::Replay {
+                op: r.op_pct.clone(),
+                period_s,
+            }),
+            SourceSpec::Constant(p) => generated(Signal::Constant(p.op_pct)),
+            SourceSpec::ModbusServer(server) => {
+                Kind::Controller(Controller::new(server, cfg.op_range(), safety))
+            }
         };
         Source {
             kind,
@@ -99,34 +110,6 @@ impl Source {
         if let Kind::Controller(c) = &self.kind {
             c.feedback(row);
         }
-    }
-}
-
-/// The time-only generator of a generated source kind (`modbus-server` gets a constant
-/// `op_min_pct`; [`Source::new`] never asks for it).
-fn generator(cfg: &SourceConfig, period_s: f64) -> Signal {
-    match cfg.kind {
-        SourceKind::RandomSteps => Signal::RandomSteps(RandomSteps::new(&cfg.random_steps)),
-        SourceKind::Steps => Signal::Steps(cfg.steps.clone().unwrap_or_else(|| StepsParams {
-            levels_pct: vec![cfg.op_min_pct],
-            hold_s: 1.0,
-            repeat: false,
-        })),
-        SourceKind::Ramp => Signal::Ramp(cfg.ramp.clone()),
-        SourceKind::Sine => Signal::Sine(cfg.sine.clone()),
-        SourceKind::Prbs => Signal::Prbs(Prbs::new(&cfg.prbs)),
-        SourceKind::Replay => Signal::Replay {
-            op: cfg
-                .replay
-                .as_ref()
-                .map(|r| r.op_pct.clone())
-                .unwrap_or_default(),
-            period_s,
-        },
-        SourceKind::Constant => {
-            Signal::Constant(cfg.constant.as_ref().map_or(cfg.op_min_pct, |c| c.op_pct))
-        }
-        SourceKind::ModbusServer => Signal::Constant(cfg.op_min_pct),
     }
 }
 

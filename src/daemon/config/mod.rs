@@ -1,4 +1,5 @@
-//! The daemon's TOML configuration: types, defaults, range checks and the embedded default.
+//! The daemon's TOML configuration: the file's shape, its checks, and the checked [`Config`]
+//! the daemon runs from; the embedded default.
 //!
 //! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]`, `[metrics]`
 //! `[health]` and `[diagnosis]`, all optional (no `[metrics]`: no Prometheus endpoint; no
@@ -7,15 +8,21 @@
 //! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
 //! each kind live in their own sub-table (`[valve.emulated]`, `[source.sine]`, ...), so a file
 //! can keep settings for several kinds and switch with one line, and every key keeps its exact
-//! line in error messages. Every error names the file, the line and the dotted key, and says
-//! what is allowed. Loading also resolves what the config points at (the model file, the
-//! replayed recording), so a missing file is reported against the key that names it.
+//! line in error messages.
+//!
+//! Two layers: serde reads the file into private types shaped as the file is (a `kind` and a
+//! table for any kind); their checks turn it into [`Config`], whose [`SourceConfig`] holds the
+//! chosen kind's settings only ([`SourceSpec`], one variant per kind), so code downstream
+//! matches on what is there and re-checks nothing. Every error names the file, the line and the
+//! dotted key, and says what is allowed. Checking also resolves what the config points at (the
+//! model file, the replayed recording), so a missing file is reported against the key that
+//! names it.
 //!
 //! Files: this one holds [`Config`], loading, and the small tables (`[loop]`, `[safety]`,
 //! `[log]`, `[metrics]`); [`valve`] holds `[valve]` and [`source`] holds `[source]`, each with
-//! the checks of its tables (`check_in`, as [`RegisterMap::check_in`] does for a register map).
+//! the checks of its tables (as [`RegisterMap::check_in`] does for a register map).
 //!
-//! This module does not run anything; [`crate::daemon`] builds the loop from a [`Config`].
+//! Not here: running anything; [`crate::daemon`] builds the loop from a [`Config`].
 //!
 //! [`RegisterMap::check_in`]: crate::modbus::map::RegisterMap::check_in
 
@@ -36,9 +43,12 @@ pub use diagnosis::DiagnosisConfig;
 pub use health::HealthConfig;
 pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
-    SineConfig, SourceConfig, SourceKind, StepsConfig,
+    SineConfig, SourceConfig, SourceSpec, StepsConfig,
 };
 pub use valve::{EmulatedConfig, ValveConfig, ValveKind, UNNAMED};
+
+use source::SourceTable;
+use valve::ValveTable;
 
 /// The default configuration, `config/emulated.toml`, embedded so default == file by construction.
 pub const DEFAULT_TOML: &str = include_str!("../../../config/emulated.toml");
@@ -49,29 +59,20 @@ pub const MAX_CONNECTIONS: usize = 1000;
 /// The name the embedded default goes by in messages.
 pub const DEFAULT_LABEL: &str = "config/emulated.toml (embedded default)";
 
-/// A whole daemon configuration, checked and resolved.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// A whole daemon configuration, checked and resolved: the valves and sources hold only the
+/// settings of the kinds in use.
+#[derive(Debug, Clone)]
 pub struct Config {
     /// Loop rate and clock.
-    #[serde(rename = "loop", default)]
     pub loop_: LoopConfig,
     /// The valves, in the order of the file: one `[valve]` table or several `[[valve]]` tables.
     /// The loop drives them in this order within each cycle.
-    #[serde(
-        rename = "valve",
-        default = "valve::one_default",
-        deserialize_with = "valve::one_or_many"
-    )]
     pub valves: Vec<ValveConfig>,
     /// The source of O_P of every valve that has no `source` table of its own.
-    #[serde(default)]
     pub source: SourceConfig,
     /// What to do on stop.
-    #[serde(default)]
     pub safety: SafetyConfig,
     /// The CSV log.
-    #[serde(default)]
     pub log: LogConfig,
     /// The Prometheus endpoint, if any.
     pub metrics: Option<MetricsConfig>,
@@ -79,6 +80,30 @@ pub struct Config {
     pub health: Option<HealthConfig>,
     /// The live diagnosis of every valve, if any (needs `health`).
     pub diagnosis: Option<DiagnosisConfig>,
+}
+
+/// A config file as written, before its checks (field order is the order `expected one of`
+/// lists the tables in).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConfigFile {
+    #[serde(rename = "loop", default)]
+    loop_: LoopConfig,
+    #[serde(
+        rename = "valve",
+        default = "valve::one_default",
+        deserialize_with = "valve::one_or_many"
+    )]
+    valves: Vec<ValveTable>,
+    #[serde(default)]
+    source: SourceTable,
+    #[serde(default)]
+    safety: SafetyConfig,
+    #[serde(default)]
+    log: LogConfig,
+    metrics: Option<MetricsConfig>,
+    health: Option<HealthConfig>,
+    diagnosis: Option<DiagnosisConfig>,
 }
 
 /// `[loop]`: rate and clock.
@@ -313,8 +338,8 @@ impl Config {
     pub fn load(path: Option<&Path>) -> Result<Config, TomlError> {
         match path {
             Some(p) => {
-                let (config, text): (Config, String) = toml_file::load(p)?;
-                config.resolve(&text, p)
+                let (file, text): (ConfigFile, String) = toml_file::load(p)?;
+                file.check(&text, p)
             }
             None => Config::from_toml(DEFAULT_TOML, Path::new(DEFAULT_LABEL)),
         }
@@ -327,45 +352,56 @@ impl Config {
 
     /// Parses, checks and resolves TOML `text` (`label` names it in messages).
     pub fn from_toml(text: &str, label: &Path) -> Result<Config, TomlError> {
-        let config: Config = toml_file::parse(text, label)?;
-        config.resolve(text, label)
+        let file: ConfigFile = toml_file::parse(text, label)?;
+        file.check(text, label)
     }
+}
 
+impl ConfigFile {
     /// The checks of every table in file order, then those across tables; loads the model and
-    /// the replayed recording.
-    fn resolve(mut self, text: &str, path: &Path) -> Result<Config, TomlError> {
+    /// the replayed recording. `text` is the file's text, `path` names it.
+    fn check(self, text: &str, path: &Path) -> Result<Config, TomlError> {
         let c = Check::whole(text, path);
         self.loop_.check_in(&c)?;
-        self.source.check_in(&c, &self.loop_)?;
-        valve::check_all(&mut self.valves, &c, &self.loop_)?;
-        if let Some(v) = (self.valves.iter()).find(|v| {
-            v.source
-                .as_ref()
-                .is_some_and(|s| s.kind == SourceKind::ModbusServer)
-        }) {
+        let source = self.source.check(&c, &self.loop_)?;
+        let valves = valve::check_all(self.valves, &c, &self.loop_)?;
+        if let Some(v) =
+            (valves.iter()).find(|v| v.source.as_ref().is_some_and(|s| s.server().is_some()))
+        {
             return Err(c.bad(
                 "valve.source",
                 "kind",
                 format!("valve `{}`: the process controller's server is the [source] table (kind = \"modbus-server\"), one for every valve it drives: leave this valve's [valve.source] out to have the controller drive it", v.label()),
             ));
         }
-        if let Some(s) = self.controller_source() {
-            let driven = self.valves.iter().filter(|v| v.source.is_none()).count();
-            s.modbus_server.check_blocks(&c, driven)?;
+        let config = Config {
+            loop_: self.loop_,
+            valves,
+            source,
+            safety: self.safety,
+            log: self.log,
+            metrics: self.metrics,
+            health: self.health,
+            diagnosis: self.diagnosis,
+        };
+        if let Some(s) = config.controller_server() {
+            let driven = config.valves.iter().filter(|v| v.source.is_none()).count();
+            s.check_blocks(&c, driven)?;
         }
-        self.safety.check_in(&c)?;
-        self.log.check_in(&c)?;
-        if let Some(h) = &self.health {
-            h.check_in(&c, self.loop_.period_s())?;
+        config.safety.check_in(&c)?;
+        config.log.check_in(&c)?;
+        let period_s = config.loop_.period_s();
+        if let Some(h) = &config.health {
+            h.check_in(&c, period_s)?;
         }
-        if let Some(d) = &self.diagnosis {
-            d.check_in(&c, self.loop_.period_s(), self.health.is_some())?;
+        if let Some(d) = &config.diagnosis {
+            d.check_in(&c, period_s, config.health.is_some())?;
         }
-        if let Some(m) = &self.metrics {
+        if let Some(m) = &config.metrics {
             c.max_connections("metrics", m.max_connections)?;
         }
-        if let (Some(m), Some(source)) = (&self.metrics, self.controller_source()) {
-            let hil = source.modbus_server.listen.0;
+        if let (Some(m), Some(server)) = (&config.metrics, config.controller_server()) {
+            let hil = server.listen.0;
             if m.listen.0 == hil && hil.port() != 0 {
                 return Err(c.bad(
                     "metrics",
@@ -374,7 +410,7 @@ impl Config {
                 ));
             }
         }
-        Ok(self)
+        Ok(config)
     }
 }
 
@@ -384,11 +420,9 @@ impl Config {
         valve.source.as_ref().unwrap_or(&self.source)
     }
 
-    /// The source of the process controller (`[source]`), when it drives a valve.
-    pub fn controller_source(&self) -> Option<&SourceConfig> {
-        (self.valves.iter())
-            .map(|v| self.source_of(v))
-            .find(|s| s.kind == SourceKind::ModbusServer)
+    /// The server of the process controller (`[source.modbus-server]`), when it drives a valve.
+    pub fn controller_server(&self) -> Option<&ModbusServerConfig> {
+        (self.valves.iter()).find_map(|v| self.source_of(v).server())
     }
 }
 

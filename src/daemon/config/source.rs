@@ -1,8 +1,12 @@
-//! `[source]`: the kind of O_P source, its clamp range and the settings of each kind
-//! (`[source.random-steps]` ... `[source.modbus-server]`), with their checks; loading resolves
-//! a replayed recording.
+//! `[source]`: the O_P source of a loop. The file's table (`SourceTable`, private to the
+//! config) holds a `kind`, the clamp range and a sub-table for any kind (`[source.random-steps]`
+//! ... `[source.modbus-server]`), so a file can keep the settings of several kinds and switch
+//! with one line; its check turns it into a [`SourceConfig`], the clamp range and a
+//! [`SourceSpec`] holding the settings of the chosen kind only, checked (a replayed recording
+//! loaded onto the loop grid). A kind whose table is missing gets the table's defaults where
+//! it has them and is refused where it has none (`steps`, `replay`, `constant`).
 //!
-//! Checking only: the sources themselves are [`crate::daemon::source`] and [`crate::daemon::hil`].
+//! Not here: running a source is [`crate::daemon::source`] and [`crate::daemon::hil`].
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -23,39 +27,93 @@ pub use crate::signal::{
 };
 use crate::toml_file::{self, TomlError};
 
-/// `[source]`: the kind of O_P source, the clamp range, and the settings of each kind.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+/// A checked source of O_P: the clamp range and the settings of the kind in use.
+#[derive(Debug, Clone)]
 pub struct SourceConfig {
-    /// The source in use.
-    pub kind: SourceKind,
     /// Lowest O_P ever sent, %.
     pub op_min_pct: f64,
-    /// Highest O_P ever sent, %.
+    /// Highest O_P ever sent, % (above `op_min_pct`).
     pub op_max_pct: f64,
-    /// `[source.random-steps]`.
-    #[serde(rename = "random-steps")]
-    pub random_steps: RandomStepsConfig,
-    /// `[source.steps]`.
-    pub steps: Option<StepsConfig>,
-    /// `[source.ramp]`.
-    pub ramp: RampConfig,
-    /// `[source.sine]`.
-    pub sine: SineConfig,
-    /// `[source.prbs]`.
-    pub prbs: PrbsConfig,
-    /// `[source.replay]`.
-    pub replay: Option<ReplayConfig>,
-    /// `[source.constant]`.
-    pub constant: Option<ConstantConfig>,
-    /// `[source.modbus-server]`.
-    #[serde(rename = "modbus-server")]
-    pub modbus_server: ModbusServerConfig,
+    /// The kind in use and its settings.
+    pub spec: SourceSpec,
 }
 
-impl Default for SourceConfig {
+impl SourceConfig {
+    /// The clamp range, `(op_min_pct, op_max_pct)`.
+    pub fn op_range(&self) -> (f64, f64) {
+        (self.op_min_pct, self.op_max_pct)
+    }
+
+    /// The server a process controller writes into, when this is a `modbus-server` source.
+    pub fn server(&self) -> Option<&ModbusServerConfig> {
+        match &self.spec {
+            SourceSpec::ModbusServer(s) => Some(s),
+            _ => None,
+        }
+    }
+}
+
+/// The kind of O_P source in use, with its checked settings: one variant per `[source] kind`.
+#[derive(Debug, Clone)]
+pub enum SourceSpec {
+    /// `random-steps`, the paper's experiment: random levels held for random times.
+    RandomSteps(RandomStepsConfig),
+    /// `steps`: a list of levels, each held for the same time.
+    Steps(StepsConfig),
+    /// `ramp`: a linear ramp (or triangle).
+    Ramp(RampConfig),
+    /// `sine`: a sine wave.
+    Sine(SineConfig),
+    /// `prbs`: a pseudo-random binary signal.
+    Prbs(PrbsConfig),
+    /// `replay`: the O_P column of a recording, loaded.
+    Replay(ReplayConfig),
+    /// `constant`: one fixed O_P.
+    Constant(ConstantConfig),
+    /// `modbus-server`: whatever a process controller writes into the daemon's Modbus TCP
+    /// server (HIL).
+    ModbusServer(ModbusServerConfig),
+}
+
+impl SourceSpec {
+    /// The name of the kind in config files.
+    pub fn tag(&self) -> &'static str {
+        match self {
+            SourceSpec::RandomSteps(_) => "random-steps",
+            SourceSpec::Steps(_) => "steps",
+            SourceSpec::Ramp(_) => "ramp",
+            SourceSpec::Sine(_) => "sine",
+            SourceSpec::Prbs(_) => "prbs",
+            SourceSpec::Replay(_) => "replay",
+            SourceSpec::Constant(_) => "constant",
+            SourceSpec::ModbusServer(_) => "modbus-server",
+        }
+    }
+}
+
+/// `[source]` as the file has it: the kind in use, the clamp range, and the tables of any kind
+/// (field order is the order `expected one of` lists them in).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub(super) struct SourceTable {
+    kind: SourceKind,
+    op_min_pct: f64,
+    op_max_pct: f64,
+    #[serde(rename = "random-steps")]
+    random_steps: RandomStepsConfig,
+    steps: Option<StepsConfig>,
+    ramp: RampConfig,
+    sine: SineConfig,
+    prbs: PrbsConfig,
+    replay: Option<ReplayTable>,
+    constant: Option<ConstantConfig>,
+    #[serde(rename = "modbus-server")]
+    modbus_server: ModbusServerConfig,
+}
+
+impl Default for SourceTable {
     fn default() -> Self {
-        SourceConfig {
+        SourceTable {
             kind: SourceKind::RandomSteps,
             op_min_pct: 0.0,
             op_max_pct: 100.0,
@@ -71,52 +129,33 @@ impl Default for SourceConfig {
     }
 }
 
-/// O_P sources.
+/// `[source] kind` as written (the names are [`SourceSpec::tag`]'s).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum SourceKind {
-    /// The paper's experiment: random levels held for random times.
+enum SourceKind {
     RandomSteps,
-    /// A list of levels, each held for the same time.
     Steps,
-    /// A linear ramp (or triangle).
     Ramp,
-    /// A sine wave.
     Sine,
-    /// A pseudo-random binary signal.
     Prbs,
-    /// The O_P column of a recording.
     Replay,
-    /// One fixed O_P.
     Constant,
-    /// Whatever a process controller writes into the daemon's Modbus TCP server (HIL).
     ModbusServer,
 }
 
-impl SourceKind {
-    /// The name used in config files.
-    pub fn tag(self) -> &'static str {
-        match self {
-            SourceKind::RandomSteps => "random-steps",
-            SourceKind::Steps => "steps",
-            SourceKind::Ramp => "ramp",
-            SourceKind::Sine => "sine",
-            SourceKind::Prbs => "prbs",
-            SourceKind::Replay => "replay",
-            SourceKind::Constant => "constant",
-            SourceKind::ModbusServer => "modbus-server",
-        }
-    }
-}
-
-/// `[source.replay]`.
+/// `[source.replay]` as written.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct ReplayTable {
+    file: PathBuf,
+}
+
+/// A checked `[source.replay]`: the recording and its O_P.
+#[derive(Debug, Clone)]
 pub struct ReplayConfig {
     /// The recording whose O_P column is replayed.
     pub file: PathBuf,
-    /// Its O_P held onto the loop grid (slot k = index k), resolved at load time.
-    #[serde(skip)]
+    /// Its O_P held onto the loop grid (slot k = index k).
     pub op_pct: Arc<Vec<f64>>,
 }
 
@@ -180,10 +219,14 @@ fn ranges(c: &Check<'_>, table: &str, checks: &[Range<'_>]) -> Result<(), TomlEr
 /// The longest hold, ramp or period accepted, s.
 const DAY_S: f64 = 86_400.0;
 
-impl SourceConfig {
+impl SourceTable {
     /// The checks of `[source]` and of the sub-table its `kind` uses, for a loop of `[loop]`
-    /// `timing`; a replayed recording is loaded here.
-    pub(super) fn check_in(&mut self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
+    /// `timing`: the chosen kind's settings, with a replayed recording loaded.
+    pub(super) fn check(
+        self,
+        c: &Check<'_>,
+        timing: &LoopConfig,
+    ) -> Result<SourceConfig, TomlError> {
         let opening = "an opening in %";
         ranges(
             c,
@@ -200,70 +243,64 @@ impl SourceConfig {
                 format!("must be above op_min_pct = {}", self.op_min_pct),
             ));
         }
-        let tag = self.kind.tag();
-        let missing = |table: &str, example: &str| {
+        // The kinds without defaults, whose names are their tables'.
+        let missing = |kind: &str, example: &str| {
             c.bad(
                 "source",
                 "kind",
-                format!("kind = \"{tag}\" needs a [source.{table}] table, e.g. {example}"),
+                format!("kind = \"{kind}\" needs a [source.{kind}] table, e.g. {example}"),
             )
         };
-        match self.kind {
-            SourceKind::RandomSteps => self.random_steps.check_in(c),
-            SourceKind::Steps => self
-                .steps
-                .as_ref()
-                .ok_or_else(|| missing("steps", "levels_pct = [30.0, 60.0], hold_s = 5.0"))?
-                .check_in(c),
+        let spec = match self.kind {
+            SourceKind::RandomSteps => {
+                self.random_steps.check_in(c)?;
+                SourceSpec::RandomSteps(self.random_steps)
+            }
+            SourceKind::Steps => {
+                let steps = self
+                    .steps
+                    .ok_or_else(|| missing("steps", "levels_pct = [30.0, 60.0], hold_s = 5.0"))?;
+                steps.check_in(c)?;
+                SourceSpec::Steps(steps)
+            }
             SourceKind::Ramp => {
-                let r = &self.ramp;
-                ranges(
-                    c,
-                    "source.ramp",
-                    &[
-                        ("from_pct", r.from_pct, 0.0, 100.0, "a level in %"),
-                        ("to_pct", r.to_pct, 0.0, 100.0, "a level in %"),
-                        ("duration_s", r.duration_s, 1e-3, DAY_S, "a ramp time in s"),
-                    ],
-                )
+                self.ramp.check_in(c)?;
+                SourceSpec::Ramp(self.ramp)
             }
             SourceKind::Sine => {
-                let w = &self.sine;
-                ranges(
-                    c,
-                    "source.sine",
-                    &[
-                        ("mean_pct", w.mean_pct, 0.0, 100.0, "a level in %"),
-                        (
-                            "amplitude_pct",
-                            w.amplitude_pct,
-                            0.0,
-                            100.0,
-                            "an amplitude in %",
-                        ),
-                        ("period_s", w.period_s, 1e-3, DAY_S, "a period in s"),
-                    ],
-                )
+                self.sine.check_in(c)?;
+                SourceSpec::Sine(self.sine)
             }
-            SourceKind::Prbs => self.prbs.check_in(c, timing.rate_hz),
-            SourceKind::Replay => self
-                .replay
-                .as_mut()
-                .ok_or_else(|| missing("replay", "file = \"recording.csv\""))?
-                .resolve(c, timing.period_s()),
+            SourceKind::Prbs => {
+                self.prbs.check_in(c, timing.rate_hz)?;
+                SourceSpec::Prbs(self.prbs)
+            }
+            SourceKind::Replay => SourceSpec::Replay(
+                self.replay
+                    .ok_or_else(|| missing("replay", "file = \"recording.csv\""))?
+                    .load(c, timing.period_s())?,
+            ),
             SourceKind::Constant => {
                 let k = self
                     .constant
-                    .as_ref()
                     .ok_or_else(|| missing("constant", "op_pct = 50.0"))?;
                 ranges(
                     c,
                     "source.constant",
                     &[("op_pct", k.op_pct, 0.0, 100.0, opening)],
-                )
+                )?;
+                SourceSpec::Constant(k)
             }
-            SourceKind::ModbusServer => self.modbus_server.check_in(c, timing.clock),
-        }
+            SourceKind::ModbusServer => {
+                self.modbus_server.check_in(c, timing.clock)?;
+                SourceSpec::ModbusServer(self.modbus_server)
+            }
+        };
+        Ok(SourceConfig {
+            op_min_pct: self.op_min_pct,
+            op_max_pct: self.op_max_pct,
+            spec,
+        })
     }
 }
 
@@ -296,6 +333,48 @@ impl RandomStepsConfig {
                     DAY_S,
                     "a hold time in s, above hold_min_s",
                 ),
+            ],
+        )
+    }
+}
+
+impl RampConfig {
+    /// The checks of `[source.ramp]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        ranges(
+            c,
+            "source.ramp",
+            &[
+                ("from_pct", self.from_pct, 0.0, 100.0, "a level in %"),
+                ("to_pct", self.to_pct, 0.0, 100.0, "a level in %"),
+                (
+                    "duration_s",
+                    self.duration_s,
+                    1e-3,
+                    DAY_S,
+                    "a ramp time in s",
+                ),
+            ],
+        )
+    }
+}
+
+impl SineConfig {
+    /// The checks of `[source.sine]`.
+    fn check_in(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        ranges(
+            c,
+            "source.sine",
+            &[
+                ("mean_pct", self.mean_pct, 0.0, 100.0, "a level in %"),
+                (
+                    "amplitude_pct",
+                    self.amplitude_pct,
+                    0.0,
+                    100.0,
+                    "an amplitude in %",
+                ),
+                ("period_s", self.period_s, 1e-3, DAY_S, "a period in s"),
             ],
         )
     }
@@ -346,9 +425,9 @@ impl PrbsConfig {
     }
 }
 
-impl ReplayConfig {
+impl ReplayTable {
     /// Loads the recording of `[source.replay]` onto the loop grid of `period_s`.
-    fn resolve(&mut self, c: &Check<'_>, period_s: f64) -> Result<(), TomlError> {
+    fn load(self, c: &Check<'_>, period_s: f64) -> Result<ReplayConfig, TomlError> {
         let op = load_replay(&self.file, period_s).map_err(|m| {
             c.bad(
                 "source.replay",
@@ -356,8 +435,10 @@ impl ReplayConfig {
                 format!("cannot replay `{}`: {m}", self.file.display()),
             )
         })?;
-        self.op_pct = Arc::new(op);
-        Ok(())
+        Ok(ReplayConfig {
+            file: self.file,
+            op_pct: Arc::new(op),
+        })
     }
 }
 

@@ -22,7 +22,7 @@ fn shipped_file_is_the_embedded_default_and_states_the_defaults() {
     empty.valves[0].emulated.model = Some(ModelKind::Pincart2);
     assert_eq!(format!("{shipped:?}"), format!("{empty:?}"));
     assert_eq!(shipped.loop_.rate_hz, 100.0);
-    assert_eq!(shipped.source.kind, SourceKind::RandomSteps);
+    assert!(matches!(shipped.source.spec, SourceSpec::RandomSteps(_)));
     assert_eq!(
         shipped.valves[0].emulated.model_spec().unwrap().model,
         ModelKind::Pincart2
@@ -48,7 +48,7 @@ fn commented_examples_in_the_shipped_file_are_valid() {
     for kind in ["random-steps", "steps", "ramp", "sine", "prbs", "constant"] {
         let t = text.replace("kind = \"random-steps\"", &format!("kind = \"{kind}\""));
         let c = Config::from_toml(&t, Path::new("examples.toml")).unwrap();
-        assert_eq!(c.source.kind.tag(), kind);
+        assert_eq!(c.source.spec.tag(), kind);
     }
     let t = text.replace("kind = \"random-steps\"", "kind = \"replay\"");
     let e = Config::from_toml(&t, Path::new("examples.toml"))
@@ -90,6 +90,15 @@ fn errors_name_file_line_key_and_what_is_allowed() {
         e.starts_with("c.toml:2: source.kind: kind = \"steps\" needs a [source.steps] table"),
         "{e}"
     );
+    // A kind whose table has no defaults needs it.
+    for (text, want) in [
+        ("[source]\nkind = \"replay\"\n", "c.toml:2: source.kind: kind = \"replay\" needs a [source.replay] table, e.g. file = \"recording.csv\""),
+        ("[source]\nkind = \"constant\"\n", "c.toml:2: source.kind: kind = \"constant\" needs a [source.constant] table, e.g. op_pct = 50.0"),
+        ("[valve]\nkind = \"modbus-tcp\"\n", "c.toml:2: valve.modbus-tcp: kind = \"modbus-tcp\" needs this table, e.g. address = \"127.0.0.1:5502\""),
+        ("[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\nkind = \"modbus-rtu\"\n", "c.toml:5: valve.modbus-rtu: kind = \"modbus-rtu\" needs this table, e.g. port = \"/dev/ttyUSB0\""),
+    ] {
+        assert_eq!(err(text), want);
+    }
     let e = err("[safety]\non_stop = \"go-to\"\n");
     assert!(
         e.starts_with("c.toml:2: safety.on_stop: on_stop = \"go-to\" needs go_to_pct"),
@@ -161,7 +170,7 @@ fn modbus_server_and_metrics_errors_name_their_key() {
     }
     // Defaults: loopback 5020, 1 s watchdog, per-mille map with a status register; no metrics.
     let c = Config::from_toml(hil, Path::new("c.toml")).unwrap();
-    let m = &c.source.modbus_server;
+    let m = c.source.server().unwrap();
     assert_eq!(m.listen.0.to_string(), "127.0.0.1:5020");
     assert_eq!(m.watchdog_s, 1.0);
     assert_eq!(m.registers.status.map(|s| s.address), Some(2));
@@ -174,9 +183,8 @@ fn modbus_server_and_metrics_errors_name_their_key() {
 fn shipped_hil_config_serves_loopback_with_metrics() {
     let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/hil.toml"));
     let c = Config::load(Some(path)).unwrap();
-    assert_eq!(c.source.kind, SourceKind::ModbusServer);
     assert_eq!(c.valves[0].kind, ValveKind::Emulated);
-    let m = &c.source.modbus_server;
+    let m = c.source.server().unwrap();
     assert!(m.listen.0.ip().is_loopback());
     // The map written out in the file is the default one.
     assert_eq!(m.registers, ModbusServerConfig::default().registers);
@@ -236,8 +244,12 @@ fn several_valves_are_named_tables_with_their_own_sources() {
     let c = Config::from_toml(&text, Path::new("two-valves.toml")).unwrap();
     let names: Vec<&str> = c.valves.iter().map(|v| v.label()).collect();
     assert_eq!(names, ["level", "cyclone"]);
-    assert_eq!(c.source_of(&c.valves[0]).random_steps.seed, 1);
-    assert_eq!(c.source_of(&c.valves[1]).random_steps.seed, 2);
+    let seed = |v: &ValveConfig| match &c.source_of(v).spec {
+        SourceSpec::RandomSteps(p) => p.seed,
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(seed(&c.valves[0]), 1);
+    assert_eq!(seed(&c.valves[1]), 2);
     assert_eq!(c.source_of(&c.valves[1]).op_min_pct, 30.0);
     // A single [valve] is one unnamed valve driven by [source].
     let one = Config::from_toml("[valve]\nkind = \"emulated\"\n", Path::new("c.toml")).unwrap();
@@ -278,7 +290,7 @@ fn a_process_controller_drives_several_valves_from_blocks_that_hold_its_map() {
     let two =
         "[source]\nkind = \"modbus-server\"\n[[valve]]\nname = \"a\"\n[[valve]]\nname = \"b\"\n";
     let c = Config::from_toml(two, Path::new("c.toml")).unwrap();
-    assert_eq!(c.controller_source().unwrap().modbus_server.block_size, 10);
+    assert_eq!(c.controller_server().unwrap().block_size, 10);
     let e = err(&format!("{two}[source.modbus-server]\nblock_size = 2\n"));
     assert!(
         e.starts_with(

@@ -10,6 +10,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
+use super::source::SourceTable;
 use super::{Check, LoopConfig, SourceConfig};
 use crate::compensate::{CompensateError, CompensationConfig, Compensator};
 use crate::modbus::link::{RtuLink, TcpLink};
@@ -18,49 +19,62 @@ use crate::modbus::profile;
 use crate::model::{bundled, DriftSpec, ModelError, ModelKind, ModelSpec};
 use crate::toml_file::{self, TomlError};
 
-/// `[valve]`: which backend, and the settings of each kind.
-///
-/// A new backend adds a variant to [`ValveKind`] and an optional sub-table field here.
-#[derive(Debug, Clone, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// A checked valve: its name, its own source if any, the backend and the settings of each
+/// kind, its register map resolved.
+#[derive(Debug, Clone)]
 pub struct ValveConfig {
     /// The valve's name in logs, file names, metrics (label `valve`) and the summary; required
     /// with several valves.
-    #[serde(default)]
     pub name: Option<String>,
     /// `[valve.source]`: this valve's source of O_P (default: `[source]`).
-    #[serde(default)]
     pub source: Option<SourceConfig>,
     /// The backend in use.
-    #[serde(default)]
     pub kind: ValveKind,
     /// `[valve.emulated]`.
-    #[serde(default)]
     pub emulated: EmulatedConfig,
     /// `[valve.modbus-tcp]`.
-    #[serde(rename = "modbus-tcp")]
     pub tcp: Option<TcpLink>,
     /// `[valve.modbus-rtu]`.
-    #[serde(rename = "modbus-rtu")]
     pub rtu: Option<RtuLink>,
     /// A shipped register profile of a real device (`config/profiles/NAME.toml`), the map
     /// under `[valve.registers]` (Modbus kinds).
-    #[serde(default)]
     pub profile: Option<String>,
-    /// `[valve.registers]` as written: each key given replaces the profile's (or the default).
-    #[serde(default, rename = "registers")]
-    register_keys: RegisterKeys,
     /// The positioner's register map: `[valve.registers]` over the profile's map, or over the
-    /// default one (set by the checks).
-    #[serde(skip)]
+    /// default one.
     pub registers: RegisterMap,
     /// A model file whose answer to each window's O_P is the health baseline (default: the
     /// first window with enough steps).
-    #[serde(default)]
     pub health_baseline_model: Option<PathBuf>,
     /// `[valve.compensation]`: the O_P compensated for the identified valve before it is sent.
-    #[serde(default)]
     pub compensation: Option<CompensationConfig>,
+}
+
+/// `[valve]` (or one `[[valve]]`) as the file has it: the backend in use and the tables of any
+/// kind (field order is the order `expected one of` lists them in).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ValveTable {
+    #[serde(default)]
+    name: Option<String>,
+    #[serde(default)]
+    source: Option<SourceTable>,
+    #[serde(default)]
+    kind: ValveKind,
+    #[serde(default)]
+    emulated: EmulatedConfig,
+    #[serde(rename = "modbus-tcp")]
+    tcp: Option<TcpLink>,
+    #[serde(rename = "modbus-rtu")]
+    rtu: Option<RtuLink>,
+    #[serde(default)]
+    profile: Option<String>,
+    /// `[valve.registers]` as written: each key given replaces the profile's (or the default).
+    #[serde(default, rename = "registers")]
+    register_keys: RegisterKeys,
+    #[serde(default)]
+    health_baseline_model: Option<PathBuf>,
+    #[serde(default)]
+    compensation: Option<CompensationConfig>,
 }
 
 /// Valve backends.
@@ -154,23 +168,23 @@ impl Default for EmulatedConfig {
 pub const UNNAMED: &str = "valve";
 
 /// One default valve, for a config without any `[valve]` table.
-pub(super) fn one_default() -> Vec<ValveConfig> {
-    vec![ValveConfig::default()]
+pub(super) fn one_default() -> Vec<ValveTable> {
+    vec![ValveTable::default()]
 }
 
 /// Reads `valve` as one `[valve]` table or as `[[valve]]` tables, keeping the errors (and
 /// their lines) of either form.
 pub(super) fn one_or_many<'de, D: serde::Deserializer<'de>>(
     d: D,
-) -> Result<Vec<ValveConfig>, D::Error> {
+) -> Result<Vec<ValveTable>, D::Error> {
     struct OneOrMany;
     impl<'de> serde::de::Visitor<'de> for OneOrMany {
-        type Value = Vec<ValveConfig>;
+        type Value = Vec<ValveTable>;
         fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
             f.write_str("a [valve] table or [[valve]] tables")
         }
         fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
-            let one = ValveConfig::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+            let one = ValveTable::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
             Ok(vec![one])
         }
         fn visit_seq<A: serde::de::SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
@@ -204,12 +218,12 @@ fn parts(text: &str) -> Vec<(usize, &str)> {
 }
 
 /// The checks of every valve: names (required, distinct and fit for file names with several
-/// valves), then each valve's tables and its own source, at their lines.
+/// valves), then each valve's tables and its own source, at their lines; the checked valves.
 pub(super) fn check_all(
-    valves: &mut [ValveConfig],
+    valves: Vec<ValveTable>,
     c: &Check<'_>,
     timing: &LoopConfig,
-) -> Result<(), TomlError> {
+) -> Result<Vec<ValveConfig>, TomlError> {
     let parts = parts(c.text);
     let several = valves.len() > 1;
     let check_of = |i: usize| {
@@ -221,14 +235,16 @@ pub(super) fn check_all(
         }
     };
     let mut seen: Vec<String> = Vec::new();
-    for (i, v) in valves.iter_mut().enumerate() {
+    let count = valves.len();
+    let mut checked = Vec::with_capacity(count);
+    for (i, v) in valves.into_iter().enumerate() {
         let vc = check_of(i);
         match &v.name {
             None if several => {
                 return Err(vc.bad(
                     "valve",
                     "",
-                    format!("valve {} of {} has no name: with several [[valve]] tables each needs name = \"...\" (e.g. \"level\")", i + 1, valves.len()),
+                    format!("valve {} of {count} has no name: with several [[valve]] tables each needs name = \"...\" (e.g. \"level\")", i + 1),
                 ))
             }
             None => {}
@@ -244,12 +260,10 @@ pub(super) fn check_all(
                 seen.push(name.clone());
             }
         }
-        v.check_in(&vc, timing)?;
-        if let Some(s) = &mut v.source {
-            s.check_in(&vc.under("valve."), timing)?;
-        }
+        checked.push(v.check(&vc, timing)?);
     }
-    super::bus::check(valves, check_of, timing)
+    super::bus::check(&checked, check_of, timing)?;
+    Ok(checked)
 }
 
 impl ValveConfig {
@@ -257,10 +271,12 @@ impl ValveConfig {
     pub fn label(&self) -> &str {
         self.name.as_deref().unwrap_or(UNNAMED)
     }
+}
 
-    /// The checks of `[valve]` and its sub-tables, for a loop of `[loop]` `timing`; resolves
-    /// the register map.
-    fn check_in(&mut self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
+impl ValveTable {
+    /// The checks of `[valve]` and its sub-tables (its own `[valve.source]` last), for a loop
+    /// of `[loop]` `timing`: the checked valve, its register map resolved.
+    fn check(self, c: &Check<'_>, timing: &LoopConfig) -> Result<ValveConfig, TomlError> {
         self.emulated.check_in(c)?;
         if let Some(file) = &self.health_baseline_model {
             if let Err(err) = ModelSpec::load(file) {
@@ -274,7 +290,29 @@ impl ValveConfig {
         if let Some(comp) = &self.compensation {
             check_compensation(comp, c, timing)?;
         }
-        self.registers = self.register_map(c)?;
+        let registers = self.register_map(c)?;
+        self.check_link(c, timing)?;
+        let source = match self.source {
+            Some(s) => Some(s.check(&c.under("valve."), timing)?),
+            None => None,
+        };
+        Ok(ValveConfig {
+            name: self.name,
+            source,
+            kind: self.kind,
+            emulated: self.emulated,
+            tcp: self.tcp,
+            rtu: self.rtu,
+            profile: self.profile,
+            registers,
+            health_baseline_model: self.health_baseline_model,
+            compensation: self.compensation,
+        })
+    }
+
+    /// The checks of the link of a Modbus kind: its table is there, its settings and its
+    /// deadline fit a loop of `[loop]` `timing`.
+    fn check_link(&self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
         let (table, settings) = match self.kind {
             ValveKind::Emulated => return Ok(()),
             ValveKind::ModbusTcp => (
@@ -322,7 +360,7 @@ impl ValveConfig {
     }
 }
 
-impl ValveConfig {
+impl ValveTable {
     /// `[valve.registers]` over the profile's map (or the default map), checked.
     fn register_map(&self, c: &Check<'_>) -> Result<RegisterMap, TomlError> {
         let section = "valve.registers";
