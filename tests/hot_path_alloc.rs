@@ -16,7 +16,7 @@ use tokio_modbus::client::Reader;
 use tokio_modbus::{Request, Slave};
 use tokio_serial::SerialPortBuilderExt;
 use valve_bridge::compensate::{CompensationConfig, Compensator};
-use valve_bridge::daemon::config::Config;
+use valve_bridge::daemon::config::{Config, ValveSpec};
 use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::source::Source;
 use valve_bridge::modbus::client::{LinkStats, ModbusValve};
@@ -200,26 +200,31 @@ fn modbus_cycle_allocations(args: &[&str]) -> (Vec<u64>, Vec<u64>) {
     let dev = common::sim::SimDevice::start(args);
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join(dev.shipped.0);
     let cfg = Config::load(Some(&shipped)).unwrap();
-    let valve_cfg = &cfg.valves[0];
     // A deadline no stall of a loaded machine reaches: a timeout would allocate its message.
-    let link = match (&valve_cfg.tcp, &valve_cfg.rtu) {
-        (Some(tcp), _) => Link::Tcp(TcpLink {
-            address: dev.endpoint.clone(),
-            timeout_ms: Some(900.0),
-            ..tcp.clone()
-        }),
-        (_, Some(rtu)) => Link::Rtu(RtuLink {
-            port: dev.endpoint.clone(),
-            timeout_ms: Some(900.0),
-            ..rtu.clone()
-        }),
-        _ => panic!("{} names no Modbus link", dev.shipped.0),
+    let (link, device) = match &cfg.valves[0].backend {
+        ValveSpec::ModbusTcp(tcp, device) => (
+            Link::Tcp(TcpLink {
+                address: dev.endpoint.clone(),
+                timeout_ms: Some(900.0),
+                ..tcp.clone()
+            }),
+            device,
+        ),
+        ValveSpec::ModbusRtu(rtu, device) => (
+            Link::Rtu(RtuLink {
+                port: dev.endpoint.clone(),
+                timeout_ms: Some(900.0),
+                ..rtu.clone()
+            }),
+            device,
+        ),
+        ValveSpec::Emulated(_) => panic!("{} names no Modbus link", dev.shipped.0),
     };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
-    let mut valve = ModbusValve::new(link.clone(), valve_cfg.registers, 1.0).unwrap();
+    let mut valve = ModbusValve::new(link.clone(), device.registers, 1.0).unwrap();
     rt.block_on(valve.connect_now()).unwrap();
     let mut cycle = |k: u64| {
         let c = rt.block_on(valve.cycle(40.0 + (k % 3) as f64));

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use valve_bridge::daemon::config::Config;
+use valve_bridge::daemon::config::{Config, ValveSpec};
 use valve_bridge::model::ModelKind;
 
 fn bin() -> Command {
@@ -42,6 +42,14 @@ fn simulate_runs_the_physical_model_file() {
     assert_eq!(rows, 60_001);
 }
 
+/// The model of the first valve of `c`, an emulated one.
+fn emulated_model(c: &Config) -> ModelKind {
+    match &c.valves[0].backend {
+        ValveSpec::Emulated(e) => e.model_spec().unwrap().model,
+        other => panic!("{other:?}"),
+    }
+}
+
 #[test]
 fn emulated_valve_takes_the_physical_model_by_name_and_file() {
     let c = Config::from_toml(
@@ -49,10 +57,7 @@ fn emulated_valve_takes_the_physical_model_by_name_and_file() {
         Path::new("c.toml"),
     )
     .unwrap();
-    assert_eq!(
-        c.valves[0].emulated.model_spec().unwrap().model,
-        ModelKind::Physical
-    );
+    assert_eq!(emulated_model(&c), ModelKind::Physical);
     let file = root("config/models/physical.toml");
     let c = Config::from_toml(
         &format!(
@@ -62,10 +67,7 @@ fn emulated_valve_takes_the_physical_model_by_name_and_file() {
         Path::new("c.toml"),
     )
     .unwrap();
-    assert_eq!(
-        c.valves[0].emulated.model_spec().unwrap().model,
-        ModelKind::Physical
-    );
+    assert_eq!(emulated_model(&c), ModelKind::Physical);
 }
 
 #[test]

@@ -29,6 +29,7 @@ use std::error::Error;
 use std::path::{Path, PathBuf};
 
 use common::{percentile, Sim};
+use valve_bridge::daemon::config::ValveSpec;
 use valve_bridge::daemon::{self, Config, RunOptions, ValveSummary};
 use valve_bridge::recording::log_format::Status;
 
@@ -149,9 +150,10 @@ fn main() -> Result<(), Box<dyn Error>> {
 fn config(addr: &str, rate_hz: f64, shipped_deadline: bool) -> Result<Config, Box<dyn Error>> {
     let mut config = Config::load(Some(Path::new(SHIPPED)))?;
     config.loop_.rate_hz = rate_hz;
-    let tcp = (config.valves.first_mut())
-        .and_then(|v| v.tcp.as_mut())
-        .ok_or("the shipped config has no [valve.modbus-tcp]")?;
+    let tcp = match config.valves.first_mut().map(|v| &mut v.backend) {
+        Some(ValveSpec::ModbusTcp(tcp, _)) => tcp,
+        _ => return Err("the shipped config has no [valve.modbus-tcp]".into()),
+    };
     tcp.address = addr.to_string();
     if !shipped_deadline {
         tcp.timeout_ms = None;

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{bail, Context as _};
-use valve_bridge::daemon::config::ValveKind;
+use valve_bridge::daemon::config::ValveSpec;
 use valve_bridge::daemon::Config;
 use valve_bridge::modbus::client::{Link, ModbusValve};
 use valve_bridge::modbus::{probe, profile};
@@ -58,27 +58,26 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             names.join(", ")
         );
     };
-    let profile = match valve.profile.as_deref().map(profile::find) {
-        Some(Some(found)) => Some(found?),
-        // The config's checks refused an unknown name already.
-        Some(None) | None => None,
-    };
-    let link = match valve.kind {
-        ValveKind::ModbusTcp => valve.tcp.clone().map(Link::Tcp),
-        ValveKind::ModbusRtu => valve.rtu.clone().map(Link::Rtu),
-        ValveKind::Emulated => bail!(
+    let (link, device) = match &valve.backend {
+        ValveSpec::ModbusTcp(link, device) => (Link::Tcp(link.clone()), device),
+        ValveSpec::ModbusRtu(link, device) => (Link::Rtu(link.clone()), device),
+        ValveSpec::Emulated(_) => bail!(
             "{}: [valve] kind = \"emulated\" has no device to probe: use a config with kind = \
              \"modbus-tcp\" or \"modbus-rtu\" (e.g. config/sim-device-tcp.toml)",
             args.config.display()
         ),
-    }
-    .context("the [valve] table of the link is missing")?;
+    };
+    let profile = match device.profile.as_deref().map(profile::find) {
+        Some(Some(found)) => Some(found?),
+        // The config's checks refused an unknown name already.
+        Some(None) | None => None,
+    };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
     let report = rt.block_on(async {
-        let mut valve = ModbusValve::new(link, valve.registers, config.loop_.period_s())?;
+        let mut valve = ModbusValve::new(link, device.registers, config.loop_.period_s())?;
         if let Some(b) = valve.budget() {
             outln!("bus budget of the loop: {}", b.describe())?;
         }

@@ -309,9 +309,9 @@ fn checked_clock(config: &Config, opts: &RunOptions) -> Result<ClockKind, Daemon
     } else {
         config.loop_.clock
     };
-    let real = config.valves.iter().find(|v| !v.kind.is_simulated());
+    let real = config.valves.iter().find(|v| !v.backend.is_simulated());
     if let (ClockKind::Virtual, Some(v)) = (clock, real) {
-        return Err(DaemonError::VirtualClock(v.kind.tag().into()));
+        return Err(DaemonError::VirtualClock(v.backend.tag().into()));
     }
     if clock == ClockKind::Virtual && config.controller_server().is_some() {
         return Err(DaemonError::VirtualClockController);

@@ -6,8 +6,8 @@
 //! runs on the loop thread's current-thread tokio runtime, so a network backend can `await` its
 //! I/O (with its own timeout, well inside one period) without any other thread.
 //!
-//! Adding a backend: add a `ValveKind` variant and its `[valve.<kind>]` table in `config.rs`, a
-//! variant here, and its arm in [`Backend::open`], [`Backend::transact`] and
+//! Adding a backend: add its `kind`, its `[valve.<kind>]` table and a [`ValveSpec`] variant in
+//! [`super::config`], a variant here, and its arm in [`Backend::open`], [`Backend::transact`] and
 //! [`Backend::describe`]. Nothing else in the daemon changes. [`Backend::open`] runs on the loop
 //! thread's runtime, so a network backend's sockets belong to the runtime that drives them.
 //!
@@ -37,8 +37,9 @@ use rand_distr::{Distribution, Normal};
 
 use std::time::Duration;
 
-use super::config::{bus, ValveConfig, ValveKind};
+use super::config::{bus, ValveConfig, ValveSpec};
 use crate::modbus::client::{Link, LinkStats, ModbusValve, OpenError, MAX_BACKOFF};
+use crate::modbus::map::RegisterMap;
 use crate::model::{Drift, ModelError, Valve};
 
 /// Why a transaction gave no V_P: the Modbus client's fault kinds, shared by every backend.
@@ -53,9 +54,6 @@ pub enum BackendError {
     /// The Modbus valve cannot be opened.
     #[error(transparent)]
     Modbus(#[from] OpenError),
-    /// `kind` names a Modbus link whose table is missing (a config not checked by `Config::load`).
-    #[error("[valve] kind = \"{0}\" needs its [valve.{0}] table")]
-    MissingTable(&'static str),
 }
 
 /// A valve the loop can drive. Both variants are large and boxed once at start-up, so moving the
@@ -78,21 +76,16 @@ impl Backend {
         period_s: f64,
         require_device: bool,
     ) -> Result<Backend, BackendError> {
-        match cfg.kind {
-            ValveKind::ModbusTcp | ValveKind::ModbusRtu => {
-                let link = match cfg.kind {
-                    ValveKind::ModbusTcp => cfg.tcp.clone().map(Link::Tcp),
-                    _ => cfg.rtu.clone().map(Link::Rtu),
-                };
-                let link = link.ok_or(BackendError::MissingTable(cfg.kind.tag()))?;
-                let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
-                // The bus budget is logged by its own check, once.
-                valve.check_budget()?;
-                connect(&mut valve, require_device).await?;
-                Ok(Backend::Modbus(Box::new(valve)))
+        match &cfg.backend {
+            ValveSpec::ModbusTcp(link, device) => {
+                let link = Link::Tcp(link.clone());
+                open_modbus(link, device.registers, period_s, require_device).await
             }
-            ValveKind::Emulated => {
-                let e = &cfg.emulated;
+            ValveSpec::ModbusRtu(link, device) => {
+                let link = Link::Rtu(link.clone());
+                open_modbus(link, device.registers, period_s, require_device).await
+            }
+            ValveSpec::Emulated(e) => {
                 let spec = e.model_spec()?;
                 let noise = if e.noise_std_pct > 0.0 {
                     let normal =
@@ -130,14 +123,13 @@ impl Backend {
         let mut backends: Vec<Backend> = Vec::with_capacity(cfgs.len());
         for (i, cfg) in cfgs.iter().enumerate() {
             let on_bus = buses.iter().find(|(_, m)| m.contains(&i));
-            let (Some((port, members)), Some(rtu)) = (on_bus, &cfg.rtu) else {
+            let (Some((port, members)), ValveSpec::ModbusRtu(rtu, device)) = (on_bus, &cfg.backend)
+            else {
                 backends.push(Backend::open(cfg, period_s, require_device).await?);
                 continue;
             };
             let budget = bus::budget(cfgs, port, members, period_s);
-            let timeouts: Vec<Option<f64>> = (members.iter())
-                .map(|&j| cfgs[j].rtu.as_ref().and_then(|l| l.timeout_ms))
-                .collect();
+            let timeouts = bus::timeouts(cfgs, members);
             let deadlines = budget.deadlines(&timeouts).map_err(|message| {
                 BackendError::Modbus(OpenError::Setting {
                     section: "valve.modbus-rtu",
@@ -152,10 +144,10 @@ impl Backend {
                 _ => None,
             };
             let mut valve = match first {
-                Some(first) => first.sharing(link, cfg.registers, period_s)?,
+                Some(first) => first.sharing(link, device.registers, period_s)?,
                 None => {
                     budget.check().map_err(OpenError::from)?;
-                    let mut valve = ModbusValve::new(link, cfg.registers, period_s)?;
+                    let mut valve = ModbusValve::new(link, device.registers, period_s)?;
                     connect(&mut valve, require_device).await?;
                     valve
                 }
@@ -196,6 +188,20 @@ impl Backend {
             Backend::Modbus(m) => m.describe(),
         }
     }
+}
+
+/// Opens the Modbus valve on `link` with the map `registers` (see [`Backend::open`]).
+async fn open_modbus(
+    link: Link,
+    registers: RegisterMap,
+    period_s: f64,
+    require_device: bool,
+) -> Result<Backend, BackendError> {
+    let mut valve = ModbusValve::new(link, registers, period_s)?;
+    // The bus budget is logged by its own check, once.
+    valve.check_budget()?;
+    connect(&mut valve, require_device).await?;
+    Ok(Backend::Modbus(Box::new(valve)))
 }
 
 /// Connects `valve` now; a device that is not there is an error with `require_device`,

@@ -6,9 +6,10 @@
 //!
 //! Checking only: opening the shared link is [`crate::daemon::valve`]'s job.
 
-use super::{Check, LoopConfig, ValveConfig, ValveKind};
+use super::{Check, LoopConfig, ValveConfig, ValveSpec};
 use crate::modbus::budget::{Budget, BusBudget};
 use crate::modbus::link::RtuLink;
+use crate::modbus::map::RegisterMap;
 use crate::modbus::plan::Plan;
 use crate::toml_file::TomlError;
 
@@ -16,7 +17,7 @@ use crate::toml_file::TomlError;
 pub fn buses(valves: &[ValveConfig]) -> Vec<(String, Vec<usize>)> {
     let mut out: Vec<(String, Vec<usize>)> = Vec::new();
     for (i, v) in valves.iter().enumerate() {
-        let Some(l) = rtu(v) else { continue };
+        let Some((l, _)) = rtu(v) else { continue };
         match out.iter_mut().find(|(port, _)| *port == l.port) {
             Some((_, members)) => members.push(i),
             None => out.push((l.port.clone(), vec![i])),
@@ -26,9 +27,19 @@ pub fn buses(valves: &[ValveConfig]) -> Vec<(String, Vec<usize>)> {
     out
 }
 
-/// The link of an RTU valve.
-fn rtu(v: &ValveConfig) -> Option<&RtuLink> {
-    v.rtu.as_ref().filter(|_| v.kind == ValveKind::ModbusRtu)
+/// The link and the register map of an RTU valve.
+fn rtu(v: &ValveConfig) -> Option<(&RtuLink, &RegisterMap)> {
+    match &v.backend {
+        ValveSpec::ModbusRtu(link, device) => Some((link, &device.registers)),
+        _ => None,
+    }
+}
+
+/// The `timeout_ms` of the valves `members`, in order.
+pub fn timeouts(valves: &[ValveConfig], members: &[usize]) -> Vec<Option<f64>> {
+    (members.iter())
+        .map(|&i| rtu(&valves[i]).and_then(|(l, _)| l.timeout_ms))
+        .collect()
 }
 
 /// The budget of the bus on `port` whose valves are `members`, for a loop of `period_s`.
@@ -36,8 +47,8 @@ pub fn budget(valves: &[ValveConfig], port: &str, members: &[usize], period_s: f
     let parts = (members.iter())
         .filter_map(|&i| {
             let v = &valves[i];
-            rtu(v).map(|l| {
-                let b = Budget::rtu(l, &Plan::rtu(&v.registers), period_s);
+            rtu(v).map(|(l, registers)| {
+                let b = Budget::rtu(l, &Plan::rtu(registers), period_s);
                 (v.label().to_string(), b)
             })
         })
@@ -54,10 +65,12 @@ pub(super) fn check<'a>(
     let t = "valve.modbus-rtu";
     for (port, members) in buses(valves) {
         let first = &valves[members[0]];
-        let Some(line) = rtu(first) else { continue };
+        let Some((line, _)) = rtu(first) else {
+            continue;
+        };
         for &i in &members[1..] {
             let v = &valves[i];
-            let Some(l) = rtu(v) else { continue };
+            let Some((l, _)) = rtu(v) else { continue };
             let c = check_of(i);
             let same = (l.baud, l.parity, l.data_bits, l.stop_bits)
                 == (line.baud, line.parity, line.data_bits, line.stop_bits);
@@ -65,7 +78,7 @@ pub(super) fn check<'a>(
                 return Err(c.bad(t, "port", format!("{port} is also valve `{}`'s port, with other line settings: one serial line has one baud rate, parity, data and stop bits; give both the same", first.label())));
             }
             if let Some(&j) = (members.iter())
-                .find(|&&j| j < i && rtu(&valves[j]).is_some_and(|o| o.slave_id == l.slave_id))
+                .find(|&&j| j < i && rtu(&valves[j]).is_some_and(|(o, _)| o.slave_id == l.slave_id))
             {
                 return Err(c.bad(t, "slave_id", format!("{} is also valve `{}`'s slave id on {port}: each device on a bus has its own address", l.slave_id, valves[j].label())));
             }
@@ -79,10 +92,7 @@ pub(super) fn check<'a>(
             };
             return Err(last.bad(t, "port", message));
         }
-        let timeouts: Vec<Option<f64>> = (members.iter())
-            .map(|&i| rtu(&valves[i]).and_then(|l| l.timeout_ms))
-            .collect();
-        if let Err(message) = bus.deadlines(&timeouts) {
+        if let Err(message) = bus.deadlines(&timeouts(valves, &members)) {
             return Err(last.bad(t, "timeout_ms", message));
         }
     }

@@ -11,9 +11,9 @@
 //! line in error messages.
 //!
 //! Two layers: serde reads the file into private types shaped as the file is (a `kind` and a
-//! table for any kind); their checks turn it into [`Config`], whose [`SourceConfig`] holds the
-//! chosen kind's settings only ([`SourceSpec`], one variant per kind), so code downstream
-//! matches on what is there and re-checks nothing. Every error names the file, the line and the
+//! table for any kind); their checks turn it into [`Config`], whose [`SourceConfig`]s and
+//! [`ValveConfig`]s hold the chosen kind's settings only ([`SourceSpec`], [`ValveSpec`]: one
+//! variant per kind), so code downstream matches on what is there and re-checks nothing. Every error names the file, the line and the
 //! dotted key, and says what is allowed. Checking also resolves what the config points at (the
 //! model file, the replayed recording), so a missing file is reported against the key that
 //! names it.
@@ -45,7 +45,7 @@ pub use source::{
     ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
     SineConfig, SourceConfig, SourceSpec, StepsConfig,
 };
-pub use valve::{EmulatedConfig, ValveConfig, ValveKind, UNNAMED};
+pub use valve::{Device, EmulatedConfig, ValveConfig, ValveSpec, UNNAMED};
 
 use source::SourceTable;
 use valve::ValveTable;

@@ -3,6 +3,22 @@
 use super::*;
 use crate::model::ModelKind;
 
+/// The emulated valve's settings of `c`'s first valve.
+fn emulated(c: &Config) -> &EmulatedConfig {
+    match &c.valves[0].backend {
+        ValveSpec::Emulated(e) => e,
+        other => panic!("{other:?}"),
+    }
+}
+
+/// The register map of `c`'s first valve, a Modbus one.
+fn registers(c: &Config) -> crate::modbus::map::RegisterMap {
+    match &c.valves[0].backend {
+        ValveSpec::ModbusTcp(_, d) | ValveSpec::ModbusRtu(_, d) => d.registers,
+        other => panic!("{other:?}"),
+    }
+}
+
 fn err(text: &str) -> String {
     Config::from_toml(text, Path::new("c.toml"))
         .unwrap_err()
@@ -19,12 +35,14 @@ fn shipped_file_is_the_embedded_default_and_states_the_defaults() {
     let shipped = Config::embedded_default().unwrap();
     let mut empty = Config::from_toml("", Path::new("empty.toml")).unwrap();
     // No `model` means pin-cart II; the file says so explicitly.
-    empty.valves[0].emulated.model = Some(ModelKind::Pincart2);
+    if let ValveSpec::Emulated(e) = &mut empty.valves[0].backend {
+        e.model = Some(ModelKind::Pincart2);
+    }
     assert_eq!(format!("{shipped:?}"), format!("{empty:?}"));
     assert_eq!(shipped.loop_.rate_hz, 100.0);
     assert!(matches!(shipped.source.spec, SourceSpec::RandomSteps(_)));
     assert_eq!(
-        shipped.valves[0].emulated.model_spec().unwrap().model,
+        emulated(&shipped).model_spec().unwrap().model,
         ModelKind::Pincart2
     );
     assert_eq!(shipped.log.dir, PathBuf::from("./logs"));
@@ -183,7 +201,7 @@ fn modbus_server_and_metrics_errors_name_their_key() {
 fn shipped_hil_config_serves_loopback_with_metrics() {
     let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/hil.toml"));
     let c = Config::load(Some(path)).unwrap();
-    assert_eq!(c.valves[0].kind, ValveKind::Emulated);
+    assert!(c.valves[0].backend.is_simulated());
     let m = c.source.server().unwrap();
     assert!(m.listen.0.ip().is_loopback());
     // The map written out in the file is the default one.
@@ -204,7 +222,7 @@ fn model_file_loads_any_model() {
     )
     .unwrap();
     assert_eq!(
-        c.valves[0].emulated.model_spec().unwrap().model,
+        emulated(&c).model_spec().unwrap().model,
         ModelKind::Stiction
     );
     let e = err(&format!(
@@ -424,7 +442,7 @@ fn a_profile_supplies_the_map_and_the_config_overrides_it_key_by_key() {
         Path::new("c.toml"),
     )
     .unwrap();
-    let map = c.valves[0].registers;
+    let map = registers(&c);
     assert_eq!((map.setpoint.address, map.position.address), (0, 3));
     assert!(map.fc6 && (map.setpoint.scale - 0.01).abs() < 1e-12);
     // MP2 of the gateway: the registers given replace the profile's whole; the rest stays.
@@ -433,15 +451,12 @@ fn a_profile_supplies_the_map_and_the_config_overrides_it_key_by_key() {
         Path::new("c.toml"),
     )
     .unwrap();
-    let map = c.valves[0].registers;
+    let map = registers(&c);
     assert_eq!((map.setpoint.address, map.position.address), (20, 23));
     assert!(map.fc6 && map.position_valid_pct == [0.0, 100.0]);
     // Without a profile, the default map as before.
     let c = Config::from_toml(&format!("[valve]\n{link}"), Path::new("c.toml")).unwrap();
-    assert_eq!(
-        c.valves[0].registers,
-        crate::modbus::map::RegisterMap::default()
-    );
+    assert_eq!(registers(&c), crate::modbus::map::RegisterMap::default());
 }
 
 #[test]

@@ -1,9 +1,14 @@
 //! `[valve]`: which backend drives the valve and the settings of each kind (`[valve.emulated]`,
-//! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]` over a `profile`), with their checks; several
-//! valves are `[[valve]]` tables, each named, each with these sub-tables and optionally a
-//! `[valve.source]` and a `[valve.compensation]` of its own.
+//! `[valve.modbus-tcp]`, `[valve.modbus-rtu]`, `[valve.registers]` over a `profile`), with their
+//! checks; several valves are `[[valve]]` tables, each named, each with these sub-tables and
+//! optionally a `[valve.source]` and a `[valve.compensation]` of its own.
 //!
-//! Checking only: opening the backend is [`crate::daemon::valve`]'s job, and the link settings
+//! The file's table (`ValveTable`, private to the config) holds a `kind` and the tables of any
+//! kind; its check turns it into a [`ValveConfig`] whose [`ValveSpec`] holds the chosen
+//! backend's settings only: the emulated model, or a Modbus link with its [`Device`] (register
+//! map resolved over the profile). A Modbus kind without its link table is refused there.
+//!
+//! Not here: opening the backend is [`crate::daemon::valve`]'s job, and the link settings
 //! themselves are [`crate::modbus::link`]'s types.
 
 use std::path::PathBuf;
@@ -19,8 +24,8 @@ use crate::modbus::profile;
 use crate::model::{bundled, DriftSpec, ModelError, ModelKind, ModelSpec};
 use crate::toml_file::{self, TomlError};
 
-/// A checked valve: its name, its own source if any, the backend and the settings of each
-/// kind, its register map resolved.
+/// A checked valve: its name, its own source if any, and its backend with the settings of
+/// that backend only.
 #[derive(Debug, Clone)]
 pub struct ValveConfig {
     /// The valve's name in logs, file names, metrics (label `valve`) and the summary; required
@@ -28,25 +33,50 @@ pub struct ValveConfig {
     pub name: Option<String>,
     /// `[valve.source]`: this valve's source of O_P (default: `[source]`).
     pub source: Option<SourceConfig>,
-    /// The backend in use.
-    pub kind: ValveKind,
-    /// `[valve.emulated]`.
-    pub emulated: EmulatedConfig,
-    /// `[valve.modbus-tcp]`.
-    pub tcp: Option<TcpLink>,
-    /// `[valve.modbus-rtu]`.
-    pub rtu: Option<RtuLink>,
-    /// A shipped register profile of a real device (`config/profiles/NAME.toml`), the map
-    /// under `[valve.registers]` (Modbus kinds).
-    pub profile: Option<String>,
-    /// The positioner's register map: `[valve.registers]` over the profile's map, or over the
-    /// default one.
-    pub registers: RegisterMap,
+    /// The backend in use and its settings.
+    pub backend: ValveSpec,
     /// A model file whose answer to each window's O_P is the health baseline (default: the
     /// first window with enough steps).
     pub health_baseline_model: Option<PathBuf>,
     /// `[valve.compensation]`: the O_P compensated for the identified valve before it is sent.
     pub compensation: Option<CompensationConfig>,
+}
+
+/// The backend of a checked valve: one variant per `[valve] kind`, with that kind's settings.
+#[derive(Debug, Clone)]
+pub enum ValveSpec {
+    /// `emulated`: a model from `config/models/` stepped once per cycle, `[valve.emulated]`.
+    Emulated(EmulatedConfig),
+    /// `modbus-tcp`: a positioner (or `sim-device`) over Modbus TCP, `[valve.modbus-tcp]`.
+    ModbusTcp(TcpLink, Device),
+    /// `modbus-rtu`: a positioner on a serial line, Modbus RTU, `[valve.modbus-rtu]`.
+    ModbusRtu(RtuLink, Device),
+}
+
+impl ValveSpec {
+    /// True for a simulated valve, which may run on the virtual clock.
+    pub fn is_simulated(&self) -> bool {
+        matches!(self, ValveSpec::Emulated(_))
+    }
+
+    /// The name of the kind in config files.
+    pub fn tag(&self) -> &'static str {
+        match self {
+            ValveSpec::Emulated(_) => "emulated",
+            ValveSpec::ModbusTcp(..) => "modbus-tcp",
+            ValveSpec::ModbusRtu(..) => "modbus-rtu",
+        }
+    }
+}
+
+/// The positioner behind a Modbus link: the shipped profile the config names, if any, and the
+/// register map in use (`[valve.registers]` over the profile's map, or over the default one).
+#[derive(Debug, Clone)]
+pub struct Device {
+    /// A shipped register profile of a real device (`config/profiles/NAME.toml`).
+    pub profile: Option<String>,
+    /// The positioner's register map.
+    pub registers: RegisterMap,
 }
 
 /// `[valve]` (or one `[[valve]]`) as the file has it: the backend in use and the tables of any
@@ -77,10 +107,10 @@ pub(super) struct ValveTable {
     compensation: Option<CompensationConfig>,
 }
 
-/// Valve backends.
+/// `[valve] kind` as written (the names are [`ValveSpec::tag`]'s).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum ValveKind {
+enum ValveKind {
     /// A model from `config/models/` stepped once per cycle.
     #[default]
     Emulated,
@@ -88,22 +118,6 @@ pub enum ValveKind {
     ModbusTcp,
     /// A positioner on a serial line, Modbus RTU, `[valve.modbus-rtu]`.
     ModbusRtu,
-}
-
-impl ValveKind {
-    /// True for a simulated valve, which may run on the virtual clock.
-    pub fn is_simulated(self) -> bool {
-        self == ValveKind::Emulated
-    }
-
-    /// The name used in config files.
-    pub fn tag(self) -> &'static str {
-        match self {
-            ValveKind::Emulated => "emulated",
-            ValveKind::ModbusTcp => "modbus-tcp",
-            ValveKind::ModbusRtu => "modbus-rtu",
-        }
-    }
 }
 
 /// `[valve.emulated]`: the model and the measurement noise.
@@ -290,8 +304,37 @@ impl ValveTable {
         if let Some(comp) = &self.compensation {
             check_compensation(comp, c, timing)?;
         }
-        let registers = self.register_map(c)?;
-        self.check_link(c, timing)?;
+        let device = Device {
+            registers: self.register_map(c)?,
+            profile: self.profile,
+        };
+        let backend = match self.kind {
+            ValveKind::Emulated => ValveSpec::Emulated(self.emulated),
+            ValveKind::ModbusTcp => {
+                let example = "address = \"127.0.0.1:5502\"";
+                let link = self.tcp.ok_or_else(|| no_link(c, "modbus-tcp", example))?;
+                check_link(
+                    c,
+                    "valve.modbus-tcp",
+                    link.violation(),
+                    link.timeout_ms,
+                    timing,
+                )?;
+                ValveSpec::ModbusTcp(link, device)
+            }
+            ValveKind::ModbusRtu => {
+                let example = "port = \"/dev/ttyUSB0\"";
+                let link = self.rtu.ok_or_else(|| no_link(c, "modbus-rtu", example))?;
+                check_link(
+                    c,
+                    "valve.modbus-rtu",
+                    link.violation(),
+                    link.timeout_ms,
+                    timing,
+                )?;
+                ValveSpec::ModbusRtu(link, device)
+            }
+        };
         let source = match self.source {
             Some(s) => Some(s.check(&c.under("valve."), timing)?),
             None => None,
@@ -299,64 +342,48 @@ impl ValveTable {
         Ok(ValveConfig {
             name: self.name,
             source,
-            kind: self.kind,
-            emulated: self.emulated,
-            tcp: self.tcp,
-            rtu: self.rtu,
-            profile: self.profile,
-            registers,
+            backend,
             health_baseline_model: self.health_baseline_model,
             compensation: self.compensation,
         })
     }
+}
 
-    /// The checks of the link of a Modbus kind: its table is there, its settings and its
-    /// deadline fit a loop of `[loop]` `timing`.
-    fn check_link(&self, c: &Check<'_>, timing: &LoopConfig) -> Result<(), TomlError> {
-        let (table, settings) = match self.kind {
-            ValveKind::Emulated => return Ok(()),
-            ValveKind::ModbusTcp => (
-                "valve.modbus-tcp",
-                self.tcp.as_ref().map(|t| (t.violation(), t.timeout_ms)),
+/// The refusal of `kind = "<tag>"` without its `[valve.<tag>]` table; `example` is a key of it.
+fn no_link(c: &Check<'_>, tag: &str, example: &str) -> TomlError {
+    TomlError::Invalid {
+        path: c.path.to_path_buf(),
+        line: c.line("valve", "kind"),
+        key: format!("valve.{tag}"),
+        message: format!("kind = \"{tag}\" needs this table, e.g. {example}"),
+    }
+}
+
+/// The checks of the link table `table`: its settings' `violation`, and a deadline
+/// `timeout_ms` that leaves a loop of `[loop]` `timing` its rhythm.
+fn check_link(
+    c: &Check<'_>,
+    table: &str,
+    violation: Option<(&'static str, String)>,
+    timeout_ms: Option<f64>,
+    timing: &LoopConfig,
+) -> Result<(), TomlError> {
+    if let Some((key, message)) = violation {
+        return Err(c.bad(table, key, message));
+    }
+    // A reply may take at most one period.
+    let period_ms = timing.period_s() * 1e3;
+    match timeout_ms {
+        Some(t) if !(t.is_finite() && t > 0.0 && t < period_ms) => Err(c.bad(
+            table,
+            "timeout_ms",
+            format!(
+                "{t} is not allowed: a deadline in ms, above 0 and below the loop \
+                 period ({period_ms:.3} ms at rate_hz = {}); leave it out for 80 % of the period",
+                timing.rate_hz
             ),
-            ValveKind::ModbusRtu => (
-                "valve.modbus-rtu",
-                self.rtu.as_ref().map(|r| (r.violation(), r.timeout_ms)),
-            ),
-        };
-        let Some((violation, timeout_ms)) = settings else {
-            return Err(TomlError::Invalid {
-                path: c.path.to_path_buf(),
-                line: c.line("valve", "kind"),
-                key: table.to_string(),
-                message: format!(
-                    "kind = \"{}\" needs this table, e.g. {}",
-                    self.kind.tag(),
-                    if self.kind == ValveKind::ModbusTcp {
-                        "address = \"127.0.0.1:5502\""
-                    } else {
-                        "port = \"/dev/ttyUSB0\""
-                    }
-                ),
-            });
-        };
-        if let Some((key, message)) = violation {
-            return Err(c.bad(table, key, message));
-        }
-        // The deadline must leave the loop its rhythm: a reply may take at most one period.
-        let period_ms = timing.period_s() * 1e3;
-        match timeout_ms {
-            Some(t) if !(t.is_finite() && t > 0.0 && t < period_ms) => Err(c.bad(
-                table,
-                "timeout_ms",
-                format!(
-                    "{t} is not allowed: a deadline in ms, above 0 and below the loop \
-                     period ({period_ms:.3} ms at rate_hz = {}); leave it out for 80 % of the period",
-                    timing.rate_hz
-                ),
-            )),
-            _ => Ok(()),
-        }
+        )),
+        _ => Ok(()),
     }
 }
 
