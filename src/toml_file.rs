@@ -43,7 +43,7 @@ pub fn parse<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlErro
     toml::from_str(text).map_err(|e| {
         let offset = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
         let before = &text[..offset];
-        let line = before.matches('\n').count() + 1;
+        let line = line_at(text, offset);
         let line_start = before.rfind('\n').map_or(0, |i| i + 1);
         let key = match (key_at(text, line), inline_key(&before[line_start..])) {
             (Some(top), Some(inner)) => format!("{top}.{inner}"),
@@ -57,6 +57,13 @@ pub fn parse<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlErro
             message: reason(e.message(), &text[offset..]),
         }
     })
+}
+
+/// The line (1-based) of byte `offset` of `text`, such as the start of a span serde gives
+/// ([`toml::Spanned`]); the last line past the end.
+pub fn line_at(text: &str, offset: usize) -> usize {
+    let before = text.get(..offset).unwrap_or(text);
+    before.matches('\n').count() + 1
 }
 
 /// The parser's message on one line; where it gives none (a control character, which TOML

@@ -244,6 +244,8 @@ impl Default for LogConfig {
 /// file, and the prefix of the tables looked up (`valve.` for a valve's own `[valve.source]`).
 pub(super) struct Check<'a> {
     text: &'a str,
+    /// The whole file's text, which the spans serde gives index.
+    file: &'a str,
     path: &'a Path,
     line_offset: usize,
     prefix: &'static str,
@@ -254,6 +256,7 @@ impl<'a> Check<'a> {
     fn whole(text: &'a str, path: &'a Path) -> Self {
         Check {
             text,
+            file: text,
             path,
             line_offset: 0,
             prefix: "",
@@ -265,11 +268,9 @@ impl<'a> Check<'a> {
         Check { prefix, ..*self }
     }
 
-    /// The line (1-based, in the file) that sets `table.key` (the table's header when `key` is
-    /// empty), or 1.
-    fn line(&self, table: &str, key: &str) -> usize {
-        let table = format!("{}{table}", self.prefix);
-        toml_file::line_of(self.text, Some(&table), key).unwrap_or(1) + self.line_offset
+    /// The line (1-based, in the file) of a value whose span serde gave ([`toml::Spanned`]).
+    fn line_at(&self, span: std::ops::Range<usize>) -> usize {
+        toml_file::line_at(self.file, span.start)
     }
 
     /// `e`, found in this part of the file, at its line in the whole file.
@@ -282,15 +283,22 @@ impl<'a> Check<'a> {
 
     /// An error about `table.key`, at the line that sets it.
     fn bad(&self, table: &str, key: &str, message: String) -> TomlError {
+        let prefixed = format!("{}{table}", self.prefix);
+        let line = toml_file::line_of(self.text, Some(&prefixed), key).unwrap_or(1);
+        self.bad_on(line + self.line_offset, table, key, message)
+    }
+
+    /// An error about `table.key` at `line` of the file.
+    fn bad_on(&self, line: usize, table: &str, key: &str, message: String) -> TomlError {
         let table = format!("{}{table}", self.prefix);
         let dotted = if key.is_empty() {
-            table.clone()
+            table
         } else {
             format!("{table}.{key}")
         };
         TomlError::Invalid {
             path: self.path.to_path_buf(),
-            line: toml_file::line_of(self.text, Some(&table), key).unwrap_or(1) + self.line_offset,
+            line,
             key: dotted,
             message,
         }

@@ -14,6 +14,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use serde::Deserialize;
+use toml::Spanned;
 
 use super::{Check, ClockKind, ListenAddr, LoopConfig};
 use crate::modbus::map::{self, RegisterMap};
@@ -96,7 +97,8 @@ impl SourceSpec {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub(super) struct SourceTable {
-    kind: SourceKind,
+    /// None: `random-steps`.
+    kind: Option<Spanned<SourceKind>>,
     op_min_pct: f64,
     op_max_pct: f64,
     #[serde(rename = "random-steps")]
@@ -114,7 +116,7 @@ pub(super) struct SourceTable {
 impl Default for SourceTable {
     fn default() -> Self {
         SourceTable {
-            kind: SourceKind::RandomSteps,
+            kind: None,
             op_min_pct: 0.0,
             op_max_pct: 100.0,
             random_steps: RandomStepsConfig::default(),
@@ -243,15 +245,21 @@ impl SourceTable {
                 format!("must be above op_min_pct = {}", self.op_min_pct),
             ));
         }
+        // The line of `kind`; only a kind written out can lack its table.
+        let (kind, line) = match &self.kind {
+            Some(k) => (*k.get_ref(), c.line_at(k.span())),
+            None => (SourceKind::RandomSteps, 1),
+        };
         // The kinds without defaults, whose names are their tables'.
         let missing = |kind: &str, example: &str| {
-            c.bad(
+            c.bad_on(
+                line,
                 "source",
                 "kind",
                 format!("kind = \"{kind}\" needs a [source.{kind}] table, e.g. {example}"),
             )
         };
-        let spec = match self.kind {
+        let spec = match kind {
             SourceKind::RandomSteps => {
                 self.random_steps.check_in(c)?;
                 SourceSpec::RandomSteps(self.random_steps)

@@ -117,6 +117,17 @@ fn errors_name_file_line_key_and_what_is_allowed() {
     ] {
         assert_eq!(err(text), want);
     }
+    // The line of `kind` is where serde read it, in any form of table.
+    let e = err("# inline\nsource = { kind = \"steps\" }\nvalve = { kind = \"modbus-tcp\" }\n");
+    assert!(
+        e.starts_with("c.toml:2: source.kind: kind = \"steps\""),
+        "{e}"
+    );
+    let e = err("# inline\nvalve = { kind = \"modbus-tcp\" }\n");
+    assert!(
+        e.starts_with("c.toml:2: valve.modbus-tcp: kind = \"modbus-tcp\""),
+        "{e}"
+    );
     let e = err("[safety]\non_stop = \"go-to\"\n");
     assert!(
         e.starts_with("c.toml:2: safety.on_stop: on_stop = \"go-to\" needs go_to_pct"),

@@ -14,6 +14,7 @@
 use std::path::PathBuf;
 
 use serde::Deserialize;
+use toml::Spanned;
 
 use super::source::SourceTable;
 use super::{Check, LoopConfig, SourceConfig};
@@ -88,8 +89,9 @@ pub(super) struct ValveTable {
     name: Option<String>,
     #[serde(default)]
     source: Option<SourceTable>,
+    /// None: `emulated`.
     #[serde(default)]
-    kind: ValveKind,
+    kind: Option<Spanned<ValveKind>>,
     #[serde(default)]
     emulated: EmulatedConfig,
     #[serde(rename = "modbus-tcp")]
@@ -108,11 +110,10 @@ pub(super) struct ValveTable {
 }
 
 /// `[valve] kind` as written (the names are [`ValveSpec::tag`]'s).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 enum ValveKind {
     /// A model from `config/models/` stepped once per cycle.
-    #[default]
     Emulated,
     /// A positioner (or `sim-device`) over Modbus TCP, `[valve.modbus-tcp]`.
     ModbusTcp,
@@ -308,11 +309,18 @@ impl ValveTable {
             registers: self.register_map(c)?,
             profile: self.profile,
         };
-        let backend = match self.kind {
+        // The line of `kind`; only a kind written out can lack its table.
+        let (kind, line) = match &self.kind {
+            Some(k) => (*k.get_ref(), c.line_at(k.span())),
+            None => (ValveKind::Emulated, 1),
+        };
+        let backend = match kind {
             ValveKind::Emulated => ValveSpec::Emulated(self.emulated),
             ValveKind::ModbusTcp => {
                 let example = "address = \"127.0.0.1:5502\"";
-                let link = self.tcp.ok_or_else(|| no_link(c, "modbus-tcp", example))?;
+                let link = self
+                    .tcp
+                    .ok_or_else(|| no_link(c, line, "modbus-tcp", example))?;
                 check_link(
                     c,
                     "valve.modbus-tcp",
@@ -324,7 +332,9 @@ impl ValveTable {
             }
             ValveKind::ModbusRtu => {
                 let example = "port = \"/dev/ttyUSB0\"";
-                let link = self.rtu.ok_or_else(|| no_link(c, "modbus-rtu", example))?;
+                let link = self
+                    .rtu
+                    .ok_or_else(|| no_link(c, line, "modbus-rtu", example))?;
                 check_link(
                     c,
                     "valve.modbus-rtu",
@@ -349,14 +359,11 @@ impl ValveTable {
     }
 }
 
-/// The refusal of `kind = "<tag>"` without its `[valve.<tag>]` table; `example` is a key of it.
-fn no_link(c: &Check<'_>, tag: &str, example: &str) -> TomlError {
-    TomlError::Invalid {
-        path: c.path.to_path_buf(),
-        line: c.line("valve", "kind"),
-        key: format!("valve.{tag}"),
-        message: format!("kind = \"{tag}\" needs this table, e.g. {example}"),
-    }
+/// The refusal of `kind = "<tag>"` (at `line`) without its `[valve.<tag>]` table; `example`
+/// is a key of it.
+fn no_link(c: &Check<'_>, line: usize, tag: &str, example: &str) -> TomlError {
+    let message = format!("kind = \"{tag}\" needs this table, e.g. {example}");
+    c.bad_on(line, "valve", tag, message)
 }
 
 /// The checks of the link table `table`: its settings' `violation`, and a deadline
