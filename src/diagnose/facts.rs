@@ -429,7 +429,7 @@ fn coarser_lattice(vp: &[f64], grid: f64) -> Option<f64> {
     let misses_allowed = ((1.0 - COARSER_EXPLAINED) * total as f64) as usize;
     let values_missable = ((1.0 - COARSER_EXPLAINED) * counts.len() as f64) as usize;
     // The most read values first, so a spacing that misses them is refused early.
-    counts.sort_by(|a, b| b.1.cmp(&a.1));
+    counts.sort_by_key(|&(_, n)| std::cmp::Reverse(n));
     let explains = |q: f64| {
         let (mut missed, mut values_missed) = (0, 0);
         for &(c, n) in &counts {
