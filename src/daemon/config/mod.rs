@@ -373,15 +373,6 @@ impl ConfigFile {
         self.loop_.check_in(&c)?;
         let source = self.source.check(&c, &self.loop_)?;
         let valves = valve::check_all(self.valves, &c, &self.loop_)?;
-        if let Some(v) =
-            (valves.iter()).find(|v| v.source.as_ref().is_some_and(|s| s.server().is_some()))
-        {
-            return Err(c.bad(
-                "valve.source",
-                "kind",
-                format!("valve `{}`: the process controller's server is the [source] table (kind = \"modbus-server\"), one for every valve it drives: leave this valve's [valve.source] out to have the controller drive it", v.label()),
-            ));
-        }
         let config = Config {
             loop_: self.loop_,
             valves,

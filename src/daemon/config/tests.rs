@@ -333,6 +333,12 @@ fn a_process_controller_drives_several_valves_from_blocks_that_hold_its_map() {
         e.starts_with("c.toml:4: valve.source.kind: valve `a`: the process controller's server is the [source] table"),
         "{e}"
     );
+    // The second valve's own source, at its line (not the first valve's `kind`).
+    let e = err("[[valve]]\nname = \"a\"\n[valve.source]\nkind = \"ramp\"\n[[valve]]\nname = \"b\"\n[valve.source]\nkind = \"modbus-server\"\n");
+    assert!(
+        e.starts_with("c.toml:8: valve.source.kind: valve `b`: the process controller's server"),
+        "{e}"
+    );
     let e = err("[source]\nkind = \"modbus-server\"\n[source.modbus-server.registers]\nstatus = { table = \"holding\", address = 2, setpoint_error_bit = 3 }\n");
     assert!(e.contains("a health alarm in bit 3"), "{e}");
 }

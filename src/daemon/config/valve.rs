@@ -233,7 +233,8 @@ fn parts(text: &str) -> Vec<(usize, &str)> {
 }
 
 /// The checks of every valve: names (required, distinct and fit for file names with several
-/// valves), then each valve's tables and its own source, at their lines; the checked valves.
+/// valves), then each valve's tables and its own source (never the controller's server, which
+/// is the top `[source]`), at their lines; the checked valves.
 pub(super) fn check_all(
     valves: Vec<ValveTable>,
     c: &Check<'_>,
@@ -275,7 +276,15 @@ pub(super) fn check_all(
                 seen.push(name.clone());
             }
         }
-        checked.push(v.check(&vc, timing)?);
+        let valve = v.check(&vc, timing)?;
+        if (valve.source.as_ref()).is_some_and(|s| s.server().is_some()) {
+            return Err(vc.bad(
+                "valve.source",
+                "kind",
+                format!("valve `{}`: the process controller's server is the [source] table (kind = \"modbus-server\"), one for every valve it drives: leave this valve's [valve.source] out to have the controller drive it", valve.label()),
+            ));
+        }
+        checked.push(valve);
     }
     super::bus::check(&checked, check_of, timing)?;
     Ok(checked)
