@@ -7,6 +7,7 @@
 //!
 //! Not here: the interactive versions of the time series (`super::chart`).
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -113,6 +114,32 @@ fn with_legend(
     svg
 }
 
+/// The frame of a line chart in `root`: `labels` (title, x axis, y axis), the ranges `x` and
+/// `y`, and a mesh without the light grid lines; None when the ranges cannot be drawn.
+fn framed<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    (title, x_label, y_label): (&str, &str, &str),
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> Option<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 16))
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(55)
+        .build_cartesian_2d(x, y)
+        .ok()?;
+    drawn(
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .light_line_style(WHITE.mix(0.0))
+            .draw(),
+    );
+    Some(chart)
+}
+
 /// The indices of the lowest and highest finite value of `y` over the non-empty `range`, in
 /// time order (the first index twice when none is finite).
 pub(crate) fn extremes(y: &[f64], range: std::ops::Range<usize>) -> (usize, usize) {
@@ -181,23 +208,10 @@ pub fn lines(
         })
         .collect();
     with_legend((900, 320), &entries, |root| {
-        let chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(55)
-            .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad));
-        let Ok(mut chart) = chart else {
+        let labels = (title, x_label, y_label);
+        let Some(mut chart) = framed(root, labels, t0..t1, (lo - pad)..(hi + pad)) else {
             return;
         };
-        drawn(
-            chart
-                .configure_mesh()
-                .x_desc(x_label)
-                .y_desc(y_label)
-                .light_line_style(WHITE.mix(0.0))
-                .draw(),
-        );
         for s in series.iter().filter(|s| s.y.len() >= range.end) {
             let idx = thin(s.y, range.clone());
             drawn(chart.draw_series(LineSeries::new(
@@ -339,23 +353,11 @@ pub fn curves(
         .into_iter()
         .collect();
     with_legend((900, 360), &entries, |root| {
-        let chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(55)
-            .build_cartesian_2d(x0..x1.max(x0 + 1e-9), (y0 - pad)..(y1 + pad));
-        let Ok(mut chart) = chart else {
+        let labels = (title, x_label, y_label);
+        let x = x0..x1.max(x0 + 1e-9);
+        let Some(mut chart) = framed(root, labels, x, (y0 - pad)..(y1 + pad)) else {
             return;
         };
-        drawn(
-            chart
-                .configure_mesh()
-                .x_desc(x_label)
-                .y_desc(y_label)
-                .light_line_style(WHITE.mix(0.0))
-                .draw(),
-        );
         for (color, points) in curves {
             drawn(chart.draw_series(LineSeries::new(
                 points.iter().copied(),
