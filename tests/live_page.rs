@@ -1,12 +1,13 @@
 //! The daemon's live page in a real browser: `valve-bridge run` on two emulated valves in real
-//! time (a worn one whose dead time grows by 0.05 s every second, a healthy one; both against
-//! the bundled pin-cart II model as their health baseline, 24 s windows every second, so the
-//! worn valve's alarm comes with the first window and is diagnosed at once), with `[metrics]` on
-//! a free loopback port. `tests/browser/check_live.py` (Playwright for Python driving Debian's
-//! Chromium, like the reports' test) loads `/` and fails on a console error, a trace chart that
-//! drew nothing or did not move on between two screenshots, the worn valve's alarm not shown
-//! (or one shown for the healthy valve), or the alarm's diagnosis not listed with a report that
-//! opens.
+//! time (a worn one whose dead time grows by 0.2 s every second up to 2 s, a healthy one; both
+//! against the bundled pin-cart II model as their health baseline, 24 s windows every second,
+//! so the worn valve's alarm comes with one of the first windows and is diagnosed at once,
+//! naming the dead time), with `[metrics]` on a free loopback port.
+//! `tests/browser/check_live.py` (Playwright for Python driving Debian's Chromium, like the
+//! reports' test) loads `/` and fails on a console error, a trace chart that drew nothing or did
+//! not move on between two screenshots, the worn valve's alarm not shown (or one shown for the
+//! healthy valve), the alarm's diagnosis not listed with a report that opens, or the effect it
+//! names not charted over time.
 //!
 //! With `VB_SCREENSHOTS=DIR` the page's screenshot is saved as `DIR/live-page.png` (README's
 //! with `VB_SCREENSHOTS=docs`). Without Chromium or Playwright the test is a visible skip, or a
@@ -40,7 +41,7 @@ fn config() -> String {
     valve(
         "worn",
         6,
-        "dead_time_drift_s_per_h = 180.0\ndead_time_drift_max_s = 2.0\n",
+        "dead_time_drift_s_per_h = 720.0\ndead_time_drift_max_s = 2.0\n",
     ) + &valve("healthy", 4, "")
         + "[health]\nwindow_s = 24.0\nevery_s = 1.0\nmin_steps = 2\n\
            [diagnosis]\nwindow_s = 60.0\nevery_s = 60.0\n\

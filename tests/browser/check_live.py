@@ -4,7 +4,8 @@ exception, fewer valves than expected, a trace chart that drew nothing, a trace 
 the same in two screenshots taken seconds apart or whose time range did not move, the alarm of
 the drifting valve not shown within the wait (or without its figure marked past its limit), an
 alarm shown for the healthy valve, and with --diagnosis, no diagnosis of the drifting valve
-listed with a report that opens without errors.
+listed with a report that opens without errors, or the effects its diagnoses name not charted
+(one chart of sizes over time per unit, each with ink on it).
 
     python3 tests/browser/check_live.py URL --valves N --alarm NAME [--healthy NAME]
         [--diagnosis] [--wait S] [--screenshots DIR]
@@ -94,6 +95,32 @@ def check_diagnosis(browser, page, url, name, seconds, problems):
     print(f"{name}: diagnosis report {href} ({title})")
 
 
+def check_sizes(page, name, problems):
+    """The effects the listed diagnoses of `name` name are charted over time: one chart per
+    unit of their sizes, each drawn."""
+    units = page.page.evaluate(
+        f"""() => {{
+          const u = new Set();
+          {section(name)}.querySelectorAll('table.diagnosis-history td:nth-child(4) > *')
+            .forEach(l => {{ const m = l.textContent.match(/: \\S+ (\\S+) \\(/); if (m) u.add(m[1]); }});
+          return Array.from(u);
+        }}""")
+    charts = page.page.evaluate(
+        f"""() => {{
+          const box = {section(name)}.querySelector('div.sizes');
+          return window.vbCharts.map((c, i) => box.contains(c.root) ? i : -1).filter(i => i >= 0);
+        }}""")
+    if not units:
+        problems.append(f"{name}: its diagnoses name no effect to chart")
+    if len(charts) != len(units):
+        problems.append(f"{name}: {len(charts)} charts of effect sizes for the units {units}")
+    for i in charts:
+        ink = page.ink(i)
+        if ink < 0.001:
+            problems.append(f"{name}: the effect-size chart {i} drew nothing ({ink:.4f} inked)")
+    print(f"{name}: effect sizes charted in {units}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("url")
@@ -111,6 +138,7 @@ def main():
         check_alarm(page, args.alarm, args.healthy, args.wait, problems)
         if args.diagnosis:
             check_diagnosis(browser, page, args.url, args.alarm, args.wait, problems)
+            check_sizes(page, args.alarm, problems)
         if args.screenshots:
             Path(args.screenshots).mkdir(parents=True, exist_ok=True)
             page.page.evaluate("window.scrollTo(0, 0)")

@@ -36,6 +36,12 @@
   function words(name) { return name.replace(/_/g, " "); }
   // A size's name without its unit: friction_band_pct is the friction band.
   function sizeName(name) { return words(name.replace(/_(pct_per_s|pct|s)$/, "")); }
+  // An effect with its size's name, once where they are the same: "backlash: friction band",
+  // "dead time".
+  function effectLabel(e) {
+    var size = sizeName(e.size.name);
+    return words(e.effect) === size ? size : words(e.effect) + ": " + size;
+  }
   function width(div) { return Math.max(320, div.clientWidth); }
   function charts() {
     var all = live.valves.map(function (v) { return v.chart; });
@@ -156,6 +162,13 @@
       .catch(function () { v.count = undefined; });  // asked again with the next answer
   }
 
+  // The time scale of diagnoses at times `xs`: a single one is shown a minute either side (left
+  // to itself, the chart would stretch one instant over years).
+  function xScale(xs) {
+    return xs.length === 1 ? { time: true, auto: false, range: [xs[0] - 60, xs[0] + 60] }
+      : { time: true };
+  }
+
   // One chart per unit: each effect's size over time, its 90 % interval as a band.
   function sizeCharts(v) {
     v.sizeCharts.forEach(function (c) { c.destroy(); });
@@ -166,7 +179,7 @@
     done.forEach(function (r) {
       r.effects.forEach(function (e) {
         var u = units[e.size.unit] = units[e.size.unit] || {};
-        u[e.effect + ": " + sizeName(e.size.name)] = true;
+        u[effectLabel(e)] = true;
       });
     });
     Object.keys(units).forEach(function (unit) {
@@ -176,14 +189,14 @@
       keys.forEach(function (key, i) {
         var pick = function (f) {
           return done.map(function (r) {
-            var e = r.effects.find(function (e) { return e.effect + ": " + sizeName(e.size.name) === key; });
+            var e = r.effects.find(function (e) { return effectLabel(e) === key; });
             return e ? f(e.size) : null;
           });
         };
         var color = COLORS[i % COLORS.length];
         data.push(pick(function (s) { return s.value; }), pick(function (s) { return s.low; }),
           pick(function (s) { return s.high; }));
-        series.push({ label: words(key), stroke: color, width: 1.5, points: { show: true, size: 7 } },
+        series.push({ label: key, stroke: color, width: 1.5, points: { show: true, size: 7 } },
           { label: "low", stroke: color, width: 0.5, dash: [4, 4], points: { show: false } },
           { label: "high", stroke: color, width: 0.5, dash: [4, 4], points: { show: false } });
         bands.push({ series: [3 * i + 3, 3 * i + 2], fill: color + "22" });
@@ -192,7 +205,8 @@
       v.sizes.appendChild(div);
       v.sizeCharts.push(new uPlot({
         title: "Effect sizes (" + unit + "), 90 % intervals", width: Math.min(width(v.sizes), 620),
-        height: 220, scales: { x: { time: true } }, bands: bands, series: series,
+        height: 220, bands: bands, series: series,
+        scales: { x: xScale(data[0]) },
         axes: [{}, { label: unit }]
       }, data, div));
     });
