@@ -249,7 +249,7 @@ fn run() -> Result<(), String> {
 fn items(d: &diagnose::Diagnosis) -> Vec<score::Item> {
     let findings = d.findings.iter().map(|f| score::Item {
         effect: f.effect,
-        worth: f.size.worth,
+        worth_low: f.size.worth_low,
         heldout_share: match f.measure {
             diagnose::Measure::HeldoutSse { before, after } => 1.0 - after / before.max(1e-12),
             diagnose::Measure::SlipDistance { .. } => 1.0,
@@ -257,7 +257,7 @@ fn items(d: &diagnose::Diagnosis) -> Vec<score::Item> {
     });
     let traces = d.traces.iter().map(|t| score::Item {
         effect: t.effect,
-        worth: t.size.worth,
+        worth_low: t.size.worth_low,
         heldout_share: t.heldout_share,
     });
     findings.chain(traces).collect()

@@ -71,6 +71,7 @@ fn exported() -> BTreeSet<String> {
         low: 1.1,
         high: 1.5,
         worth: 4.3,
+        worth_low: 3.7,
     };
     let record = Record {
         t_s: 3600.0,

@@ -29,7 +29,8 @@ pub struct Outcome {
 #[derive(Debug, Clone, Copy)]
 pub struct Item {
     pub effect: Effect,
-    pub worth: f64,
+    /// Its worth at the less material end of its interval, what materiality is judged on.
+    pub worth_low: f64,
     pub heldout_share: f64,
 }
 
@@ -258,7 +259,7 @@ impl Outcome {
     /// of the default thresholds: an approximation away from them).
     fn named_at(&self, m: f64, share: f64) -> Vec<Effect> {
         (self.items.iter())
-            .filter(|i| i.worth >= m && i.heldout_share >= share)
+            .filter(|i| i.worth_low >= m && i.heldout_share >= share)
             .map(|i| i.effect)
             .collect()
     }

@@ -182,7 +182,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     } else {
         current
     };
-    let sized = (data.facts, rec.op);
+    let sized = (data.facts, rec.op, data.tuning);
     for f in findings.iter_mut() {
         // A stick-slip finding judged by its slips is sized by the measured slips.
         if matches!(f.measure, Measure::HeldoutSse { .. }) {
@@ -196,7 +196,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     for t in traces.iter_mut() {
         t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
     }
-    let (findings, shrunk) = worth_maintenance(findings, &final_spec);
+    let (findings, shrunk) = worth_maintenance(findings, &final_spec, data.tuning.materiality);
     traces.extend(shrunk);
     let final_spec = if findings.is_empty() {
         baseline.spec.clone()
@@ -256,13 +256,19 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     }
 }
 
-/// The findings still worth maintenance by their size in the final model `spec`, and those
-/// the joint refit of the others shrank below that, as traces (they stay in the model).
-/// Stick-slip judged by its slips is sized by them, as it was judged, and stays.
-fn worth_maintenance(findings: Vec<Finding>, spec: &ModelSpec) -> (Vec<Finding>, Vec<Trace>) {
-    let (kept, shrunk): (Vec<Finding>, Vec<Finding>) = findings
-        .into_iter()
-        .partition(|f| f.size.worth >= 1.0 || !matches!(f.measure, Measure::HeldoutSse { .. }));
+/// The findings still worth maintenance in the final model `spec`, all through their interval
+/// (its less material end at least `materiality`), and those the joint refit of the others
+/// shrank below that or whose interval reaches below it, as traces (they stay in the model):
+/// a size the recording cannot tell from one not worth maintenance is no maintenance ticket.
+/// Stick-slip judged by its slips was judged on its slips' interval and stays.
+fn worth_maintenance(
+    findings: Vec<Finding>,
+    spec: &ModelSpec,
+    materiality: f64,
+) -> (Vec<Finding>, Vec<Trace>) {
+    let (kept, shrunk): (Vec<Finding>, Vec<Finding>) = findings.into_iter().partition(|f| {
+        f.size.worth_low >= materiality || !matches!(f.measure, Measure::HeldoutSse { .. })
+    });
     let traces = shrunk
         .into_iter()
         .map(|f| Trace {
@@ -321,7 +327,7 @@ mod tests {
     use crate::model::{bundled, ModelKind};
 
     #[test]
-    fn a_finding_the_final_model_shrank_below_worth_is_a_trace() {
+    fn a_finding_shrunk_below_worth_or_unsure_of_it_is_a_trace() {
         let dt = 0.01;
         let op: Vec<f64> = (0..3000)
             .map(|k| 40.0 + 10.0 * ((k / 500) % 2) as f64)
@@ -336,7 +342,7 @@ mod tests {
         };
         let facts = facts::measure(&rec, 0.05, 0.0);
         let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
-        let finding = |effect, worth, measure| Finding {
+        let finding = |effect, (worth, worth_low), measure| Finding {
             effect,
             facts: evidence::Evidence::of(effect, &spec, &spec, &facts, &[], 0.05),
             params: serde_json::Map::new(),
@@ -352,6 +358,7 @@ mod tests {
                 low: 0.1 * worth,
                 high: 0.1 * worth,
                 worth,
+                worth_low,
             },
             measure,
             knobs: vec![],
@@ -362,20 +369,20 @@ mod tests {
         };
         let (kept, traces) = worth_maintenance(
             vec![
-                finding(Effect::Backlash, 2.0, sse),
-                finding(Effect::Stiction, 0.6, sse),
+                finding(Effect::Backlash, (2.0, 1.5), sse),
+                finding(Effect::Stiction, (0.6, 0.5), sse),
+                // Material at its value, not at its interval's low end.
+                finding(Effect::Deadband, (1.5, 0.7), sse),
             ],
             &spec,
+            1.0,
         );
         assert_eq!(
             kept.iter().map(|f| f.effect).collect::<Vec<_>>(),
             [Effect::Backlash]
         );
-        assert_eq!(traces.len(), 1);
-        assert_eq!(
-            (traces[0].effect, traces[0].size.worth),
-            (Effect::Stiction, 0.6)
-        );
+        let traced: Vec<(Effect, f64)> = traces.iter().map(|t| (t.effect, t.size.worth)).collect();
+        assert_eq!(traced, [(Effect::Stiction, 0.6), (Effect::Deadband, 1.5)]);
         assert!((traces[0].heldout_share - 0.2).abs() < 1e-12);
     }
 }

@@ -545,15 +545,17 @@ impl<'a> Search<'a> {
         };
         let tuning = self.data.tuning;
         let (value, low, high) = c.slip_size(self.data.scorer);
+        let least = tuning.worth.slip_pct.max(1.5 * self.data.sigma);
         let size = Size {
             name: "slip_pct",
             unit: "%",
             value,
             low,
             high,
-            worth: value / tuning.worth.slip_pct.max(1.5 * self.data.sigma),
+            worth: value / least,
+            worth_low: low / least,
         };
-        if size.worth < tuning.materiality {
+        if size.worth_low < tuning.materiality {
             self.traces.push(Trace {
                 effect: Effect::Stiction,
                 size,
@@ -670,6 +672,7 @@ mod tests {
                 low: 1.0,
                 high: 1.0,
                 worth: 1.0,
+                worth_low: 1.0,
             },
             significant: true,
             plausible: material,

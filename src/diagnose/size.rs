@@ -70,6 +70,7 @@ pub(crate) fn size(
         low: value,
         high: value,
         worth,
+        worth_low: worth,
     }
 }
 
@@ -243,7 +244,7 @@ pub(crate) fn interval(
     effect: Effect,
     spec: &ModelSpec,
     scorer: &Scorer,
-    (facts, op): (&Facts, &[f64]),
+    (facts, op, tuning): (&Facts, &[f64], &Tuning),
 ) -> Size {
     let Some((knob, additive)) = profiled(effect, spec) else {
         return size;
@@ -259,8 +260,8 @@ pub(crate) fn interval(
             }
         })
         .collect();
-    // Per grid point, its size and the squared error of every held-out block.
-    let profile: Vec<(f64, Vec<f64>)> = grid
+    // Per grid point, its size, its worth and the squared error of every held-out block.
+    let profile: Vec<Point> = grid
         .iter()
         .map(|&x| {
             let mut s = spec.clone();
@@ -274,23 +275,28 @@ pub(crate) fn interval(
                 (Effect::Backlash, _) => lost_motion(&s, facts, op).band_bound_pct(),
                 _ => measure(effect, &s, facts, op).2,
             };
-            (value, scorer.held_blocks(&sim))
+            let worth = self::size(effect, &s, facts, op, tuning).worth;
+            Point {
+                at: [value, worth],
+                blocks: scorer.held_blocks(&sim),
+            }
         })
         .collect();
-    let blocks = profile.first().map_or(0, |p| p.1.len());
-    if blocks < 2 || profile.iter().any(|p| !p.0.is_finite()) {
+    let blocks = profile.first().map_or(0, |p| p.blocks.len());
+    if blocks < 2 || profile.iter().any(|p| !p.at.iter().all(|v| v.is_finite())) {
         return size;
     }
     let mut rng = ChaCha8Rng::seed_from_u64(0x512e);
-    let mut best: Vec<f64> = (0..RESAMPLES)
+    let (mut best, mut best_worth): (Vec<f64>, Vec<f64>) = (0..RESAMPLES)
         .map(|_| {
             let pick: Vec<usize> = (0..blocks).map(|_| rng.gen_range(0..blocks)).collect();
             let sse: Vec<f64> = (profile.iter())
-                .map(|p| pick.iter().map(|&b| p.1[b]).sum())
+                .map(|p| pick.iter().map(|&b| p.blocks[b]).sum())
                 .collect();
-            at_minimum(&sse, &profile)
+            let [value, worth] = at_minimum(&sse, &profile);
+            (value, worth)
         })
-        .collect();
+        .unzip();
     let (low, high) = (
         stats::quantile(&mut best, 0.05),
         stats::quantile(&mut best, 0.95),
@@ -298,18 +304,26 @@ pub(crate) fn interval(
     Size {
         low: low.min(size.value),
         high: high.max(size.value),
+        worth_low: stats::quantile(&mut best_worth, 0.05).min(size.worth),
         ..size
     }
 }
 
-/// The size at the minimum of `sse` along the profile (a parabola through the lowest point
-/// and its neighbours, in grid steps, mapped between their sizes).
-fn at_minimum(sse: &[f64], profile: &[(f64, Vec<f64>)]) -> f64 {
+/// A grid point of a profile: its size and worth, and the squared error of each held-out
+/// block.
+struct Point {
+    at: [f64; 2],
+    blocks: Vec<f64>,
+}
+
+/// The size and worth at the minimum of `sse` along the profile (a parabola through the
+/// lowest point and its neighbours, in grid steps, mapped between their sizes and worths).
+fn at_minimum(sse: &[f64], profile: &[Point]) -> [f64; 2] {
     let i = (0..sse.len())
         .min_by(|&a, &b| sse[a].total_cmp(&sse[b]))
         .unwrap_or(0);
     if i == 0 || i + 1 == sse.len() {
-        return profile[i].0;
+        return profile[i].at;
     }
     let (a, b, c) = (sse[i - 1], sse[i], sse[i + 1]);
     let curve = a - 2.0 * b + c;
@@ -319,11 +333,11 @@ fn at_minimum(sse: &[f64], profile: &[(f64, Vec<f64>)]) -> f64 {
         0.0
     };
     let (from, to) = if shift < 0.0 {
-        (profile[i].0, profile[i - 1].0)
+        (profile[i].at, profile[i - 1].at)
     } else {
-        (profile[i].0, profile[i + 1].0)
+        (profile[i].at, profile[i + 1].at)
     };
-    from + (to - from) * shift.abs()
+    [0, 1].map(|k| from[k] + (to[k] - from[k]) * shift.abs())
 }
 
 #[cfg(test)]
@@ -363,9 +377,11 @@ mod tests {
         let s = size(Effect::Backlash, &truth, &facts, &op, &tuning);
         assert_eq!((s.name, s.value), ("friction_band_pct", 1.0));
         assert!((s.worth - 1.0 / 0.3).abs() < 1e-9);
-        let s = interval(s, Effect::Backlash, &truth, &scorer, (&facts, &op));
+        let s = interval(s, Effect::Backlash, &truth, &scorer, (&facts, &op, &tuning));
         assert!(s.low <= 1.0 && s.high >= 1.0, "{s:?}");
         assert!(s.low > 0.9 && s.high < 1.1, "{s:?}");
+        // Its worth at the interval's low end: the low end over the 0.3 % threshold.
+        assert!((s.worth_low - s.low / 0.3).abs() < 0.05, "{s:?}");
         // Read far from the truth, the interval still holds the value the profile finds best.
         let mut off = truth.clone();
         composed::set(&mut off, Knob::FrictionBand, 0.8);
@@ -374,7 +390,7 @@ mod tests {
             Effect::Backlash,
             &off,
             &scorer,
-            (&facts, &op),
+            (&facts, &op, &tuning),
         );
         assert!(s.high > 0.9, "{s:?}");
     }

@@ -27,6 +27,10 @@ pub struct Size {
     /// How the size compares with what is worth maintenance: 1 at the threshold, above 1
     /// beyond it (for a stroke speed, the threshold over the speed).
     pub worth: f64,
+    /// `worth` at the less material end of the interval (its 5 % quantile over the same
+    /// resamples): at least 1 when the recording is sure the effect is worth maintenance.
+    /// `worth` itself when no interval was computed.
+    pub worth_low: f64,
 }
 
 impl Size {
@@ -380,6 +384,7 @@ mod tests {
             low: 1.1,
             high: 1.8,
             worth: 4.7,
+            worth_low: 3.6,
         };
         assert_eq!(s.words(), "friction band 1.40 % (1.10-1.80)");
         let exact = Size {

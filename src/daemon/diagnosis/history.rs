@@ -163,6 +163,7 @@ mod tests {
                 low,
                 high,
                 worth: value / 0.3,
+                worth_low: low / 0.3,
             },
         }
     }
