@@ -21,11 +21,6 @@
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
-// Lints of the field, as tokio-modbus keeps them: every public type can be printed, nothing is
-// `pub` that cannot be reached from outside, and `unsafe` only in the system calls that say why.
-#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
-#![deny(unsafe_code)]
-
 pub mod compensate;
 pub mod daemon;
 pub mod diagnose;

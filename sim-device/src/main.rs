@@ -30,9 +30,6 @@
 //! SIGTERM logs what the server went through before exiting. It is a test instrument: no
 //! persistence, no device identification, no coils.
 
-#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
-#![deny(unsafe_code)]
-
 mod faults;
 mod rtu;
 mod tcp;
