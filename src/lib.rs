@@ -37,6 +37,9 @@ pub mod signal;
 pub mod synth;
 pub mod toml_file;
 
+#[cfg(test)]
+pub(crate) mod testkit;
+
 /// The log filter when `RUST_LOG` is not set: `info`, except tokio-modbus's own per-frame
 /// decoding warnings (several multi-line entries per bad reply), which the Modbus client already
 /// reports once per fault in its own words.
