@@ -21,11 +21,6 @@
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 
-// Lints of the field, as tokio-modbus keeps them: every public type can be printed, nothing is
-// `pub` that cannot be reached from outside, and `unsafe` only in the system calls that say why.
-#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
-#![deny(unsafe_code)]
-
 pub mod compensate;
 pub mod daemon;
 pub mod diagnose;
@@ -41,6 +36,9 @@ pub mod report;
 pub mod signal;
 pub mod synth;
 pub mod toml_file;
+
+#[cfg(test)]
+pub(crate) mod testkit;
 
 /// The log filter when `RUST_LOG` is not set: `info`, except tokio-modbus's own per-frame
 /// decoding warnings (several multi-line entries per bad reply), which the Modbus client already

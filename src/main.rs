@@ -4,9 +4,6 @@
 //! calls the library. Errors are printed as one line (with their causes) and exit code 1; no
 //! backtrace. `RUST_LOG` sets the log level (default `info`, see `valve_bridge::init_tracing`).
 
-#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
-#![deny(unsafe_code)]
-
 mod cli;
 
 use clap::{Parser, Subcommand};

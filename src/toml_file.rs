@@ -2,7 +2,8 @@
 //!
 //! Every error names the file, the line and the dotted key (`pincart2.c_p`), and says what was
 //! wrong in one line, so a user can fix the file without reading a backtrace. This module only
-//! parses and locates; what a key may hold is checked by the type that owns it.
+//! parses and locates; what a key may hold is checked by the type that owns it. A check that
+//! fails after parsing finds its key's line in a [`Layout`], the parser's spans of the text.
 
 use std::path::{Path, PathBuf};
 
@@ -93,9 +94,9 @@ fn code_of(line: &str) -> &str {
     }
 }
 
-/// An error about `table.key` in `text`, located at the line that sets it (or line 1).
+/// An error about `table.key`, located at the line of `lines` that sets it (or line 1).
 pub fn invalid(
-    text: &str,
+    lines: Lines<'_>,
     path: &Path,
     table: Option<&str>,
     key: &str,
@@ -108,34 +109,76 @@ pub fn invalid(
     };
     TomlError::Invalid {
         path: path.to_path_buf(),
-        line: line_of(text, table, key).unwrap_or(1),
+        line: lines.of(table, key).unwrap_or(1),
         key: dotted,
         message,
     }
 }
 
-/// The line (1-based) where `key` is set inside `[table]` (or at the top when `table` is None).
-/// A table itself is found by its header when `key` is empty.
-pub fn line_of(text: &str, table: Option<&str>, key: &str) -> Option<usize> {
-    let mut current: Option<String> = None;
-    for (i, raw) in text.lines().enumerate() {
-        let line = code_of(raw);
-        if let Some(name) = header(line) {
-            if key.is_empty() && Some(name.as_str()) == table {
-                return Some(i + 1);
-            }
-            current = Some(name);
-            continue;
-        }
-        if current.as_deref() == table {
-            if let Some((k, _)) = line.split_once('=') {
-                if k.trim().trim_matches('"') == key {
-                    return Some(i + 1);
-                }
-            }
+/// A TOML text as the parser sees it, for the line a table or a key is written on: the spans of
+/// the parser serde reads the file with, so a key is found however it is written (quoted, after
+/// a comment that names it, in an array of tables).
+#[derive(Debug)]
+pub struct Layout<'a> {
+    text: &'a str,
+    /// None for a text that does not parse (its error comes from [`parse`]).
+    doc: Option<toml_edit::ImDocument<&'a str>>,
+}
+
+impl<'a> Layout<'a> {
+    /// The layout of `text`.
+    pub fn parse(text: &'a str) -> Layout<'a> {
+        Layout {
+            text,
+            doc: toml_edit::ImDocument::parse(text).ok(),
         }
     }
-    None
+
+    /// Its lines, in the first table of every array of tables.
+    pub fn lines(&self) -> Lines<'_> {
+        Lines {
+            layout: self,
+            nth: 0,
+        }
+    }
+}
+
+/// Where the tables and keys of a [`Layout`] are written, taking one table of each array of
+/// tables (the `nth`: the third `[[valve]]` and its sub-tables).
+#[derive(Debug, Clone, Copy)]
+pub struct Lines<'a> {
+    layout: &'a Layout<'a>,
+    nth: usize,
+}
+
+impl<'a> Lines<'a> {
+    /// The same lines in the `nth` (0-based) table of each array of tables.
+    pub fn nth(self, nth: usize) -> Lines<'a> {
+        Lines { nth, ..self }
+    }
+
+    /// The line (1-based) where `key = ...` is set in `[table]` (dotted from the top, None for
+    /// the top level), or where `[table]` is headed when `key` is empty. None when the text does
+    /// not write it: a `[table.key]` table is not `key = ...`, and a table only implied by its
+    /// sub-tables has no header.
+    pub fn of(&self, table: Option<&str>, key: &str) -> Option<usize> {
+        let doc = self.layout.doc.as_ref()?;
+        let mut t = doc.as_table();
+        for name in table.into_iter().flat_map(|t| t.split('.')) {
+            t = match t.get(name)? {
+                toml_edit::Item::Table(inner) => inner,
+                toml_edit::Item::ArrayOfTables(array) => array.get(self.nth)?,
+                _ => return None,
+            };
+        }
+        let span = if key.is_empty() {
+            t.span()
+        } else {
+            let (k, item) = t.get_key_value(key)?;
+            item.is_value().then(|| k.span())?
+        }?;
+        Some(line_at(self.layout.text, span.start))
+    }
 }
 
 /// The dotted key set on `line` (1-based), with its table, if that line sets one.
@@ -170,7 +213,7 @@ fn inline_key(line_head: &str) -> Option<&str> {
 }
 
 /// The table name of a `[table]` or `[[array]]` header line.
-pub fn header(line: &str) -> Option<String> {
+fn header(line: &str) -> Option<String> {
     let inner = line.strip_prefix('[')?;
     let end = inner.find(']')?;
     Some(inner[..end].trim_matches(['[', ']', ' ']).to_string())
@@ -213,10 +256,8 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert_eq!(err, "c.toml:1: (file): missing field `name`");
-        assert_eq!(
-            line_of("# rate_hz = 2\nrate_hz = 1", None, "rate_hz"),
-            Some(2)
-        );
+        let layout = Layout::parse("# rate_hz = 2\nrate_hz = 1");
+        assert_eq!(layout.lines().of(None, "rate_hz"), Some(2));
     }
 
     #[test]
@@ -260,11 +301,34 @@ mod tests {
     }
 
     #[test]
-    fn line_of_finds_keys_in_tables() {
-        let text = "a = 1\n[t]\na = 2\n";
-        assert_eq!(line_of(text, None, "a"), Some(1));
-        assert_eq!(line_of(text, Some("t"), "a"), Some(3));
-        assert_eq!(line_of(text, Some("t"), ""), Some(2));
-        assert_eq!(line_of(text, Some("u"), "a"), None);
+    fn lines_find_keys_and_headers_in_tables() {
+        let text = "a = 1\n[t]\na = 2\n\"b c\" = 3\n[u.v]\nw = 4\n";
+        let layout = Layout::parse(text);
+        let lines = layout.lines();
+        assert_eq!(lines.of(None, "a"), Some(1));
+        assert_eq!(lines.of(Some("t"), "a"), Some(3));
+        assert_eq!(lines.of(Some("t"), "b c"), Some(4));
+        assert_eq!(lines.of(Some("t"), ""), Some(2));
+        assert_eq!(lines.of(Some("u.v"), "w"), Some(6));
+        assert_eq!(lines.of(Some("u.v"), ""), Some(5));
+        // `v` is a table of `u`, not a key set in it.
+        assert_eq!(lines.of(Some("u"), "v"), None);
+        // `[u]` is only implied by `[u.v]`: it has no header.
+        assert_eq!(lines.of(Some("u"), ""), None);
+        assert_eq!(lines.of(Some("x"), "a"), None);
+        assert_eq!(lines.of(Some("t"), "x"), None);
+    }
+
+    #[test]
+    fn lines_take_the_nth_table_of_an_array() {
+        let text = "[[v]]\nname = \"a\"\n[[v]]\n[v.s]\nk = 1\n\n[[v]]\nname = \"c\"\n";
+        let layout = Layout::parse(text);
+        let lines = layout.lines();
+        assert_eq!(lines.of(Some("v"), "name"), Some(2));
+        assert_eq!(lines.nth(1).of(Some("v"), ""), Some(3));
+        assert_eq!(lines.nth(1).of(Some("v"), "name"), None);
+        assert_eq!(lines.nth(1).of(Some("v.s"), "k"), Some(5));
+        assert_eq!(lines.nth(2).of(Some("v"), "name"), Some(8));
+        assert_eq!(lines.nth(3).of(Some("v"), ""), None);
     }
 }

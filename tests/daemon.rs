@@ -304,9 +304,7 @@ fn sigterm_stops_cleanly_with_the_safe_action_logged() {
         assert!(Instant::now() < deadline, "no log rows after 20 s");
         std::thread::sleep(Duration::from_millis(20));
     }
-    // SAFETY: kill(2) on our own child's pid with a standard signal.
-    let rc = unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
-    assert_eq!(rc, 0);
+    assert!(common::signal(&child, libc::SIGTERM));
     let out = child.wait_with_output().unwrap();
     assert!(
         out.status.success(),
@@ -463,6 +461,7 @@ fn peak_rss_kib(args: &[&str], cwd: &Path) -> i64 {
         .unwrap();
     let mut status = 0;
     // SAFETY: wait4 on our own child's pid, with valid pointers to a status and an rusage.
+    #[allow(unsafe_code)]
     let usage = unsafe {
         let mut usage: libc::rusage = std::mem::zeroed();
         let pid = libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage);

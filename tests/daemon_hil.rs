@@ -74,7 +74,7 @@ impl Daemon {
         let mut err = child.stderr.take().unwrap();
         let stderr = std::thread::spawn(move || {
             let mut s = String::new();
-            let _ = err.read_to_string(&mut s);
+            drop(err.read_to_string(&mut s));
             s
         });
         let mut daemon = Daemon {
@@ -89,7 +89,7 @@ impl Daemon {
         for _ in 0..announced {
             let mut line = String::new();
             if daemon.stdout.read_line(&mut line).unwrap() == 0 {
-                let _ = daemon.child.0.wait();
+                drop(daemon.child.0.wait());
                 let err = daemon.stderr.take().unwrap().join().unwrap();
                 panic!("the daemon ended before announcing its endpoints: {err}");
             }
@@ -112,9 +112,7 @@ impl Daemon {
 
     /// SIGTERM, then the exit status must be 0; returns the output and the log rows.
     fn stop(mut self) -> Stopped {
-        // SAFETY: kill(2) on our own child's pid with a standard signal.
-        let rc = unsafe { libc::kill(self.child.0.id() as libc::pid_t, libc::SIGTERM) };
-        assert_eq!(rc, 0);
+        assert!(common::signal(&self.child.0, libc::SIGTERM));
         let status = self.child.0.wait().unwrap();
         let mut stdout = String::new();
         self.stdout.read_to_string(&mut stdout).unwrap();
@@ -143,8 +141,8 @@ struct KillOnDrop(Child);
 
 impl Drop for KillOnDrop {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        drop(self.0.kill());
+        drop(self.0.wait());
     }
 }
 

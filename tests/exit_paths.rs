@@ -87,11 +87,7 @@ fn a_closed_stderr_pipe_mid_run_does_not_skip_the_stop_action() {
     // The loop now warns of every failed cycle, into the closed pipe.
     dev.kill();
     std::thread::sleep(Duration::from_millis(500));
-    // SAFETY: kill(2) on our own child's pid with a standard signal.
-    assert_eq!(
-        unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGTERM) },
-        0
-    );
+    assert!(common::signal(&daemon, libc::SIGTERM));
     let out = daemon.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{:?}\n{stdout}", out.status);
@@ -136,8 +132,8 @@ fn sim_device_serves_with_a_full_stderr() {
         let _turn = real_time_turn();
         run_cmd(&cfg, &logs, 0.5).output().unwrap()
     };
-    let _ = sim.kill();
-    let _ = sim.wait();
+    drop(sim.kill());
+    drop(sim.wait());
     assert!(
         out.status.success(),
         "{}",
@@ -189,6 +185,7 @@ fn analysis_output_that_cannot_be_written_is_one_line_or_quiet() {
     let mut fds = [0 as libc::c_int; 2];
     // SAFETY: pipe(2) fills the two descriptors; the read end is closed at once and the write
     // end handed to a File that owns it.
+    #[allow(unsafe_code)]
     let stdout = unsafe {
         assert_eq!(libc::pipe(fds.as_mut_ptr()), 0);
         libc::close(fds[0]);

@@ -32,6 +32,7 @@ thread_local! {
 
 // SAFETY: every call is forwarded to the system allocator unchanged; counting touches only a
 // const-initialised thread-local cell, which does not allocate.
+#[allow(unsafe_code)]
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         ALLOCATIONS.with(|c| c.set(c.get() + 1));

@@ -55,13 +55,13 @@ impl Daemon {
     /// SIGTERM, then its exit and the rest of its stdout (the summary).
     fn stop(&mut self) -> (bool, String) {
         if matches!(self.0.try_wait(), Ok(None)) {
-            // SAFETY: kill(2) on our own child's pid, not yet reaped, with a standard signal.
-            unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
+            // Not yet reaped: the pid is still our child's.
+            common::signal(&self.0, libc::SIGTERM);
         }
         let ok = self.0.wait().is_ok_and(|s| s.success());
         let mut rest = String::new();
         if let Some(mut out) = self.0.stdout.take() {
-            let _ = out.read_to_string(&mut rest);
+            drop(out.read_to_string(&mut rest));
         }
         (ok, rest)
     }
@@ -69,7 +69,7 @@ impl Daemon {
 
 impl Drop for Daemon {
     fn drop(&mut self) {
-        let _ = self.stop();
+        self.stop();
     }
 }
 

@@ -39,7 +39,11 @@ fn load(name: &str) -> (File, String) {
     let (file, text): (File, String) = toml_file::load(&path).unwrap_or_else(|e| panic!("{e}"));
     file.valve
         .registers
-        .check_in(&text, &path, "valve.registers")
+        .check_in(
+            toml_file::Layout::parse(&text).lines(),
+            &path,
+            "valve.registers",
+        )
         .unwrap_or_else(|e| panic!("{e}"));
     (file, text)
 }

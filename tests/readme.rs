@@ -318,7 +318,7 @@ fn start(scratch: &Scratch, cmd: &Cmd, text: &str) -> Started {
         let mut all = String::new();
         for line in BufReader::new(out).lines().map_while(Result::ok) {
             if all.is_empty() {
-                let _ = tx.send(line.clone());
+                drop(tx.send(line.clone()));
             }
             all.push_str(&line);
             all.push('\n');
@@ -328,7 +328,7 @@ fn start(scratch: &Scratch, cmd: &Cmd, text: &str) -> Started {
     let mut err = child.stderr.take().unwrap();
     let stderr = std::thread::spawn(move || {
         let mut s = String::new();
-        let _ = err.read_to_string(&mut s);
+        drop(err.read_to_string(&mut s));
         s
     });
     Started {
@@ -364,16 +364,10 @@ fn wait(child: &mut Child, limit: Duration) -> Option<ExitStatus> {
     None
 }
 
-/// Signals the process group of `child`.
-fn signal(child: &Child, sig: libc::c_int) {
-    // SAFETY: kill(2) on the process group our own child leads, with a standard signal.
-    unsafe { libc::kill(-(child.id() as libc::pid_t), sig) };
-}
-
 /// Ends a started command and returns (status, stdout, stderr); None if it would not stop.
 fn end(mut s: Started, sig: Option<libc::c_int>) -> (Option<ExitStatus>, String, String) {
     if let Some(sig) = sig {
-        signal(&s.child, sig);
+        common::signal_group(&s.child, sig);
     }
     let limit = if sig.is_some() {
         BACKGROUND_LIMIT
@@ -382,8 +376,8 @@ fn end(mut s: Started, sig: Option<libc::c_int>) -> (Option<ExitStatus>, String,
     };
     let status = wait(&mut s.child, limit);
     if status.is_none() {
-        signal(&s.child, libc::SIGKILL);
-        let _ = s.child.wait();
+        common::signal_group(&s.child, libc::SIGKILL);
+        drop(s.child.wait());
     }
     let out = s.stdout.join().unwrap_or_default();
     let err = s.stderr.join().unwrap_or_default();

@@ -24,6 +24,7 @@ use common::sim::{real_time_turn, BIN};
 /// Starts `cmd` with at most `fds` open file descriptors.
 fn spawn_with_fd_limit(cmd: &mut Command, fds: u64) -> Child {
     // SAFETY: setrlimit is async-signal-safe; the closure touches nothing else.
+    #[allow(unsafe_code)]
     unsafe {
         cmd.pre_exec(move || {
             let limit = libc::rlimit {
@@ -56,7 +57,7 @@ fn endpoints(child: &mut Child, n: usize) -> (Vec<String>, JoinHandle<String>) {
     }
     let rest = std::thread::spawn(move || {
         let mut text = String::new();
-        let _ = out.read_to_string(&mut text);
+        drop(out.read_to_string(&mut text));
         text
     });
     (found, rest)
@@ -96,8 +97,7 @@ fn scrape(addr: &str) -> String {
 
 /// SIGTERM, then the rest of its stdout and its stderr (it must exit 0).
 fn stop(child: Child, stdout: JoinHandle<String>) -> (String, String) {
-    // SAFETY: kill(2) on our own child's pid with a standard signal.
-    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+    common::signal(&child, libc::SIGTERM);
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "{stderr}");

@@ -23,91 +23,91 @@ use valve_bridge::recording::Recording;
 use valve_bridge::synth::{self, physical, Excitation, SynthError};
 
 /// Sample period of every recording, s (100 Hz).
-pub const DT: f64 = 0.01;
+pub(crate) const DT: f64 = 0.01;
 
 // Label thresholds: an effect is labelled when its physics reaches these.
 /// Transport delay, s: more than twice the slowest healthy one and above the 0.2 s a healthy
 /// positioner may have.
-pub const DEAD_TIME_S: f64 = 0.25;
+pub(crate) const DEAD_TIME_S: f64 = 0.25;
 /// Coulomb band, %: a reversal loses at least 0.6 % of travel, several times the largest
 /// healthy band and above the noisiest sensor (0.25 %).
-pub const BACKLASH_PCT: f64 = 0.6;
+pub(crate) const BACKLASH_PCT: f64 = 0.6;
 /// Static band above the Coulomb band, %: slips of about this size stand above the noise...
-pub const STICTION_PCT: f64 = 0.4;
+pub(crate) const STICTION_PCT: f64 = 0.4;
 /// ...and the excitation makes the stem stick and slip at least this often (a stem that only
 /// breaks away at the start of large moves, and settles smoothly, shows no stick-slip).
-pub const STICK_SLIPS: usize = 10;
+pub(crate) const STICK_SLIPS: usize = 10;
 /// Chamber volume growth g: the open valve is at least twice as slow as the closed one...
-pub const GROWTH: f64 = 1.0;
+pub(crate) const GROWTH: f64 = 1.0;
 /// ...and between the openings the recording visits (5th to 95th percentile of V_P) the
 /// response slows by at least half: a valve kept near one opening shows no dependence on it.
-pub const GROWTH_EXPOSED_RATIO: f64 = 1.5;
+pub(crate) const GROWTH_EXPOSED_RATIO: f64 = 1.5;
 /// Both flow limits at most this, %/s: a full stroke takes at least 4 s, well below the 40 %/s
 /// a healthy positioner strokes at...
-pub const SLEW_PCT_PER_S: f64 = 25.0;
+pub(crate) const SLEW_PCT_PER_S: f64 = 25.0;
 /// Ratio of the faster to the slower flow limit: opening and closing speeds differ by half.
-pub const ASYMMETRY_RATIO: f64 = 1.5;
+pub(crate) const ASYMMETRY_RATIO: f64 = 1.5;
 /// ...and a limit (or the slower side of an asymmetry) counts only when the same valve without
 /// it would have moved this many times faster than the limit...
-pub const EXPOSED_SPEED_RATIO: f64 = 1.5;
+pub(crate) const EXPOSED_SPEED_RATIO: f64 = 1.5;
 /// ...for this long in total, s: the limit then shapes the recording.
-pub const EXPOSED_S: f64 = 3.0;
+pub(crate) const EXPOSED_S: f64 = 3.0;
 /// Error below which the minimum flow takes over from proportional action (q_min / K), %:
 /// small moves are visibly constant-rate at this size...
-pub const MIN_SPEED_BAND_PCT: f64 = 0.4;
+pub(crate) const MIN_SPEED_BAND_PCT: f64 = 0.4;
 /// ...and the floor moves V_P (noise-free) away from where the same valve without it would
 /// be, by three sensor-noise sigmas (at least 0.1 %) for this long in total, s.
-pub const MIN_SPEED_SHOWN_S: f64 = 3.0;
+pub(crate) const MIN_SPEED_SHOWN_S: f64 = 3.0;
 /// Positioner deadband, %: the valve stops short by 0.15 % or more.
-pub const DEADBAND_PCT: f64 = 0.3;
+pub(crate) const DEADBAND_PCT: f64 = 0.3;
 /// A stop below 100 % counts when O_P asks to pass it by at least this much, %...
-pub const SATURATION_MARGIN_PCT: f64 = 1.0;
+pub(crate) const SATURATION_MARGIN_PCT: f64 = 1.0;
 /// ...for this long in total, s.
-pub const SATURATION_S: f64 = 10.0;
+pub(crate) const SATURATION_S: f64 = 10.0;
 /// Sensor resolution, %: at least this and at least the sensor noise (a finer lattice is
 /// dithered into the noise).
-pub const QUANTIZATION_PCT: f64 = 0.15;
+pub(crate) const QUANTIZATION_PCT: f64 = 0.15;
 /// Largest sensor error |(a - 1) x + b| over the openings O_P visits (5th-95th percentile), %.
-pub const CALIBRATION_PCT: f64 = 0.5;
+pub(crate) const CALIBRATION_PCT: f64 = 0.5;
 
 // Healthy ranges (every case's physics starts inside all of them): the imperfections of a
 // valve in good order, as large as the shared healthy case's (0.1 % friction band, 0.05 s
 // transport delay) and a little more. They may be visible at the lowest sensor noise; they are
 // not what a valve engineer would call a fault.
 /// Transport delay, s.
-pub const HEALTHY_DEAD_TIME_S: (f64, f64) = (0.02, 0.1);
+pub(crate) const HEALTHY_DEAD_TIME_S: (f64, f64) = (0.02, 0.1);
 /// Coulomb band, %.
-pub const HEALTHY_COULOMB_PCT: (f64, f64) = (0.0, 0.15);
+pub(crate) const HEALTHY_COULOMB_PCT: (f64, f64) = (0.0, 0.15);
 /// Static band above Coulomb, %.
-pub const HEALTHY_STATIC_EXCESS_PCT: (f64, f64) = (0.0, 0.03);
+pub(crate) const HEALTHY_STATIC_EXCESS_PCT: (f64, f64) = (0.0, 0.03);
 /// Volume growth.
-pub const HEALTHY_GROWTH: (f64, f64) = (0.0, 0.2);
+pub(crate) const HEALTHY_GROWTH: (f64, f64) = (0.0, 0.2);
 /// Fill limit, %/s (the vent limit is within 10 % of it).
-pub const HEALTHY_FILL_PCT_PER_S: (f64, f64) = (50.0, 100.0);
+pub(crate) const HEALTHY_FILL_PCT_PER_S: (f64, f64) = (50.0, 100.0);
 /// Positioner deadband, %.
-pub const HEALTHY_DEADBAND_PCT: (f64, f64) = (0.0, 0.1);
+pub(crate) const HEALTHY_DEADBAND_PCT: (f64, f64) = (0.0, 0.1);
 /// Sensor lattice when there is one, %.
-pub const HEALTHY_LATTICE_PCT: (f64, f64) = (0.005, 0.05);
+pub(crate) const HEALTHY_LATTICE_PCT: (f64, f64) = (0.005, 0.05);
 /// Sensor noise levels, %.
-pub const NOISE_LEVELS_PCT: [f64; 3] = [0.02, 0.1, 0.25];
+pub(crate) const NOISE_LEVELS_PCT: [f64; 3] = [0.02, 0.1, 0.25];
 
 // The broadened healthy class: valves in good order as they look in closed loop under a noisy
 // controller with slow reversals (the level loop's inflow turns over minutes), wider than the
 // ranges above where a healthy valve in service can be.
 /// The excitation of the broadened healthy class.
-pub const NOISY_LOOP: &str = "noisy_loop";
+pub(crate) const NOISY_LOOP: &str = "noisy_loop";
 /// Coulomb band, %.
-pub const BROAD_COULOMB_PCT: (f64, f64) = (0.0, 0.2);
+pub(crate) const BROAD_COULOMB_PCT: (f64, f64) = (0.0, 0.2);
 /// Positioner gain, 1/s (the other healthy valves: 3-10).
-pub const BROAD_GAIN_PER_S: (f64, f64) = (2.0, 10.0);
+pub(crate) const BROAD_GAIN_PER_S: (f64, f64) = (2.0, 10.0);
 /// Sensor noise levels, %.
-pub const BROAD_NOISE_LEVELS_PCT: [f64; 4] = [0.02, 0.1, 0.25, 0.4];
+pub(crate) const BROAD_NOISE_LEVELS_PCT: [f64; 4] = [0.02, 0.1, 0.25, 0.4];
 /// Noise of the loop's level sensor, %: the controller's output moves three times as much
 /// (the default loop's is 0.15 %).
-pub const BROAD_LEVEL_NOISE_PCT: (f64, f64) = (0.1, 0.5);
+pub(crate) const BROAD_LEVEL_NOISE_PCT: (f64, f64) = (0.1, 0.5);
 
 /// The excitations cycled over the cases.
-pub const EXCITATIONS: [&str; 5] = [
+pub(crate) const EXCITATIONS: [&str; 5] = [
     "random_steps",
     "closed_loop",
     "small_steps",
@@ -119,7 +119,7 @@ pub const EXCITATIONS: [&str; 5] = [
 /// flow limit only shows where the excitation asks for more speed than it allows, so under
 /// gentle excitations (closed loop: a healthy valve rarely moves faster than 2 %/s; small
 /// steps: 8 %/s; ramps: 12 %/s but for a few seconds) limits are drawn lower and ratios higher.
-pub fn size_range(effect: Effect, noise_pct: f64, excitation: &str) -> (f64, f64) {
+pub(crate) fn size_range(effect: Effect, noise_pct: f64, excitation: &str) -> (f64, f64) {
     let gentle = match excitation {
         "closed_loop" => 2,
         "small_steps" | "ramps" => 1,
@@ -144,7 +144,7 @@ pub fn size_range(effect: Effect, noise_pct: f64, excitation: &str) -> (f64, f64
 
 /// What a case is meant to hold.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Plan {
+pub(crate) struct Plan {
     pub index: usize,
     pub seed: u64,
     pub effects: Vec<Effect>,
@@ -153,7 +153,7 @@ pub struct Plan {
 
 /// A generated, labelled case.
 #[derive(Debug, Clone)]
-pub struct Case {
+pub(crate) struct Case {
     pub plan: Plan,
     pub spec: ModelSpec,
     pub excitation: Excitation,
@@ -171,7 +171,7 @@ pub struct Case {
 /// `n` plans from `seed`: a fifth healthy (at least 40 when `n` >= 200), 15 % with two
 /// effects, the rest with one, every effect equally often, shuffled; then `n` * 3 / 20 more
 /// healthy valves of the broadened class ([`NOISY_LOOP`]).
-pub fn plans(seed: u64, n: usize) -> Vec<Plan> {
+pub(crate) fn plans(seed: u64, n: usize) -> Vec<Plan> {
     let mut out = plans_of_effects(seed, n);
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xb20ad);
     for _ in 0..n * 3 / 20 {
@@ -239,10 +239,10 @@ fn plans_of_effects(seed: u64, n: usize) -> Vec<Plan> {
 }
 
 /// Most draws of one case; the last one is kept, labelled as it is, if none matched the plan.
-pub const MAX_DRAWS: usize = 200;
+pub(crate) const MAX_DRAWS: usize = 200;
 
 /// Generates and labels the case of `plan`, `duration_s` long.
-pub fn build(plan: &Plan, duration_s: f64) -> Result<Case, SynthError> {
+pub(crate) fn build(plan: &Plan, duration_s: f64) -> Result<Case, SynthError> {
     let mut draw = 1;
     loop {
         let mut rng = ChaCha8Rng::seed_from_u64(plan.seed.wrapping_add(draw as u64));
@@ -458,7 +458,7 @@ fn quantile(x: &[f64], q: f64) -> f64 {
 
 /// The effects `spec` holds by the thresholds, `healthy` being the same valve before any
 /// effect was built in (for the limits that must be exercised to count).
-pub fn labels(
+pub(crate) fn labels(
     spec: &ModelSpec,
     healthy: &ModelSpec,
     rec: &Recording,
@@ -657,7 +657,7 @@ fn floor_shown(spec: &ModelSpec, rec: &Recording) -> Result<bool, SynthError> {
 
 /// The effects whose physics in `spec` lies outside the healthy ranges (whatever the
 /// excitation did with them).
-pub fn outside_healthy(spec: &ModelSpec) -> Vec<Effect> {
+pub(crate) fn outside_healthy(spec: &ModelSpec) -> Vec<Effect> {
     let Some(p) = spec.physical else {
         return Vec::new();
     };

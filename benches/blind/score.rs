@@ -9,7 +9,7 @@ use valve_bridge::diagnose::Effect;
 
 /// What one case was and what diagnosis said about it.
 #[derive(Debug, Clone)]
-pub struct Outcome {
+pub(crate) struct Outcome {
     pub excitation: &'static str,
     pub labels: Vec<Effect>,
     /// Each planned effect with the size it was drawn at.
@@ -27,7 +27,7 @@ pub struct Outcome {
 
 /// A finding or a trace, weighed.
 #[derive(Debug, Clone, Copy)]
-pub struct Item {
+pub(crate) struct Item {
     pub effect: Effect,
     /// Its worth at the less material end of its interval, what materiality is judged on.
     pub worth_low: f64,
@@ -38,30 +38,30 @@ impl Outcome {
     /// Whether `effect` was planned in the valve but did not show enough in its recording to be
     /// labelled: the physics is there, so finding it is not a false finding, and missing it is
     /// not a miss.
-    pub fn faint(&self, effect: Effect) -> bool {
+    pub(crate) fn faint(&self, effect: Effect) -> bool {
         !self.labels.contains(&effect) && self.sizes.iter().any(|(e, _)| *e == effect)
     }
 
     /// A valve with nothing planned: every parameter inside its healthy range.
-    pub fn healthy(&self) -> bool {
+    pub(crate) fn healthy(&self) -> bool {
         self.labels.is_empty() && self.sizes.is_empty()
     }
 
     /// 1 - final / baseline held-out SSE.
-    pub fn gain(&self) -> f64 {
+    pub(crate) fn gain(&self) -> f64 {
         1.0 - self.final_heldout_sse / self.baseline_heldout_sse
     }
 }
 
 /// Targets the method is judged against.
-pub const FIRST_HIT_TARGET: f64 = 0.92;
-pub const PRECISION_TARGET: f64 = 0.95;
-pub const RECALL_TARGET: f64 = 0.88;
-pub const HEALTHY_FALSE_TARGET: f64 = 0.02;
-pub const GAIN_TARGET: f64 = 0.50;
-pub const SECONDS_TARGET: f64 = 15.0;
+pub(crate) const FIRST_HIT_TARGET: f64 = 0.92;
+pub(crate) const PRECISION_TARGET: f64 = 0.95;
+pub(crate) const RECALL_TARGET: f64 = 0.88;
+pub(crate) const HEALTHY_FALSE_TARGET: f64 = 0.02;
+pub(crate) const GAIN_TARGET: f64 = 0.50;
+pub(crate) const SECONDS_TARGET: f64 = 15.0;
 /// Share of cases a size bin must find to count as found reliably.
-pub const RELIABLE: f64 = 0.80;
+pub(crate) const RELIABLE: f64 = 0.80;
 
 fn short(e: Option<Effect>) -> &'static str {
     match e {
@@ -109,7 +109,7 @@ fn pct(num: usize, den: usize) -> String {
 }
 
 /// The confusion matrix over valves with at most one effect, then the two-effect valves.
-pub fn print_confusion(all: &[Outcome]) {
+pub(crate) fn print_confusion(all: &[Outcome]) {
     println!("\nConfusion matrix, valves with at most one effect (rows: true effect, columns: first finding):");
     let cls = classes();
     print!("{:>6}", "");
@@ -149,7 +149,7 @@ pub fn print_confusion(all: &[Outcome]) {
 }
 
 /// Precision and recall per effect over all findings; returns the overall (precision, recall).
-pub fn print_precision_recall(all: &[Outcome]) -> (f64, f64) {
+pub(crate) fn print_precision_recall(all: &[Outcome]) -> (f64, f64) {
     println!("\nPer effect, over all findings:");
     println!(
         "{:<22}{:>8}{:>8}{:>8}{:>11}{:>8}",
@@ -201,7 +201,7 @@ fn size_bins(all: &[Outcome], effect: Effect) -> Vec<f64> {
 
 /// Per effect and excitation: the lower edge of the smallest size bin found in at least 80 %
 /// of its valves (found: the effect is among the findings).
-pub fn print_smallest_found(all: &[Outcome], excitations: &[&str]) {
+pub(crate) fn print_smallest_found(all: &[Outcome], excitations: &[&str]) {
     println!("\nSmallest size found in >= 80 % of valves, per excitation (size bin lower edge, found/valves in it):");
     print!("{:<30}", "effect (size unit)");
     for x in excitations {
@@ -284,7 +284,7 @@ fn at(cases: &[&Outcome], m: f64, share: f64) -> (usize, usize, usize, usize) {
 /// The curve of healthy valves with a finding against recall, over the materiality threshold
 /// (overall and per excitation) and over the share of the held-out error a finding must
 /// remove (at the documented sizes); `share` is the run's.
-pub fn print_curve(all: &[Outcome], excitations: &[&str], share: f64) {
+pub(crate) fn print_curve(all: &[Outcome], excitations: &[&str], share: f64) {
     println!(
         "\nHealthy valves with a finding / recall, over the materiality threshold (x the documented sizes; \
          from each valve's findings and traces):"
@@ -319,7 +319,7 @@ pub fn print_curve(all: &[Outcome], excitations: &[&str], share: f64) {
 }
 
 /// The overall figures against their targets.
-pub fn print_overall(all: &[Outcome], precision: f64, recall: f64) {
+pub(crate) fn print_overall(all: &[Outcome], precision: f64, recall: f64) {
     let with: Vec<&Outcome> = all.iter().filter(|o| !o.labels.is_empty()).collect();
     let healthy: Vec<&Outcome> = all.iter().filter(|o| o.healthy()).collect();
     let faint: Vec<&Outcome> = (all.iter())

@@ -34,7 +34,7 @@ const DT: f64 = 0.01;
 /// the figures start after it, s.
 const SETTLE_S: f64 = 10.0;
 /// Deadband of the travel count on the V_P read, %: two steps of its 0.1 % resolution.
-pub const DEADBAND_PCT: f64 = 0.2;
+pub(crate) const DEADBAND_PCT: f64 = 0.2;
 /// sim-device's faults: late replies and lost requests, as a busy device and network give.
 const FAULTS: [&str; 6] = [
     "--delay-ms",
@@ -48,7 +48,7 @@ const FAULTS: [&str; 6] = [
 const TCP_CONFIG: &str = include_str!("../../config/sim-device-tcp.toml");
 
 /// One valve's figures over Modbus, without and with compensation.
-pub struct Outcome {
+pub(crate) struct Outcome {
     pub name: String,
     pub scenario: Scenario,
     /// What the diagnosed model compensates.
@@ -61,7 +61,7 @@ pub struct Outcome {
 
 /// Figures of one logged run.
 #[derive(Debug, Clone, Copy)]
-pub struct Figures {
+pub(crate) struct Figures {
     /// RMS of the V_P read minus the healthy twin's, %.
     pub tracking_pct: f64,
     pub travel: metrics::Travel,
@@ -101,8 +101,8 @@ impl Device {
 
 impl Drop for Device {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        drop(self.child.kill());
+        drop(self.child.wait());
     }
 }
 
@@ -311,7 +311,7 @@ fn switched_off(summary: &str, name: &str) -> Option<f64> {
 
 /// Runs the Modbus part on `valves` under `work`: a log of `log_s` per valve, diagnosed, then
 /// `run_s` of each scenario without and with compensation; `progress` says what is going on.
-pub fn run(
+pub(crate) fn run(
     valves: &[(String, ModelSpec)],
     work: &Path,
     (log_s, run_s, log_seed): (f64, f64, u64),

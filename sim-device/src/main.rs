@@ -30,9 +30,6 @@
 //! SIGTERM logs what the server went through before exiting. It is a test instrument: no
 //! persistence, no device identification, no coils.
 
-#![warn(missing_debug_implementations, unreachable_pub, let_underscore_drop)]
-#![deny(unsafe_code)]
-
 mod faults;
 mod rtu;
 mod tcp;
@@ -211,15 +208,16 @@ fn load_config(path: &Path) -> anyhow::Result<(Served, Option<u8>)> {
     let (file, text): (ConfigFile, String) = toml_file::load(path)?;
     let v = file.valve;
     let section = "valve.registers";
+    let layout = toml_file::Layout::parse(&text);
     let served = match &v.profile {
         None => {
             let map = RegisterMap::from(v.registers);
-            map.check_in(&text, path, section)?;
+            map.check_in(layout.lines(), path, section)?;
             Served::map(map)
         }
         Some(name) => {
             let p = shipped_profile(name)?;
-            Served::profile(p.under(&v.registers, &text, path, section, 0)?, &p)
+            Served::profile(p.under(&v.registers, layout.lines(), path, section)?, &p)
         }
     };
     Ok((served, v.rtu.slave_id.or(v.tcp.unit_id)))

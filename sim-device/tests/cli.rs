@@ -35,7 +35,7 @@ fn bad_register_maps_name_file_line_and_key() {
             "{path}:2: valve.registers.status.address: 0 overlaps setpoint"
         )],
     );
-    let _ = std::fs::remove_dir_all(&dir);
+    drop(std::fs::remove_dir_all(&dir));
 }
 
 #[test]

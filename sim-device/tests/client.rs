@@ -56,7 +56,7 @@ async fn kinds(v: &mut ModbusValve, n: usize, pause: Duration) -> Vec<(&'static 
             Ok(_) => ("ok", String::new()),
             Err(Fault::Timeout(t)) => ("timeout", t.to_string()),
             Err(Fault::Error(e)) => ("error", e.to_string()),
-            Err(Fault::Disconnected(m)) => ("disconnected", m),
+            Err(Fault::Disconnected(d)) => ("disconnected", d.to_string()),
         });
         tokio::time::sleep(pause).await;
     }

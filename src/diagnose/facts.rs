@@ -680,7 +680,7 @@ pub fn slips(reference: &[f64], y: &[f64], scale: &SlipScale) -> Vec<Slip> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::stats::tests::noise;
+    use crate::testkit::{changes, noise, steps, Columns};
 
     /// `x` without a reading in every 25th row and in three rows in a row every 300.
     fn with_holes(x: &[f64]) -> Vec<f64> {
@@ -818,37 +818,9 @@ mod tests {
         let dt = 0.01;
         // O_P: 40 -> 50 at 5 s, -> 45 at 15 s. V_P follows 0.3 s late, 0.8 s late after the reversal.
         let n = 2500;
-        let op: Vec<f64> = (0..n)
-            .map(|k| {
-                if k < 500 {
-                    40.0
-                } else if k < 1500 {
-                    50.0
-                } else {
-                    45.0
-                }
-            })
-            .collect();
-        let vp: Vec<f64> = (0..n)
-            .map(|k| {
-                if k < 530 {
-                    40.0
-                } else if k < 1580 {
-                    50.0
-                } else {
-                    45.0
-                }
-            })
-            .collect();
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-        let rec = RecordingView {
-            restarts: &[],
-            t: &t,
-            op: &op,
-            vp: &vp,
-            dt,
-        };
-        let f = measure(&rec, 0.0, 0.0);
+        let op = changes(n, 40.0, &[(500, 50.0), (1500, 45.0)]);
+        let vp = changes(n, 40.0, &[(530, 50.0), (1580, 45.0)]);
+        let f = measure(&Columns::new(op, vp, dt).view(), 0.0, 0.0);
         assert_eq!(f.steps.len(), 2);
         assert!(!f.steps[0].reversal && f.steps[1].reversal);
         assert!((f.steps[0].delay_s - 0.3).abs() < 1e-9 && (f.steps[1].delay_s - 0.8).abs() < 1e-9);
@@ -862,9 +834,7 @@ mod tests {
         // Steps between 10 and 90 % every 5 s; V_P moves at 8 |e| %/s at most 60 %/s, divided
         // by 1 + g V / 100 (a chamber that grows with travel), read with 0.1 % of noise.
         let (dt, n) = (0.01, 20000);
-        let op: Vec<f64> = (0..n)
-            .map(|k| [10.0, 90.0, 30.0, 70.0][(k / 500) % 4])
-            .collect();
+        let op = steps(n, 500, &[10.0, 90.0, 30.0, 70.0]);
         let e = noise(n, 0.1);
         let run = |g: f64| {
             let mut x = op[0];
@@ -896,11 +866,8 @@ mod tests {
         // Steps of 5 % every 4 s; V_P moves at 5 |e| %/s, or at least `floor` until it is
         // there, read with 0.05 % of noise.
         let (dt, n) = (0.01, 8000);
-        let op: Vec<f64> = (0..n)
-            .map(|k| 40.0 + 5.0 * ((k / 400) % 2) as f64)
-            .collect();
+        let op = steps(n, 400, &[40.0, 45.0]);
         let e = noise(n, 0.05);
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         let tails = |floor: f64, holes: bool| {
             let mut x = op[0];
             let mut vp: Vec<f64> = (0..n)
@@ -914,14 +881,7 @@ mod tests {
             if holes {
                 vp = with_holes(&vp);
             }
-            let rec = RecordingView {
-                restarts: &[],
-                t: &t,
-                op: &op,
-                vp: &vp,
-                dt,
-            };
-            measure(&rec, 0.05, 0.0)
+            measure(&Columns::new(op.clone(), vp, dt).view(), 0.05, 0.0)
         };
         // 0.25-0.5 % from rest: 1.25-2.5 %/s proportionally, 4 %/s with the floor.
         let slowing = tails(0.0, false).approach_speed(0.25, 0.5).unwrap();

@@ -171,36 +171,16 @@ fn last_direction(op: &[f64], a: usize, dt: f64) -> Option<i8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testkit::{changes, ripple, Columns};
 
     #[test]
     fn windows_find_the_bad_stretch_and_its_context() {
-        let dt = 0.01;
         let n = 6000;
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         // O_P goes up at 10 s and reverses at 30 s; the residual is bad for 1 s after 30 s.
-        let op: Vec<f64> = (0..n)
-            .map(|k| {
-                if k < 1000 {
-                    40.0
-                } else if k < 3000 {
-                    50.0
-                } else {
-                    45.0
-                }
-            })
-            .collect();
-        let vp = op.clone();
-        let r: Vec<f64> = (0..n)
-            .map(|k| if (3000..3100).contains(&k) { 1.0 } else { 0.0 })
-            .collect();
-        let rec = RecordingView {
-            restarts: &[],
-            t: &t,
-            op: &op,
-            vp: &vp,
-            dt,
-        };
-        let w = windows(&rec, &r, 0.05);
+        let op = changes(n, 40.0, &[(1000, 50.0), (3000, 45.0)]);
+        let r = changes(n, 0.0, &[(3000, 1.0), (3100, 0.0)]);
+        let rec = Columns::new(op.clone(), op, 0.01);
+        let w = windows(&rec.view(), &r, 0.05);
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(w[0].start_s > 28.5 && w[0].end_s < 31.5, "{w:?}");
         assert_eq!(w[0].kind, Context::Reversal);
@@ -209,18 +189,9 @@ mod tests {
 
     #[test]
     fn clean_residual_gives_no_window() {
-        let t: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
         let x = vec![50.0; 1000];
-        let r: Vec<f64> = (0..1000)
-            .map(|k| 0.05 * ((k * 7919 % 13) as f64 / 6.0 - 1.0))
-            .collect();
-        let rec = RecordingView {
-            restarts: &[],
-            t: &t,
-            op: &x,
-            vp: &x,
-            dt: 0.01,
-        };
-        assert!(windows(&rec, &r, 0.05).is_empty());
+        let r: Vec<f64> = (0..1000).map(|k| ripple(k, 0.05)).collect();
+        let rec = Columns::new(x.clone(), x, 0.01);
+        assert!(windows(&rec.view(), &r, 0.05).is_empty());
     }
 }

@@ -325,22 +325,14 @@ fn outcome(
 mod tests {
     use super::*;
     use crate::model::{bundled, ModelKind};
+    use crate::testkit::{steps, Columns};
 
     #[test]
     fn a_finding_shrunk_below_worth_or_unsure_of_it_is_a_trace() {
         let dt = 0.01;
-        let op: Vec<f64> = (0..3000)
-            .map(|k| 40.0 + 10.0 * ((k / 500) % 2) as f64)
-            .collect();
-        let t: Vec<f64> = (0..op.len()).map(|k| k as f64 * dt).collect();
-        let rec = RecordingView {
-            t: &t,
-            op: &op,
-            vp: &op,
-            restarts: &[],
-            dt,
-        };
-        let facts = facts::measure(&rec, 0.05, 0.0);
+        let op = steps(3000, 500, &[40.0, 50.0]);
+        let rec = Columns::new(op.clone(), op, dt);
+        let facts = facts::measure(&rec.view(), 0.05, 0.0);
         let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
         let finding = |effect, (worth, worth_low), measure| Finding {
             effect,

@@ -208,30 +208,20 @@ impl<'a> Scorer<'a> {
 mod tests {
     use super::*;
     use crate::model::{bundled, ModelKind};
+    use crate::testkit::{answer, steps, Columns};
 
     #[test]
     fn blocks_alternate_and_errors_split_by_block() {
         let dt = 0.01;
-        let op: Vec<f64> = (0..60000)
-            .map(|k| 30.0 + 10.0 * ((k / 700) % 4) as f64)
-            .collect();
+        let op = steps(60000, 700, &[30.0, 40.0, 50.0, 60.0]);
         let truth = bundled(ModelKind::Fopdt);
-        let vp = crate::model::Valve::new(&truth, dt)
-            .unwrap()
-            .simulate(&op, 30.0);
-        let t: Vec<f64> = (0..op.len()).map(|k| k as f64 * dt).collect();
-        let rec = RecordingView {
-            restarts: &[],
-            t: &t,
-            op: &op,
-            vp: &vp,
-            dt,
-        };
-        let s = Scorer::new(&rec);
+        let vp = answer(&truth, &op, dt);
+        let rec = Columns::new(op, vp, dt);
+        let s = Scorer::new(&rec.view());
         // 600 s: blocks of 30 s, twenty of them, ten held out.
         assert_eq!((s.block_len, s.n_blocks, s.skip), (3000, 20, 100));
         assert!(!s.held(2999) && s.held(3000) && !s.held(6000));
-        assert_eq!(s.n_fit() + s.n_held(), op.len() - 100);
+        assert_eq!(s.n_fit() + s.n_held(), rec.op.len() - 100);
         assert_eq!(
             s.errors(&truth),
             Errors {

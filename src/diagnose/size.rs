@@ -343,9 +343,11 @@ fn at_minimum(sse: &[f64], profile: &[Point]) -> [f64; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::stats::tests::noise;
-    use crate::model::{bundled, ModelKind, Valve};
-    use crate::recording::RecordingView;
+    use crate::model::{bundled, ModelKind};
+    use crate::testkit::{answer, noise, steps, Columns};
+
+    /// O_P stepping 2-6 %, reversing, every 4 s.
+    const LEVELS: [f64; 5] = [50.0, 54.0, 51.0, 56.0, 52.0];
 
     #[test]
     fn a_friction_band_is_sized_with_an_interval_around_it() {
@@ -353,26 +355,17 @@ mod tests {
         // 0.05 % of noise: the held-out blocks place the band within a few percent of 1 %.
         let dt = 0.01;
         let n = 40_000;
-        let op: Vec<f64> = (0..n)
-            .map(|k| 50.0 + [0.0, 4.0, 1.0, 6.0, 2.0][(k / 400) % 5])
-            .collect();
+        let op = steps(n, 400, &LEVELS);
         let mut truth = composed::compose(&bundled(ModelKind::Fopdt), dt);
         composed::set(&mut truth, Knob::FrictionBand, 1.0);
         let e = noise(n, 0.05);
-        let vp: Vec<f64> = (Valve::new(&truth, dt).unwrap().simulate(&op, op[0]).iter())
+        let vp: Vec<f64> = (answer(&truth, &op, dt).iter())
             .zip(&e)
             .map(|(v, e)| v + e)
             .collect();
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-        let rec = RecordingView {
-            t: &t,
-            op: &op,
-            vp: &vp,
-            restarts: &[],
-            dt,
-        };
-        let scorer = Scorer::new(&rec);
-        let facts = super::super::facts::measure(&rec, 0.05, 0.0);
+        let rec = Columns::new(op.clone(), vp, dt);
+        let scorer = Scorer::new(&rec.view());
+        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
         let tuning = Tuning::default();
         let s = size(Effect::Backlash, &truth, &facts, &op, &tuning);
         assert_eq!((s.name, s.value), ("friction_band_pct", 1.0));
@@ -400,20 +393,10 @@ mod tests {
         // Steps of 1-6 % held 4 s, on a valve stroking at 20 %/s.
         let dt = 0.01;
         let n = 20_000;
-        let steps: Vec<f64> = (0..n)
-            .map(|k| 50.0 + [0.0, 4.0, 1.0, 6.0, 2.0][(k / 400) % 5])
-            .collect();
+        let steps = steps(n, 400, &LEVELS);
         let read = |op: &[f64]| {
-            let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-            let vp = op.to_vec();
-            let rec = RecordingView {
-                t: &t,
-                op,
-                vp: &vp,
-                restarts: &[],
-                dt,
-            };
-            super::super::facts::measure(&rec, 0.05, 0.0)
+            let rec = Columns::new(op.to_vec(), op.to_vec(), dt);
+            super::super::facts::measure(&rec.view(), 0.05, 0.0)
         };
         let facts = read(&steps);
         let mut spec = composed::compose(&bundled(ModelKind::Fopdt), dt);

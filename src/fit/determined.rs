@@ -79,20 +79,19 @@ pub fn undetermined(
 mod tests {
     use super::*;
     use crate::fit::params::Limits;
-    use crate::model::{bundled, ModelKind, Valve};
+    use crate::model::{bundled, ModelKind};
+    use crate::testkit::{answer, ripple, steps};
 
     #[test]
     fn a_parameter_the_data_cannot_see_is_flagged() {
         // An FOPDT valve on slow steps: the dead time (0.38 s) and the time constant are
         // pinned down; a pure delay fitted to it finds its dead time too.
         let dt = 0.01;
-        let op: Vec<f64> = (0..20000)
-            .map(|k| 40.0 + 10.0 * ((k / 700) % 3) as f64)
-            .collect();
+        let op = steps(20000, 700, &[40.0, 50.0, 60.0]);
         let truth = bundled(ModelKind::Fopdt);
-        let vp = Valve::new(&truth, dt).unwrap().simulate(&op, op[0]);
+        let vp = answer(&truth, &op, dt);
         let noisy: Vec<f64> = (vp.iter().enumerate())
-            .map(|(k, v)| v + 0.05 * ((k * 7919 % 13) as f64 / 6.0 - 1.0))
+            .map(|(k, v)| v + ripple(k, 0.05))
             .collect();
         let all = vec![true; op.len()];
         let problem = Problem::new(&op, &noisy, &all, dt);

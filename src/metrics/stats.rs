@@ -103,17 +103,9 @@ pub fn correlation_length(r: &[f64]) -> f64 {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-
-    /// Deterministic Gaussian noise of standard deviation `sd` (seeded, so tests repeat).
-    pub(crate) fn noise(n: usize, sd: f64) -> Vec<f64> {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(987654321);
-        let normal = Normal::new(0.0, sd).unwrap();
-        (0..n).map(|_| normal.sample(&mut rng)).collect()
-    }
+    use crate::testkit::noise;
 
     #[test]
     fn quantiles_are_order_statistics() {

@@ -30,7 +30,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use smallvec::{smallvec, SmallVec};
 
-use crate::toml_file::{self, TomlError};
+use crate::toml_file::{Lines, TomlError};
 
 /// The Modbus table a register lives in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -520,12 +520,12 @@ impl RegisterMap {
         }
     }
 
-    /// Checks a map read from `text` (file `path`) under `[section]`, e.g. `valve.registers`:
-    /// the error names the file, the line and the full dotted key.
-    pub fn check_in(&self, text: &str, path: &Path, section: &str) -> Result<(), TomlError> {
+    /// Checks a map read from file `path` (laid out in `lines`) under `[section]`, e.g.
+    /// `valve.registers`: the error names the file, the line and the full dotted key.
+    pub fn check_in(&self, lines: Lines<'_>, path: &Path, section: &str) -> Result<(), TomlError> {
         match self.validate() {
             Ok(()) => Ok(()),
-            Err(v) => Err(v.located(text, path, section)),
+            Err(v) => Err(v.located(lines, path, section)),
         }
     }
 }
@@ -536,14 +536,14 @@ impl MapViolation {
         self.key.split_once('.').map_or(&self.key, |(top, _)| top)
     }
 
-    /// This violation of a map read from `text` (file `path`) under `[section]`, at the line
-    /// that sets its key (else the section's header, else line 1).
-    pub fn located(self, text: &str, path: &Path, section: &str) -> TomlError {
+    /// This violation of a map read from file `path` (laid out in `lines`) under `[section]`,
+    /// at the line that sets its key (else the section's header, else line 1).
+    pub fn located(self, lines: Lines<'_>, path: &Path, section: &str) -> TomlError {
         // Keys are `name.sub` (an inline table `name = { sub = .. }` or a `[section.name]` table) or `name`.
         let (top, sub) = self.key.split_once('.').unwrap_or((&self.key, ""));
-        let line = toml_file::line_of(text, Some(section), top)
-            .or_else(|| toml_file::line_of(text, Some(&format!("{section}.{top}")), sub))
-            .or_else(|| toml_file::line_of(text, Some(section), ""))
+        let line = (lines.of(Some(section), top))
+            .or_else(|| lines.of(Some(&format!("{section}.{top}")), sub))
+            .or_else(|| lines.of(Some(section), ""))
             .unwrap_or(1);
         TomlError::Invalid {
             path: path.to_path_buf(),
@@ -583,6 +583,7 @@ impl RegisterMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::toml_file::{self, Layout};
 
     fn parse(text: &str) -> Result<RegisterMap, TomlError> {
         #[derive(Deserialize)]
@@ -590,8 +591,9 @@ mod tests {
             registers: RegisterMap,
         }
         let doc: Doc = toml_file::parse(text, Path::new("m.toml"))?;
+        let layout = Layout::parse(text);
         doc.registers
-            .check_in(text, Path::new("m.toml"), "registers")?;
+            .check_in(layout.lines(), Path::new("m.toml"), "registers")?;
         Ok(doc.registers)
     }
 

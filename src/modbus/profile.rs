@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::map::{RegisterKeys, RegisterMap, Table};
-use crate::toml_file::{self, TomlError};
+use crate::toml_file::{self, Layout, Lines, TomlError};
 
 /// The shipped profiles, by name (each `config/profiles/NAME.toml`).
 const SHIPPED: [(&str, &str); 4] = [
@@ -164,18 +164,20 @@ impl Profile {
     /// The profile `name` from its `text` (read from `path`), checked.
     fn parse(name: &'static str, text: &'static str, path: &Path) -> Result<Profile, TomlError> {
         let file: File = toml_file::parse(text, path)?;
+        let layout = Layout::parse(text);
+        let lines = layout.lines();
         let map = RegisterMap::from(file.registers);
-        map.check_in(text, path, "registers")?;
+        map.check_in(lines, path, "registers")?;
         let bad = |key: &str, message: String| {
-            toml_file::invalid(text, path, Some("profile"), key, message)
+            toml_file::invalid(lines, path, Some("profile"), key, message)
         };
         if file.profile.first_number > 1 {
             return Err(bad("first_number", format!("{} is not allowed: 1 when the manual's register 1 is address 0, 0 when it gives addresses", file.profile.first_number)));
         }
-        for o in &file.others {
+        for (nth, o) in file.others.iter().enumerate() {
             if let Some(k) = o.meanings.keys().find(|k| k.parse::<u16>().is_err()) {
                 return Err(toml_file::invalid(
-                    text,
+                    lines.nth(nth),
                     path,
                     Some("read"),
                     "meanings",
@@ -202,30 +204,29 @@ impl Profile {
         u32::from(address) + self.about.first_number
     }
 
-    /// The map of a config whose `[valve.registers]` (in `text`, file `path`, under `section`,
-    /// `line_offset` lines into the file) gives `keys`: those keys over this profile's map,
-    /// checked. An error names the config's line for a key it gives, the profile's otherwise.
+    /// The map of a config whose `[valve.registers]` (in file `path`, laid out in `lines`,
+    /// under `section`) gives `keys`: those keys over this profile's map, checked. An error
+    /// names the config's line for a key it gives, the profile's otherwise.
     pub fn under(
         &self,
         keys: &RegisterKeys,
-        text: &str,
+        lines: Lines<'_>,
         path: &Path,
         section: &str,
-        line_offset: usize,
     ) -> Result<RegisterMap, TomlError> {
         let map = keys.over(self.map);
         let Err(v) = map.validate() else {
             return Ok(map);
         };
         if keys.gives(v.top_key()) {
-            let mut e = v.located(text, path, section);
-            if let TomlError::Invalid { line, message, .. } = &mut e {
-                *line += line_offset;
+            let mut e = v.located(lines, path, section);
+            if let TomlError::Invalid { message, .. } = &mut e {
                 message.push_str(&format!(" (over profile `{}`)", self.name));
             }
             Err(e)
         } else {
-            let mut e = v.located(self.text, &self.path, "registers");
+            let layout = Layout::parse(self.text);
+            let mut e = v.located(layout.lines(), &self.path, "registers");
             if let TomlError::Invalid { message, .. } = &mut e {
                 message.push_str(&format!(" (with the [{section}] of {})", path.display()));
             }
@@ -296,16 +297,23 @@ mod tests {
             .clone()
             .try_into()
             .unwrap();
+        let layout = Layout::parse(text);
         let map = p
-            .under(&keys, text, Path::new("c.toml"), "valve.registers", 0)
+            .under(
+                &keys,
+                layout.lines(),
+                Path::new("c.toml"),
+                "valve.registers",
+            )
             .unwrap();
         assert_eq!((map.setpoint.address, map.position.address), (0, 23));
         assert!(map.fc6, "kept from the profile");
         assert_eq!(map.position_valid_pct, [0.0, 100.0]);
         // No keys: the profile's map.
         let none = RegisterKeys::default();
+        let empty = Layout::parse("");
         assert_eq!(
-            p.under(&none, "", Path::new("c.toml"), "valve.registers", 0)
+            p.under(&none, empty.lines(), Path::new("c.toml"), "valve.registers")
                 .unwrap(),
             p.map
         );
@@ -314,23 +322,33 @@ mod tests {
     #[test]
     fn a_conflict_is_named_in_the_file_of_the_key_at_fault() {
         let p = shipped("burkert-mfc-float");
-        // fc6 with the profile's f32 set-point: the config's key is at fault, at its line.
-        let text = "[valve]\nprofile = \"burkert-mfc-float\"\n[valve.registers]\nfc6 = true\n";
+        // fc6 with the profile's f32 set-point: the config's key is at fault, at its line (in
+        // the second valve's tables).
+        let text = "[[valve]]\nname = \"a\"\n[valve.registers]\nfc6 = false\n\n\
+                    [[valve]]\nname = \"b\"\nprofile = \"burkert-mfc-float\"\n\
+                    [valve.registers]\nfc6 = true\n";
         let keys = RegisterKeys {
             fc6: Some(true),
             ..RegisterKeys::default()
         };
+        let layout = Layout::parse(text);
         let e = p
-            .under(&keys, text, Path::new("c.toml"), "valve.registers", 10)
+            .under(
+                &keys,
+                layout.lines().nth(1),
+                Path::new("c.toml"),
+                "valve.registers",
+            )
             .unwrap_err()
             .to_string();
         assert!(
-            e.starts_with("c.toml:14: valve.registers.fc6: true needs a one-register set-point (u16 or i16, not f32)")
+            e.starts_with("c.toml:10: valve.registers.fc6: true needs a one-register set-point (u16 or i16, not f32)")
                 && e.ends_with("(over profile `burkert-mfc-float`)"),
             "{e}"
         );
+        let empty = Layout::parse("");
         let err = |keys: RegisterKeys| {
-            p.under(&keys, "", Path::new("c.toml"), "valve.registers", 0)
+            p.under(&keys, empty.lines(), Path::new("c.toml"), "valve.registers")
                 .unwrap_err()
                 .to_string()
         };

@@ -294,7 +294,7 @@ impl ModelSpec {
         match self.violations().into_iter().next() {
             None => Ok(()),
             Some(v) => Err(toml_file::invalid(
-                text,
+                toml_file::Layout::parse(text).lines(),
                 path,
                 v.table,
                 v.key,

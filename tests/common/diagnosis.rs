@@ -3,12 +3,12 @@
 use valve_bridge::diagnose::Diagnosis;
 
 /// The effects found, in order.
-pub fn names(d: &Diagnosis) -> Vec<&'static str> {
+pub(crate) fn names(d: &Diagnosis) -> Vec<&'static str> {
     d.findings.iter().map(|f| f.effect.name()).collect()
 }
 
 /// A fitted parameter by its label, from the first finding that has it (NaN when none does).
-pub fn param(d: &Diagnosis, name: &str) -> f64 {
+pub(crate) fn param(d: &Diagnosis, name: &str) -> f64 {
     d.findings
         .iter()
         .find_map(|f| f.params.get(name))

@@ -1,14 +1,32 @@
 //! Helpers shared by the integration tests of `valve-bridge` (each test file uses a part).
 #![allow(dead_code)]
 
-pub mod diagnosis;
-pub mod sim;
-pub mod tools;
+pub(crate) mod diagnosis;
+pub(crate) mod sim;
+pub(crate) mod tools;
 
 use std::path::{Path, PathBuf};
+use std::process::Child;
+
+/// Sends `sig` to `child`; true if kill(2) took it.
+pub(crate) fn signal(child: &Child, sig: libc::c_int) -> bool {
+    kill(child.id() as libc::pid_t, sig)
+}
+
+/// Sends `sig` to the process group `child` leads; true if kill(2) took it.
+pub(crate) fn signal_group(child: &Child, sig: libc::c_int) -> bool {
+    kill(-(child.id() as libc::pid_t), sig)
+}
+
+/// kill(2): `sig` to `pid` (a process group when negative).
+#[allow(unsafe_code)]
+fn kill(pid: libc::pid_t, sig: libc::c_int) -> bool {
+    // SAFETY: kill(2) takes two integers and touches no memory of this process.
+    unsafe { libc::kill(pid, sig) == 0 }
+}
 
 /// The log files of `dir` whose names start with `prefix` (`vb-NAME-`), oldest first.
-pub fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
+pub(crate) fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -23,7 +41,7 @@ pub fn logs(dir: &Path, prefix: &str) -> Vec<PathBuf> {
 
 /// One row of a daemon log as the tests read it (the columns they check).
 #[derive(Debug)]
-pub struct LogRow {
+pub(crate) struct LogRow {
     pub op: f64,
     pub vp: Option<f64>,
     pub status: String,
@@ -31,7 +49,7 @@ pub struct LogRow {
 }
 
 /// Every row of the daemon log at `path`.
-pub fn log_rows(path: &Path) -> Vec<LogRow> {
+pub(crate) fn log_rows(path: &Path) -> Vec<LogRow> {
     let mut r = csv::Reader::from_path(path).unwrap();
     r.records()
         .map(|rec| {
@@ -48,7 +66,7 @@ pub fn log_rows(path: &Path) -> Vec<LogRow> {
 
 /// Panics if `text`, meant for people, holds a number with a float artefact: seven or more
 /// decimals (`0.09999999999999999`, `49.400000000000006`).
-pub fn assert_for_people(text: &str) {
+pub(crate) fn assert_for_people(text: &str) {
     let bytes = text.as_bytes();
     let mut i = 0;
     while i < bytes.len() {

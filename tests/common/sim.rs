@@ -8,18 +8,19 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Mutex, MutexGuard};
 
 /// The valve-bridge binary.
-pub const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
+pub(crate) const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 
 /// The shipped daemon configs for sim-device and the endpoint each names.
-pub const TCP_CONFIG: (&str, &str) = ("config/sim-device-tcp.toml", "127.0.0.1:5502");
+pub(crate) const TCP_CONFIG: (&str, &str) = ("config/sim-device-tcp.toml", "127.0.0.1:5502");
 /// See [`TCP_CONFIG`].
-pub const RTU_CONFIG: (&str, &str) = ("config/sim-device-rtu.toml", "/tmp/vb-sim-device");
+pub(crate) const RTU_CONFIG: (&str, &str) = ("config/sim-device-rtu.toml", "/tmp/vb-sim-device");
 
 /// A constant O_P of 40 %.
-pub const CONSTANT: &str = "[source]\nkind = \"constant\"\n[source.constant]\nop_pct = 40.0\n";
+pub(crate) const CONSTANT: &str =
+    "[source]\nkind = \"constant\"\n[source.constant]\nop_pct = 40.0\n";
 
 /// The sim-device binary, next to valve-bridge.
-pub fn sim_device_bin() -> PathBuf {
+pub(crate) fn sim_device_bin() -> PathBuf {
     let p = Path::new(BIN).with_file_name("sim-device");
     assert!(
         p.exists(),
@@ -31,7 +32,7 @@ pub fn sim_device_bin() -> PathBuf {
 
 /// A running sim-device and the endpoint it printed (`tcp: ADDR` or `pty: PATH`); its stderr
 /// (its log) goes to a file, read by [`SimDevice::stop`].
-pub struct SimDevice {
+pub(crate) struct SimDevice {
     child: Child,
     /// `host:port` or the pty's path.
     pub endpoint: String,
@@ -42,7 +43,7 @@ pub struct SimDevice {
 
 impl SimDevice {
     /// Starts sim-device with `args` and the shipped config of its link.
-    pub fn start(args: &[&str]) -> SimDevice {
+    pub(crate) fn start(args: &[&str]) -> SimDevice {
         let shipped = if args.contains(&"--pty") {
             RTU_CONFIG
         } else {
@@ -55,7 +56,7 @@ impl SimDevice {
     }
 
     /// Starts sim-device with exactly `args` (no config unless given).
-    pub fn start_bare(args: &[&str], shipped: (&'static str, &'static str)) -> SimDevice {
+    pub(crate) fn start_bare(args: &[&str], shipped: (&'static str, &'static str)) -> SimDevice {
         let log = tempfile::NamedTempFile::new().unwrap();
         let mut child = Command::new(sim_device_bin())
             .args(args)
@@ -69,8 +70,8 @@ impl SimDevice {
             .read_line(&mut line)
             .unwrap();
         let Some((_, endpoint)) = line.trim().split_once(": ") else {
-            let _ = child.kill();
-            let _ = child.wait();
+            drop(child.kill());
+            drop(child.wait());
             let log = std::fs::read_to_string(log.path()).unwrap_or_default();
             panic!("sim-device {args:?} announced no endpoint: {log}");
         };
@@ -83,13 +84,13 @@ impl SimDevice {
     }
 
     /// The process id.
-    pub fn pid(&self) -> u32 {
+    pub(crate) fn pid(&self) -> u32 {
         self.child.id()
     }
 
     /// A daemon config for this device: its shipped config pointed at its endpoint, with
     /// `edits` applied and `source` appended.
-    pub fn config(&self, dir: &Path, edits: &[(&str, &str)], source: &str) -> PathBuf {
+    pub(crate) fn config(&self, dir: &Path, edits: &[(&str, &str)], source: &str) -> PathBuf {
         let (file, endpoint) = self.shipped;
         let mut all = vec![(endpoint, self.endpoint.as_str())];
         all.extend_from_slice(edits);
@@ -97,44 +98,42 @@ impl SimDevice {
     }
 
     /// Kills the device at once (SIGKILL).
-    pub fn kill(&mut self) {
+    pub(crate) fn kill(&mut self) {
         self.child.kill().unwrap();
         self.child.wait().unwrap();
     }
 
     /// Sends `signal` to the device.
-    pub fn signal(&self, signal: libc::c_int) {
-        // SAFETY: kill(2) on our own child's pid with a standard signal.
-        let rc = unsafe { libc::kill(self.child.id() as libc::pid_t, signal) };
-        assert_eq!(rc, 0);
+    pub(crate) fn signal(&self, signal: libc::c_int) {
+        assert!(super::signal(&self.child, signal));
     }
 
     /// Stops the device with SIGTERM and returns its log.
-    pub fn stop(mut self) -> String {
+    pub(crate) fn stop(mut self) -> String {
         self.signal(libc::SIGTERM);
-        let _ = self.child.wait();
+        drop(self.child.wait());
         std::fs::read_to_string(self.log.path()).unwrap_or_default()
     }
 }
 
 impl Drop for SimDevice {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        drop(self.child.kill());
+        drop(self.child.wait());
     }
 }
 
 /// A port held bound but not listening: connections to it are refused, and no other test's
 /// server can take it while the guard lives (a port bound and released at once can be handed
 /// to a parallel test's server before the daemon connects).
-pub struct NobodyListening {
+pub(crate) struct NobodyListening {
     _socket: tokio::net::TcpSocket,
 }
 
 /// `127.0.0.1:PORT` with a port nobody listens on (held by the returned guard; drop it to let
 /// a device start there), and a daemon config for the shipped TCP config pointed at it (in
 /// `dir`, with `source` appended).
-pub fn nobody_listening(dir: &Path, source: &str) -> (String, PathBuf, NobodyListening) {
+pub(crate) fn nobody_listening(dir: &Path, source: &str) -> (String, PathBuf, NobodyListening) {
     let socket = tokio::net::TcpSocket::new_v4().unwrap();
     socket.bind("127.0.0.1:0".parse().unwrap()).unwrap();
     let port = socket.local_addr().unwrap().port();
@@ -145,7 +144,7 @@ pub fn nobody_listening(dir: &Path, source: &str) -> (String, PathBuf, NobodyLis
 
 /// A daemon config `daemon.toml`: the shipped config with each `(from, to)` replaced (each must
 /// occur) and `source` appended.
-pub fn config(dir: &Path, shipped: &str, edits: &[(&str, &str)], source: &str) -> PathBuf {
+pub(crate) fn config(dir: &Path, shipped: &str, edits: &[(&str, &str)], source: &str) -> PathBuf {
     let mut text =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(shipped)).unwrap();
     for (from, to) in edits {
@@ -158,7 +157,7 @@ pub fn config(dir: &Path, shipped: &str, edits: &[(&str, &str)], source: &str) -
 }
 
 /// `valve-bridge probe --config CFG EXTRA...` with the default log level, run to the end.
-pub fn probe(cfg: &Path, extra: &[&str]) -> Output {
+pub(crate) fn probe(cfg: &Path, extra: &[&str]) -> Output {
     Command::new(BIN)
         .args(["probe", "--config"])
         .arg(cfg)
@@ -169,7 +168,7 @@ pub fn probe(cfg: &Path, extra: &[&str]) -> Output {
 }
 
 /// `valve-bridge run` with the default log level (`RUST_LOG` unset).
-pub fn run_cmd(cfg: &Path, log_dir: &Path, duration_s: f64) -> Command {
+pub(crate) fn run_cmd(cfg: &Path, log_dir: &Path, duration_s: f64) -> Command {
     let mut cmd = Command::new(BIN);
     cmd.args(["run", "--config"])
         .arg(cfg)
@@ -182,7 +181,7 @@ pub fn run_cmd(cfg: &Path, log_dir: &Path, duration_s: f64) -> Command {
 }
 
 /// The rows of the only log file in `dir`.
-pub fn read_log<R: serde::de::DeserializeOwned>(dir: &Path) -> Vec<R> {
+pub(crate) fn read_log<R: serde::de::DeserializeOwned>(dir: &Path) -> Vec<R> {
     let files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -193,7 +192,7 @@ pub fn read_log<R: serde::de::DeserializeOwned>(dir: &Path) -> Vec<R> {
 }
 
 /// The stdout of a run that must have succeeded.
-pub fn stdout(out: &Output) -> String {
+pub(crate) fn stdout(out: &Output) -> String {
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
@@ -206,13 +205,13 @@ pub fn stdout(out: &Output) -> String {
 
 /// Real-time runs take turns: on a small machine, parallel 100 Hz loops (each busy-waits before
 /// its deadlines) and their devices would make each other miss cycles.
-pub fn real_time_turn() -> MutexGuard<'static, ()> {
+pub(crate) fn real_time_turn() -> MutexGuard<'static, ()> {
     static REAL_TIME: Mutex<()> = Mutex::new(());
     REAL_TIME.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// The summary's count after `prefix` (`reconnects: 3` or `reconnects: 3 (...)`).
-pub fn summary_count(summary: &str, prefix: &str) -> u64 {
+pub(crate) fn summary_count(summary: &str, prefix: &str) -> u64 {
     summary
         .lines()
         .find_map(|l| l.strip_prefix(prefix))

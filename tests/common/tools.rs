@@ -11,16 +11,16 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// How to install mbpoll (libmodbus's command-line client).
-pub const MBPOLL_INSTALL: &str = "apt-get install mbpoll";
+pub(crate) const MBPOLL_INSTALL: &str = "apt-get install mbpoll";
 /// How to install pymodbus with its serial support.
-pub const PYMODBUS_INSTALL: &str = "python3 -m pip install 'pymodbus[serial]>=3.6,<4'";
+pub(crate) const PYMODBUS_INSTALL: &str = "python3 -m pip install 'pymodbus[serial]>=3.6,<4'";
 
 /// How to install Debian's Chromium.
-pub const CHROMIUM_INSTALL: &str = "apt-get install chromium";
+pub(crate) const CHROMIUM_INSTALL: &str = "apt-get install chromium";
 /// How to install Playwright for Python (pointed at the system's Chromium, no browser download).
-pub const PLAYWRIGHT_INSTALL: &str = "python3 -m pip install 'playwright>=1.40,<2'";
+pub(crate) const PLAYWRIGHT_INSTALL: &str = "python3 -m pip install 'playwright>=1.40,<2'";
 /// The Chromium the browser tests drive: `VB_CHROMIUM`, else Debian's.
-pub fn chromium() -> String {
+pub(crate) fn chromium() -> String {
     std::env::var("VB_CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into())
 }
 
@@ -28,7 +28,7 @@ static SKIPPED: AtomicUsize = AtomicUsize::new(0);
 
 /// True if `program probe...` runs and succeeds. If not, fails the test under
 /// `VB_REQUIRE_TOOLS=1`, else reports the skip and returns false.
-pub fn have(program: &str, probe: &[&str], install: &str) -> bool {
+pub(crate) fn have(program: &str, probe: &[&str], install: &str) -> bool {
     let ok = Command::new(program)
         .args(probe)
         .stdout(Stdio::null())
@@ -42,12 +42,12 @@ pub fn have(program: &str, probe: &[&str], install: &str) -> bool {
 }
 
 /// True if mbpoll is installed (see [`have`]).
-pub fn have_mbpoll() -> bool {
+pub(crate) fn have_mbpoll() -> bool {
     have("mbpoll", &["-V"], MBPOLL_INSTALL)
 }
 
 /// True if python3 can import pymodbus and pyserial (see [`have`]).
-pub fn have_pymodbus() -> bool {
+pub(crate) fn have_pymodbus() -> bool {
     have(
         "python3",
         &["-c", "import pymodbus, serial"],
@@ -56,7 +56,7 @@ pub fn have_pymodbus() -> bool {
 }
 
 /// True if Chromium runs and python3 can import Playwright (see [`have`]).
-pub fn have_browser() -> bool {
+pub(crate) fn have_browser() -> bool {
     have(&chromium(), &["--version"], CHROMIUM_INSTALL)
         && have(
             "python3",
@@ -66,12 +66,12 @@ pub fn have_browser() -> bool {
 }
 
 /// True when a missing tool must fail the test (`VB_REQUIRE_TOOLS` set and not `0`).
-pub fn tools_required() -> bool {
+pub(crate) fn tools_required() -> bool {
     std::env::var("VB_REQUIRE_TOOLS").is_ok_and(|v| !v.is_empty() && v != "0")
 }
 
 /// Reports that `what` did not run: a failure under `VB_REQUIRE_TOOLS=1`, else a visible skip.
-pub fn missing(what: &str, install: &str) {
+pub(crate) fn missing(what: &str, install: &str) {
     let test = std::thread::current()
         .name()
         .unwrap_or("a test")
@@ -82,9 +82,9 @@ pub fn missing(what: &str, install: &str) {
     );
     let n = SKIPPED.fetch_add(1, Ordering::SeqCst) + 1;
     // Straight to the process's stderr: `eprintln!` would be captured and shown only on failure.
-    let _ = writeln!(
+    drop(writeln!(
         std::io::stderr(),
         "SKIPPED ({n} in this test binary): {test}: {what} is not available; install it \
          ({install}), or set VB_REQUIRE_TOOLS=1 to make this a failure"
-    );
+    ));
 }

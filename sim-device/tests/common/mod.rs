@@ -3,13 +3,13 @@
 #![allow(dead_code)] // each test file and bench uses a different part of this helper
 
 #[path = "../../../tests/common/tools.rs"]
-pub mod tools;
+pub(crate) mod tools;
 
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, ChildStdout, Command, Stdio};
 
 /// A running sim-device, killed when dropped.
-pub struct Sim {
+pub(crate) struct Sim {
     child: Child,
     _stdout: BufReader<ChildStdout>,
     /// `host:port` announced for --tcp.
@@ -20,7 +20,7 @@ pub struct Sim {
 
 impl Sim {
     /// Starts sim-device with `args` and waits for its endpoint lines.
-    pub fn start(args: &[&str]) -> Sim {
+    pub(crate) fn start(args: &[&str]) -> Sim {
         let mut child = Command::new(env!("CARGO_BIN_EXE_sim-device"))
             .args(args)
             .stdout(Stdio::piped())
@@ -34,7 +34,9 @@ impl Sim {
             let mut line = String::new();
             if stdout.read_line(&mut line).unwrap_or(0) == 0 {
                 let mut err = String::new();
-                let _ = child.stderr.take().map(|mut e| e.read_to_string(&mut err));
+                if let Some(mut e) = child.stderr.take() {
+                    drop(e.read_to_string(&mut err));
+                }
                 panic!("sim-device {args:?} ended before announcing its endpoints: {err}");
             }
             if let Some(a) = line.trim().strip_prefix("tcp: ") {
@@ -52,9 +54,9 @@ impl Sim {
     }
 
     /// Kills the device now.
-    pub fn kill(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+    pub(crate) fn kill(&mut self) {
+        drop(self.child.kill());
+        drop(self.child.wait());
     }
 }
 
@@ -65,7 +67,7 @@ impl Drop for Sim {
 }
 
 /// Runs sim-device to completion and returns (exit success, stderr without info logs).
-pub fn run_to_end(args: &[&str]) -> (bool, String) {
+pub(crate) fn run_to_end(args: &[&str]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_sim-device"))
         .args(args)
         .env("RUST_LOG", "warn")
@@ -78,7 +80,7 @@ pub fn run_to_end(args: &[&str]) -> (bool, String) {
 }
 
 /// A TCP port that was free a moment ago.
-pub fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
         .map(|a| a.port())
@@ -86,7 +88,7 @@ pub fn free_port() -> u16 {
 }
 
 /// The value at quantile `q` (0-1) of ascending `sorted` values (nearest rank); 0 when empty.
-pub fn percentile(sorted: &[f64], q: f64) -> f64 {
+pub(crate) fn percentile(sorted: &[f64], q: f64) -> f64 {
     match sorted.len() {
         0 => 0.0,
         n => sorted[((n - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize],

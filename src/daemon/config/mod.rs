@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::toml_file::{self, TomlError};
+use crate::toml_file::{self, Layout, Lines, TomlError};
 
 pub use diagnosis::DiagnosisConfig;
 pub use health::HealthConfig;
@@ -239,27 +239,33 @@ impl Default for LogConfig {
         }
     }
 }
-/// Where the checks of one config point their messages: its text (or the part of it that
-/// holds one `[[valve]]` table and its sub-tables, `line_offset` lines into the file), its
-/// file, and the prefix of the tables looked up (`valve.` for a valve's own `[valve.source]`).
+/// Where the checks of one config point their messages: the lines of its tables (in one
+/// `[[valve]]` table and its sub-tables, for that valve's checks), its file, and the prefix of
+/// the tables looked up (`valve.` for a valve's own `[valve.source]`).
 pub(super) struct Check<'a> {
-    text: &'a str,
+    lines: Lines<'a>,
     /// The whole file's text, which the spans serde gives index.
     file: &'a str,
     path: &'a Path,
-    line_offset: usize,
     prefix: &'static str,
 }
 
 impl<'a> Check<'a> {
-    /// The checks of a whole file.
-    fn whole(text: &'a str, path: &'a Path) -> Self {
+    /// The checks of a whole file, `text` laid out in `layout`.
+    fn whole(text: &'a str, layout: &'a Layout<'a>, path: &'a Path) -> Self {
         Check {
-            text,
+            lines: layout.lines(),
             file: text,
             path,
-            line_offset: 0,
             prefix: "",
+        }
+    }
+
+    /// The checks of the `nth` (0-based) `[[valve]]` table and its sub-tables.
+    fn valve(&self, nth: usize) -> Check<'a> {
+        Check {
+            lines: self.lines.nth(nth),
+            ..self.under("")
         }
     }
 
@@ -273,19 +279,11 @@ impl<'a> Check<'a> {
         toml_file::line_at(self.file, span.start)
     }
 
-    /// `e`, found in this part of the file, at its line in the whole file.
-    fn shift(&self, mut e: TomlError) -> TomlError {
-        if let TomlError::Invalid { line, .. } = &mut e {
-            *line += self.line_offset;
-        }
-        e
-    }
-
     /// An error about `table.key`, at the line that sets it.
     fn bad(&self, table: &str, key: &str, message: String) -> TomlError {
         let prefixed = format!("{}{table}", self.prefix);
-        let line = toml_file::line_of(self.text, Some(&prefixed), key).unwrap_or(1);
-        self.bad_on(line + self.line_offset, table, key, message)
+        let line = self.lines.of(Some(&prefixed), key).unwrap_or(1);
+        self.bad_on(line, table, key, message)
     }
 
     /// An error about `table.key` at `line` of the file.
@@ -369,7 +367,8 @@ impl ConfigFile {
     /// The checks of every table in file order, then those across tables; loads the model and
     /// the replayed recording. `text` is the file's text, `path` names it.
     fn check(self, text: &str, path: &Path) -> Result<Config, TomlError> {
-        let c = Check::whole(text, path);
+        let layout = Layout::parse(text);
+        let c = Check::whole(text, &layout, path);
         self.loop_.check_in(&c)?;
         let source = self.source.check(&c, &self.loop_)?;
         let valves = valve::check_all(self.valves, &c, &self.loop_)?;

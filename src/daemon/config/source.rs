@@ -26,7 +26,7 @@ pub use crate::signal::{
     ConstantParams as ConstantConfig, PrbsParams as PrbsConfig, RampParams as RampConfig,
     RandomStepsParams as RandomStepsConfig, SineParams as SineConfig, StepsParams as StepsConfig,
 };
-use crate::toml_file::{self, TomlError};
+use crate::toml_file::TomlError;
 
 /// A checked source of O_P: the clamp range and the settings of the kind in use.
 #[derive(Debug, Clone)]
@@ -493,7 +493,7 @@ impl ModbusServerConfig {
             "the time after which a connection without requests is closed, in s",
         )?;
         let section = "source.modbus-server.registers";
-        self.registers.check_in(c.text, c.path, section)?;
+        self.registers.check_in(c.lines, c.path, section)?;
         if let Some(st) = self.registers.status {
             let bit = st.setpoint_error_bit;
             if [
@@ -505,8 +505,8 @@ impl ModbusServerConfig {
             {
                 return Err(TomlError::Invalid {
                     path: c.path.to_path_buf(),
-                    line: toml_file::line_of(c.text, Some(section), "status")
-                        .or_else(|| toml_file::line_of(c.text, Some(section), ""))
+                    line: (c.lines.of(Some(section), "status"))
+                        .or_else(|| c.lines.of(Some(section), ""))
                         .unwrap_or(1),
                     key: format!("{section}.status.setpoint_error_bit"),
                     message: format!(

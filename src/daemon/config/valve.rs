@@ -23,7 +23,7 @@ use crate::modbus::link::{RtuLink, TcpLink};
 use crate::modbus::map::{RegisterKeys, RegisterMap};
 use crate::modbus::profile;
 use crate::model::{bundled, DriftSpec, ModelError, ModelKind, ModelSpec};
-use crate::toml_file::{self, TomlError};
+use crate::toml_file::TomlError;
 
 /// A checked valve: its name, its own source if any, and its backend with the settings of
 /// that backend only.
@@ -209,29 +209,6 @@ pub(super) fn one_or_many<'de, D: serde::Deserializer<'de>>(
     d.deserialize_any(OneOrMany)
 }
 
-/// The part of `text` that holds each `[[valve]]` table and its sub-tables, with the lines
-/// before it; the whole text for a single `[valve]`.
-fn parts(text: &str) -> Vec<(usize, &str)> {
-    let mut starts: Vec<(usize, usize)> = Vec::new();
-    let mut offset = 0;
-    for (i, line) in text.split_inclusive('\n').enumerate() {
-        let l = line.trim();
-        if l.starts_with("[[") && toml_file::header(l).as_deref() == Some("valve") {
-            starts.push((i, offset));
-        }
-        offset += line.len();
-    }
-    if starts.is_empty() {
-        return vec![(0, text)];
-    }
-    let ends = starts.iter().skip(1).map(|s| s.1).chain([text.len()]);
-    starts
-        .iter()
-        .zip(ends)
-        .map(|(&(line, from), to)| (line, &text[from..to]))
-        .collect()
-}
-
 /// The checks of every valve: names (required, distinct and fit for file names with several
 /// valves), then each valve's tables and its own source (never the controller's server, which
 /// is the top `[source]`), at their lines; the checked valves.
@@ -240,16 +217,8 @@ pub(super) fn check_all(
     c: &Check<'_>,
     timing: &LoopConfig,
 ) -> Result<Vec<ValveConfig>, TomlError> {
-    let parts = parts(c.text);
     let several = valves.len() > 1;
-    let check_of = |i: usize| {
-        let (line_offset, text) = parts.get(i).copied().unwrap_or((0, c.text));
-        Check {
-            text,
-            line_offset: c.line_offset + line_offset,
-            ..c.under("")
-        }
-    };
+    let check_of = |i: usize| c.valve(i);
     let mut seen: Vec<String> = Vec::new();
     let count = valves.len();
     let mut checked = Vec::with_capacity(count);
@@ -409,15 +378,12 @@ impl ValveTable {
         let section = "valve.registers";
         let Some(name) = &self.profile else {
             let map = RegisterMap::from(self.register_keys);
-            map.check_in(c.text, c.path, section)
-                .map_err(|e| c.shift(e))?;
+            map.check_in(c.lines, c.path, section)?;
             return Ok(map);
         };
         match profile::find(name) {
             None => Err(c.bad("valve", "profile", profile::unknown(name))),
-            Some(found) => {
-                found?.under(&self.register_keys, c.text, c.path, section, c.line_offset)
-            }
+            Some(found) => found?.under(&self.register_keys, c.lines, c.path, section),
         }
     }
 }

@@ -19,7 +19,10 @@ use tokio_modbus::client::{rtu, tcp, Context, Reader, Writer};
 use tokio_modbus::slave::SlaveContext;
 use tokio_modbus::Slave;
 
-use super::{Fault, Link, ReplyError, Timeout, FIRST_BACKOFF, MAX_BACKOFF, SILENT_LINK};
+use super::{
+    BrokenStream, ConnectError, Disconnected, Down, Fault, IoFailure, Link, ReplyError, StreamEnd,
+    Timeout, Unlinked, FIRST_BACKOFF, MAX_BACKOFF, SILENT_LINK,
+};
 use crate::modbus::map::Table;
 use crate::modbus::plan::Transaction;
 use crate::modbus::wire::{rtu_frame_fault, RtuWire, TcpWire, WireState};
@@ -36,7 +39,7 @@ pub(super) struct Connection {
     /// When the device last answered (or the connection opened).
     last_answer: Instant,
     /// Why the link is down, for the cycles that find it so.
-    down_because: String,
+    down_because: Down,
     /// Late replies counted so far on this connection.
     late_seen: u64,
     /// Late replies discarded on the connections before this one.
@@ -59,7 +62,7 @@ impl Connection {
             wire: Arc::default(),
             answered: false,
             last_answer: Instant::now(),
-            down_because: "not connected yet".into(),
+            down_because: Down::NotConnectedYet,
             late_seen: 0,
             late_before: 0,
             next_attempt: Instant::now(),
@@ -82,7 +85,7 @@ impl Connection {
 
     /// One connection attempt within `deadline`; on failure, the reason, and the next attempt
     /// waits the backoff (which doubles).
-    pub(super) async fn attempt(&mut self, deadline: Instant) -> Result<(), String> {
+    pub(super) async fn attempt(&mut self, deadline: Instant) -> Result<(), ConnectError> {
         self.ctx = None;
         self.attempts += 1;
         let allowed = deadline.saturating_duration_since(Instant::now());
@@ -120,8 +123,10 @@ impl Connection {
                 self.next_attempt = Instant::now() + self.backoff;
                 self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
                 Err(match failed {
-                    Ok(Err(e)) => e.to_string(),
-                    _ => format!("no connection within {} ms", allowed.as_millis()),
+                    Ok(Err(e)) => ConnectError::Io(IoFailure::from(&e)),
+                    _ => ConnectError::Timeout {
+                        ms: allowed.as_millis(),
+                    },
                 })
             }
         }
@@ -130,7 +135,7 @@ impl Connection {
     /// Drops the link because `why`. It is reopened at once if it had answered (a device that
     /// restarted), otherwise after the backoff (a device that takes connections but never
     /// answers on them).
-    fn drop_link(&mut self, why: String) {
+    fn drop_link(&mut self, why: Down) {
         self.ctx = None;
         if self.answered {
             self.next_attempt = Instant::now();
@@ -146,7 +151,7 @@ impl Connection {
     /// answers on every new connection, but garbled now and then, would otherwise be reconnected
     /// at once each time: the reopening waits by the rate of such failures instead
     /// ([`GarbleRate`]), not by how many came in a row.
-    fn drop_garbled(&mut self, who: &Link, why: String) {
+    fn drop_garbled(&mut self, who: &Link, why: Down) {
         let wait = self.garbled.hit(Instant::now());
         self.drop_link(why);
         if !wait.is_zero() {
@@ -167,12 +172,13 @@ impl Connection {
     pub(super) async fn reconnect(&mut self, who: &Link, deadline: Instant) -> Result<(), Fault> {
         let now = Instant::now();
         if now < self.next_attempt {
-            return Err(Fault::Disconnected(format!(
-                "{}: {}; next connection attempt in {} ms",
-                who.describe(),
-                self.down_because,
-                (self.next_attempt - now).as_millis()
-            )));
+            return Err(Fault::Disconnected(Box::new(Disconnected {
+                link: who.describe(),
+                why: Unlinked::Backoff {
+                    down: self.down_because.clone(),
+                    wait_ms: (self.next_attempt - now).as_millis(),
+                },
+            })));
         }
         match self.attempt(deadline).await {
             Ok(()) => {
@@ -180,14 +186,15 @@ impl Connection {
                 tracing::info!("{}: connected", who.describe());
                 Ok(())
             }
-            Err(why) => {
-                self.down_because = format!("cannot connect: {why}");
-                Err(Fault::Disconnected(format!(
-                    "{}: {}; next attempt in {} ms",
-                    who.describe(),
-                    self.down_because,
-                    (self.next_attempt - Instant::now()).as_millis()
-                )))
+            Err(error) => {
+                self.down_because = Down::CannotConnect(error.clone());
+                Err(Fault::Disconnected(Box::new(Disconnected {
+                    link: who.describe(),
+                    why: Unlinked::CannotConnect {
+                        error,
+                        wait_ms: (self.next_attempt - Instant::now()).as_millis(),
+                    },
+                })))
             }
         }
     }
@@ -204,11 +211,10 @@ impl Connection {
         deadline: Instant,
     ) -> Result<Vec<u16>, Fault> {
         let Some(ctx) = self.ctx.as_mut() else {
-            return Err(Fault::Disconnected(format!(
-                "{}: {}",
-                who.describe(),
-                self.down_because
-            )));
+            return Err(Fault::Disconnected(Box::new(Disconnected {
+                link: who.describe(),
+                why: Unlinked::NotOpen(self.down_because.clone()),
+            })));
         };
         // On a shared bus each valve addresses its own unit.
         ctx.set_slave(Slave(who.unit_id()));
@@ -237,10 +243,7 @@ impl Connection {
                 }
                 let silent = Instant::now() - self.last_answer;
                 if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
-                    let why = format!(
-                        "no answer for {:.1} s on an open connection, reopening it",
-                        silent.as_secs_f64()
-                    );
+                    let why = Down::Silent(silent);
                     tracing::warn!("{}: {why}", who.describe());
                     self.drop_link(why);
                 }
@@ -249,12 +252,7 @@ impl Connection {
             Ok(Err(tokio_modbus::Error::Transport(e))) => {
                 let garbled = e.kind() == io::ErrorKind::InvalidData;
                 let (fault, broken) = self.classify_transport(who, t, e);
-                if broken {
-                    let why = match &fault {
-                        Fault::Disconnected(m) => m.clone(),
-                        Fault::Error(e) => e.to_string(),
-                        Fault::Timeout(t) => t.to_string(),
-                    };
+                if let Some(why) = broken {
                     if garbled {
                         self.drop_garbled(who, why);
                     } else {
@@ -271,7 +269,7 @@ impl Connection {
                     why: e.to_string(),
                 };
                 if matches!(self.link, Link::Tcp(_)) {
-                    self.drop_garbled(who, fault.to_string());
+                    self.drop_garbled(who, Down::Reply(fault.clone()));
                 }
                 Err(Fault::Error(fault))
             }
@@ -311,36 +309,47 @@ impl Connection {
         }
     }
 
-    /// The fault of a transport error, and whether it broke the link. A bad RTU frame leaves
-    /// the line usable (the input is emptied before the next request); anything else on RTU,
-    /// and any transport error on TCP, breaks it.
-    fn classify_transport(&self, who: &Link, t: Transaction, e: io::Error) -> (Fault, bool) {
+    /// The fault of a transport error, and why the link is down if it broke it. A bad RTU
+    /// frame leaves the line usable (the input is emptied before the next request); anything
+    /// else on RTU, and any transport error on TCP, breaks it.
+    fn classify_transport(
+        &self,
+        who: &Link,
+        t: Transaction,
+        e: io::Error,
+    ) -> (Fault, Option<Down>) {
         let fc = t.function_code();
         let rtu = matches!(self.link, Link::Rtu(_));
         if e.kind() == io::ErrorKind::InvalidData {
             if rtu {
                 if let Some(bad) = rtu_frame_fault(&self.wire.received(), &t) {
-                    return (Fault::Error(ReplyError::Frame(bad)), false);
+                    return (Fault::Error(ReplyError::Frame(bad)), None);
                 }
             }
             let why = format!("unusable reply: {e}");
-            return (Fault::Error(ReplyError::Unusable { fc, why }), !rtu);
+            let unusable = ReplyError::Unusable { fc, why };
+            let broken = (!rtu).then(|| Down::Reply(unusable.clone()));
+            return (Fault::Error(unusable), broken);
         }
         // tokio-modbus reports a stream that ended with the thread's last errno, which says
         // nothing about it (`Operation now in progress`): the wire knows what happened.
-        let what = if self.wire.closed() {
-            "the device closed the connection".to_string()
+        let end = if self.wire.closed() {
+            StreamEnd::Closed
         } else {
+            let failure = IoFailure::from(&e);
             match e.kind() {
-                io::ErrorKind::ConnectionReset => format!("the device reset the connection ({e})"),
-                io::ErrorKind::BrokenPipe => format!("the connection is broken ({e})"),
-                _ => e.to_string(),
+                io::ErrorKind::ConnectionReset => StreamEnd::Reset(failure),
+                io::ErrorKind::BrokenPipe => StreamEnd::BrokenPipe(failure),
+                _ => StreamEnd::Io(failure),
             }
         };
-        (
-            Fault::Disconnected(format!("{}: FC {fc}: {what}", who.describe())),
-            true,
-        )
+        let stream = BrokenStream { fc, end };
+        let link = who.describe();
+        let fault = Fault::Disconnected(Box::new(Disconnected {
+            link: link.clone(),
+            why: Unlinked::Broken(stream.clone()),
+        }));
+        (fault, Some(Down::Broken { link, stream }))
     }
 }
 

@@ -1,10 +1,13 @@
 //! Why a cycle gave no V_P, typed: what the loop counts (timeout, error, disconnected) and the
-//! cause of each (the function code, the deadline, the exception code, the bad frame), so
-//! a caller can tell causes apart without reading the words, which only `Display` writes.
+//! cause of each (the function code, the deadline, the exception code, the bad frame, why the
+//! link is down), so a caller can tell causes apart without reading the words, which only
+//! `Display` writes.
 //!
 //! Not here: deciding which fault a failed exchange is (`connection.rs`).
 
 use std::fmt;
+use std::io;
+use std::time::Duration;
 
 use tokio_modbus::ExceptionCode;
 
@@ -21,9 +24,114 @@ pub enum Fault {
     /// An exception, CRC or framing error, or an unusable value.
     #[error("error: {0}")]
     Error(ReplyError),
-    /// The link is down (and being reopened): the link, and why.
+    /// The link is down (and being reopened): the link, and why (boxed: a fault is returned
+    /// by every cycle, and this cause is the largest).
     #[error("disconnected: {0}")]
-    Disconnected(String),
+    Disconnected(Box<Disconnected>),
+}
+
+/// A cycle that found its link down, or broke it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{link}: {why}")]
+pub struct Disconnected {
+    /// The valve's link, described.
+    pub link: String,
+    /// Why no transaction went through.
+    pub why: Unlinked,
+}
+
+/// Why a cycle's link could not carry its transaction.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Unlinked {
+    /// The link is closed, for this reason.
+    #[error("{0}")]
+    NotOpen(Down),
+    /// The link is down for this reason, and the next connection attempt waits `wait_ms`.
+    #[error("{down}; next connection attempt in {wait_ms} ms")]
+    Backoff { down: Down, wait_ms: u128 },
+    /// A connection attempt failed just now; the next one waits `wait_ms`.
+    #[error("cannot connect: {error}; next attempt in {wait_ms} ms")]
+    CannotConnect { error: ConnectError, wait_ms: u128 },
+    /// The transaction broke the stream.
+    #[error("{0}")]
+    Broken(BrokenStream),
+}
+
+/// Why a link is down, kept for the cycles that find it so.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Down {
+    /// No connection was opened yet.
+    #[error("not connected yet")]
+    NotConnectedYet,
+    /// The last connection attempt failed.
+    #[error("cannot connect: {0}")]
+    CannotConnect(ConnectError),
+    /// The device answered nothing for this long on an open TCP connection.
+    #[error("no answer for {:.1} s on an open connection, reopening it", .0.as_secs_f64())]
+    Silent(Duration),
+    /// A transaction of the valve on `link` broke the stream.
+    #[error("{link}: {stream}")]
+    Broken { link: String, stream: BrokenStream },
+    /// A reply put the TCP stream out of step.
+    #[error("{0}")]
+    Reply(ReplyError),
+}
+
+/// Why a connection (or the serial port) could not be opened.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConnectError {
+    /// The operating system refused it.
+    #[error("{0}")]
+    Io(IoFailure),
+    /// No connection within the deadline, ms.
+    #[error("no connection within {ms} ms")]
+    Timeout { ms: u128 },
+}
+
+/// A transaction that ended its link's stream.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("FC {fc}: {end}")]
+pub struct BrokenStream {
+    /// The request's function code.
+    pub fc: u8,
+    /// How the stream ended.
+    pub end: StreamEnd,
+}
+
+/// How a link's stream ended.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StreamEnd {
+    /// The device closed the connection.
+    #[error("the device closed the connection")]
+    Closed,
+    /// The device reset the connection.
+    #[error("the device reset the connection ({0})")]
+    Reset(IoFailure),
+    /// Writing found the connection broken.
+    #[error("the connection is broken ({0})")]
+    BrokenPipe(IoFailure),
+    /// Another transport error (on RTU, the serial port's).
+    #[error("{0}")]
+    Io(IoFailure),
+}
+
+/// An I/O error as it was reported: its kind, for callers, and its words, for people.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct IoFailure {
+    /// The error's kind.
+    pub kind: io::ErrorKind,
+    /// The error as it printed.
+    pub message: String,
+}
+
+impl From<&io::Error> for IoFailure {
+    fn from(e: &io::Error) -> IoFailure {
+        IoFailure {
+            kind: e.kind(),
+            message: e.to_string(),
+        }
+    }
 }
 
 /// A transaction whose reply did not come complete before its deadline.
@@ -114,6 +222,75 @@ mod tests {
             "no reply to FC 23 within 8 ms (the device does answer, later: 3 replies came after \
              their deadline; a longer timeout_ms may fit the loop period)"
         );
+    }
+
+    #[test]
+    fn a_disconnection_names_the_link_and_why_it_is_down() {
+        let link = "Modbus TCP 10.0.0.7:502 unit 1".to_string();
+        let refused = ConnectError::Io(IoFailure {
+            kind: io::ErrorKind::ConnectionRefused,
+            message: "Connection refused (os error 111)".into(),
+        });
+        let broken = BrokenStream {
+            fc: 23,
+            end: StreamEnd::Closed,
+        };
+        let cases = [
+            (
+                Unlinked::NotOpen(Down::NotConnectedYet),
+                "not connected yet",
+            ),
+            (
+                Unlinked::Backoff {
+                    down: Down::Silent(Duration::from_millis(3040)),
+                    wait_ms: 90,
+                },
+                "no answer for 3.0 s on an open connection, reopening it; next connection \
+                 attempt in 90 ms",
+            ),
+            (
+                Unlinked::CannotConnect {
+                    error: refused.clone(),
+                    wait_ms: 200,
+                },
+                "cannot connect: Connection refused (os error 111); next attempt in 200 ms",
+            ),
+            (
+                Unlinked::Backoff {
+                    down: Down::CannotConnect(ConnectError::Timeout { ms: 8 }),
+                    wait_ms: 150,
+                },
+                "cannot connect: no connection within 8 ms; next connection attempt in 150 ms",
+            ),
+            (
+                Unlinked::Broken(broken.clone()),
+                "FC 23: the device closed the connection",
+            ),
+            (
+                Unlinked::NotOpen(Down::Broken {
+                    link: link.clone(),
+                    stream: broken,
+                }),
+                "Modbus TCP 10.0.0.7:502 unit 1: FC 23: the device closed the connection",
+            ),
+            (
+                Unlinked::Broken(BrokenStream {
+                    fc: 3,
+                    end: StreamEnd::Reset(IoFailure {
+                        kind: io::ErrorKind::ConnectionReset,
+                        message: "Connection reset by peer (os error 104)".into(),
+                    }),
+                }),
+                "FC 3: the device reset the connection (Connection reset by peer (os error 104))",
+            ),
+        ];
+        for (why, words) in cases {
+            let fault = Fault::Disconnected(Box::new(Disconnected {
+                link: link.clone(),
+                why,
+            }));
+            assert_eq!(fault.to_string(), format!("disconnected: {link}: {words}"));
+        }
     }
 
     #[test]

@@ -40,7 +40,10 @@ pub use super::link::Link;
 use super::map::{MapViolation, RegisterMap, Table};
 use super::plan::{Plan, Transaction, MAX_JOINED_SPAN};
 use connection::Connection;
-pub use fault::{Fault, ReplyError, Timeout};
+pub use fault::{
+    BrokenStream, ConnectError, Disconnected, Down, Fault, IoFailure, ReplyError, StreamEnd,
+    Timeout, Unlinked,
+};
 
 /// Wait after a failed connection attempt; doubles with each further one, up to [`MAX_BACKOFF`].
 pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
@@ -69,10 +72,13 @@ pub enum OpenError {
     Address { address: String, reason: String },
     /// The TCP device did not accept a connection.
     #[error("cannot connect to Modbus TCP {address}: {reason} (check [valve.modbus-tcp] address and that the device is on)")]
-    TcpConnect { address: String, reason: String },
+    TcpConnect {
+        address: String,
+        reason: ConnectError,
+    },
     /// The serial port cannot be opened.
     #[error("cannot open serial port {port}: {reason} (check [valve.modbus-rtu] port)")]
-    Serial { port: String, reason: String },
+    Serial { port: String, reason: ConnectError },
     /// The serial line cannot carry the loop rate.
     #[error(transparent)]
     Budget(#[from] BudgetError),
