@@ -111,15 +111,12 @@ pub(crate) fn refit(
 
 /// Refits a candidate from several starts by successive halving: every start gets a short
 /// search on every other fit block, and only the best one (by the fit error of the whole
-/// simulation) is searched further on all of them, from where it ended with a smaller simplex,
-/// if its fit error is below `refine_below` (`f64::INFINITY`: always). Most starts of a
-/// multi-modal candidate are plainly worse after a few dozen iterations, and a candidate that
-/// after them has barely moved the fit error is not refined into one that matters.
+/// simulation) is searched further on all of them, from where it ended with a smaller simplex.
+/// Most starts of a multi-modal candidate are plainly worse after a few dozen iterations.
 pub(crate) fn refit_from(
     scorer: &Scorer,
     spec: &ModelSpec,
     starts: &[Vec<Free>],
-    refine_below: f64,
 ) -> (ModelSpec, Errors) {
     let surveyed = starts
         .par_iter()
@@ -137,9 +134,6 @@ pub(crate) fn refit_from(
     let Some((free, (best, errors))) = surveyed else {
         return (spec.clone(), scorer.errors(spec));
     };
-    if errors.fit >= refine_below {
-        return (best, errors);
-    }
     let (refined, refined_errors) = refit(
         scorer,
         &best,

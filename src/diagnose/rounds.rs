@@ -259,13 +259,9 @@ impl<'a> Search<'a> {
             cur: self.cur,
             corr_len: self.corr_len,
         };
-        // A candidate whose survey gains less than a quarter of the held-out share a finding
-        // needs is not refined: it could not become one.
-        let refine_below = self.cur.fit * (1.0 - self.data.tuning.min_heldout_share / 4.0);
         jobs.par_iter()
             .map(|job| {
-                let (spec, errors) =
-                    refit_from(self.data.scorer, &self.current, &job.starts, refine_below);
+                let (spec, errors) = refit_from(self.data.scorer, &self.current, &job.starts);
                 judge.judge(job.effect, spec, errors, job.starts[0].clone(), job.own)
             })
             .collect()
@@ -445,8 +441,7 @@ impl<'a> Search<'a> {
         let from_here = starting_at(&self.freed, &self.current);
         let mut starts = spread_starts(self.freed.clone());
         starts.push(from_here);
-        let (polished, errors) =
-            refit_from(self.data.scorer, &self.current, &starts, f64::INFINITY);
+        let (polished, errors) = refit_from(self.data.scorer, &self.current, &starts);
         tracing::debug!(
             held_before = self.cur.held,
             held_after = errors.held,
@@ -483,8 +478,7 @@ impl<'a> Search<'a> {
                 starts.push(moved(i, seen));
             }
         }
-        let (refitted, errors) =
-            refit_from(self.data.scorer, &self.current, &starts, f64::INFINITY);
+        let (refitted, errors) = refit_from(self.data.scorer, &self.current, &starts);
         tracing::debug!(
             held_before = self.cur.held,
             held_after = errors.held,
@@ -518,8 +512,7 @@ impl<'a> Search<'a> {
                     .collect()
             })
             .collect();
-        let (polished, errors) =
-            refit_from(self.data.scorer, &self.current, &starts, f64::INFINITY);
+        let (polished, errors) = refit_from(self.data.scorer, &self.current, &starts);
         tracing::debug!(
             held_before = self.cur.held,
             held_after = errors.held,
