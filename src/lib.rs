@@ -20,11 +20,18 @@
 //! - [`synth`]: synthetic recordings (random steps, small steps, ramps, a mix, or a closed level
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
+//!
+//! `fit`, `diagnose`, `fleet` and `report` are the `analysis` feature (on by default); without
+//! it the library is the daemon's runtime alone, and the daemon refuses `[diagnosis]`
+//! ([`daemon::DaemonError::NoDiagnosis`]).
 
 pub mod compensate;
 pub mod daemon;
+#[cfg(feature = "analysis")]
 pub mod diagnose;
+#[cfg(feature = "analysis")]
 pub mod fit;
+#[cfg(feature = "analysis")]
 pub mod fleet;
 pub mod human;
 pub mod metrics;
@@ -32,6 +39,7 @@ pub mod modbus;
 pub mod model;
 pub mod net;
 pub mod recording;
+#[cfg(feature = "analysis")]
 pub mod report;
 pub mod signal;
 pub mod synth;

@@ -3,6 +3,7 @@
 //! Each subcommand lives in `src/cli/<name>.rs` with its arguments and a `run` function that
 //! calls the library. Errors are printed as one line (with their causes) and exit code 1; no
 //! backtrace. `RUST_LOG` sets the log level (default `info`, see `valve_bridge::init_tracing`).
+//! The offline analysis commands exist only with the `analysis` feature (on by default).
 
 mod cli;
 
@@ -18,12 +19,21 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a valve model over the O_P of a recording and score it against the measured V_P.
-    Simulate(cli::simulate::Args),
     /// Run the valve loop (100 Hz by default): source -> valve -> CSV log, until stopped.
     Run(cli::run::Args),
     /// Read every register of a config's map once from the device (writes only with --write-test).
     Probe(cli::probe::Args),
+    #[cfg(feature = "analysis")]
+    #[command(flatten)]
+    Analysis(Analysis),
+}
+
+/// The offline analysis commands (the `analysis` feature).
+#[cfg(feature = "analysis")]
+#[derive(Subcommand)]
+enum Analysis {
+    /// Run a valve model over the O_P of a recording and score it against the measured V_P.
+    Simulate(cli::simulate::Args),
     /// Find where a model and a recording differ, name the missing physics, add it, show the gain.
     Diagnose(cli::diagnose::Args),
     /// Fit every model of the paper to a recording: Table 1 (with held-out scores), Table 2, model files.
@@ -36,17 +46,27 @@ enum Command {
     Demo(cli::demo::Args),
 }
 
+#[cfg(feature = "analysis")]
+impl Analysis {
+    fn run(self) -> anyhow::Result<()> {
+        match self {
+            Analysis::Simulate(a) => cli::simulate::run(a),
+            Analysis::Diagnose(a) => cli::diagnose::run(a),
+            Analysis::Demo(a) => cli::demo::run(a),
+            Analysis::Identify(a) => cli::identify::run(a),
+            Analysis::Steps(a) => cli::steps::run(a),
+            Analysis::Fleet(a) => cli::fleet::run(a),
+        }
+    }
+}
+
 fn main() -> std::process::ExitCode {
     valve_bridge::init_tracing();
     let result = match Cli::parse().command {
-        Command::Simulate(a) => cli::simulate::run(a),
         Command::Run(a) => cli::run::run(a),
         Command::Probe(a) => cli::probe::run(a),
-        Command::Diagnose(a) => cli::diagnose::run(a),
-        Command::Demo(a) => cli::demo::run(a),
-        Command::Identify(a) => cli::identify::run(a),
-        Command::Steps(a) => cli::steps::run(a),
-        Command::Fleet(a) => cli::fleet::run(a),
+        #[cfg(feature = "analysis")]
+        Command::Analysis(a) => a.run(),
     };
     cli::report(result)
 }

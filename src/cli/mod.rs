@@ -22,17 +22,24 @@ macro_rules! errln {
     }};
 }
 
+#[cfg(feature = "analysis")]
 pub(crate) mod demo;
+#[cfg(feature = "analysis")]
 pub(crate) mod diagnose;
+#[cfg(feature = "analysis")]
 pub(crate) mod fleet;
+#[cfg(feature = "analysis")]
 pub(crate) mod identify;
+#[cfg(feature = "analysis")]
 pub(crate) mod input;
 pub(crate) mod probe;
 pub(crate) mod run;
+#[cfg(feature = "analysis")]
 pub(crate) mod simulate;
+#[cfg(feature = "analysis")]
 pub(crate) mod steps;
 
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::process::ExitCode;
 
 /// Standard output could not be written.
@@ -47,7 +54,9 @@ pub(crate) fn write_stdout(args: std::fmt::Arguments) -> Result<(), StdoutError>
 
 /// A progress bar of `len` units drawn with `template` (indicatif syntax), only when stderr is
 /// a terminal: piped output and logs stay clean.
+#[cfg(feature = "analysis")]
 pub(crate) fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
     std::io::stderr().is_terminal().then(|| {
         let b = indicatif::ProgressBar::new(len);
         b.set_style(

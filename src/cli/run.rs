@@ -4,7 +4,15 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use valve_bridge::daemon::{self, Config, RunOptions};
-use valve_bridge::report;
+#[cfg(feature = "analysis")]
+use valve_bridge::report::live::analysis;
+
+/// Without the `analysis` feature the loop runs alone: no health plot, and `[diagnosis]` is
+/// refused at start (`DaemonError::NoDiagnosis`).
+#[cfg(not(feature = "analysis"))]
+fn analysis() -> daemon::Analysis {
+    daemon::Analysis::default()
+}
 
 /// Arguments of `valve-bridge run`.
 #[derive(clap::Args)]
@@ -41,7 +49,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             virtual_clock: args.as_fast_as_possible,
             progress: true,
             require_device: args.require_device,
-            analysis: report::live::analysis(),
+            analysis: analysis(),
         },
     )?;
     // The loop has stopped, the safe action is applied and the log is flushed: a closed stdout

@@ -6,8 +6,9 @@
 //! The health thread feeds a [`Feed`] with the rows it gets from the loggers: a ring per
 //! valve, copied into a job when a diagnosis is due. Jobs go through an unbounded queue to the
 //! diagnosis thread (`vb-diagnosis`), so neither the health thread nor the loop ever waits for
-//! a diagnosis. It diagnoses on a pool of its own whose threads run at the lowest priority
-//! (`SCHED_IDLE`, else nice 19): they take only CPU time nothing else wants. Jobs are
+//! a diagnosis. It runs at the lowest priority (`SCHED_IDLE`, else nice 19, [`lowest_priority`],
+//! which the analysis layer's diagnosis also gives the threads of its parallel work): it takes
+//! only CPU time nothing else wants. Jobs are
 //! diagnosed in the order they were made, each from its own copy of the rows, so on the virtual
 //! clock the history is the same on every run; at the end of a run the thread finishes the jobs
 //! still queued.
@@ -295,27 +296,19 @@ struct History {
     report: DiagnosisReport,
 }
 
-/// The diagnosis thread: diagnoses each job in order on the low-priority pool.
+/// The diagnosis thread: diagnoses each job in order, at the lowest priority.
 fn work(
     rx: Receiver<Job>,
     mut histories: Vec<History>,
     cfg: &DiagnosisConfig,
     period_s: f64,
 ) -> Result<Vec<DiagnosisReport>, DaemonError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .thread_name(|i| format!("vb-diagnose-{i}"))
-        .start_handler(|_| lowest_priority())
-        .build()
-        .map_err(|e| DaemonError::Thread {
-            what: "diagnosis pool",
-            source: std::io::Error::other(e),
-        })?;
     lowest_priority();
     for job in rx {
         let Some(h) = histories.get_mut(job.valve) else {
             continue;
         };
-        let record = pool.install(|| h.diagnose(&job, cfg, period_s));
+        let record = h.diagnose(&job, cfg, period_s);
         h.write(record)?;
     }
     Ok(histories.into_iter().map(|h| h.report).collect())
@@ -323,7 +316,7 @@ fn work(
 
 /// Puts the calling thread at the lowest priority: `SCHED_IDLE`, else nice 19.
 #[allow(unsafe_code)]
-fn lowest_priority() {
+pub fn lowest_priority() {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: plain system calls on the calling thread (pid 0) with a valid parameter.
     let idle = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } == 0;

@@ -67,7 +67,7 @@ pub enum DaemonError {
         source: std::io::Error,
     },
     /// `[diagnosis]` asked of a daemon started without a diagnosis to run.
-    #[error("[diagnosis]: this program runs the loop without diagnosis; remove [diagnosis] from the config or run it with `valve-bridge run`")]
+    #[error("[diagnosis]: this program runs the loop without diagnosis; remove [diagnosis] from the config or run it with a `valve-bridge run` built with the `analysis` feature (the default)")]
     NoDiagnosis,
     /// A thread, runtime or signal handler could not be set up.
     #[error("cannot start the {what}: {source}")]

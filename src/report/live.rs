@@ -4,9 +4,11 @@
 //! Not here: when windows are diagnosed, the history and its alarms (`daemon::diagnosis`).
 
 use std::path::Path;
+use std::sync::OnceLock;
 
 use crate::daemon::analysis::{Analysis, WindowDiagnosis};
 use crate::daemon::diagnosis::history::Entry;
+use crate::daemon::diagnosis::lowest_priority;
 use crate::diagnose::{diagnose, Diagnosis};
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
@@ -21,19 +23,36 @@ pub fn analysis() -> Analysis {
     }
 }
 
-/// Diagnoses a window as `diagnose` (with `--model base`) does a recording; with `title`, its
-/// report's files too.
+/// The pool live diagnoses run on, built at the first: its threads (`vb-diagnose-<i>`) run at
+/// the lowest priority, as the daemon's diagnosis thread does, so a diagnosis's parallel work
+/// takes only CPU time nothing else wants.
+static POOL: OnceLock<Result<rayon::ThreadPool, String>> = OnceLock::new();
+
+/// Diagnoses a window as `diagnose` (with `--model base`) does a recording, on the low-priority
+/// [`POOL`]; with `title`, its report's files too.
 fn diagnose_window(
     rec: &RecordingView,
     base: Option<&ModelSpec>,
     title: Option<&str>,
 ) -> Result<WindowDiagnosis, String> {
-    let d = diagnose(rec, base, &|_, _| {}).map_err(|e| e.to_string())?;
-    Ok(WindowDiagnosis {
-        verdict: super::verdict::verdict(&d),
-        effects: entries(&d),
-        report: title.map_or_else(Vec::new, |t| super::diagnose::files(t, rec, &d).to_vec()),
-        model: d.final_model.spec,
+    let pool = POOL
+        .get_or_init(|| {
+            rayon::ThreadPoolBuilder::new()
+                .thread_name(|i| format!("vb-diagnose-{i}"))
+                .start_handler(|_| lowest_priority())
+                .build()
+                .map_err(|e| format!("cannot start the diagnosis pool: {e}"))
+        })
+        .as_ref()
+        .map_err(Clone::clone)?;
+    pool.install(|| {
+        let d = diagnose(rec, base, &|_, _| {}).map_err(|e| e.to_string())?;
+        Ok(WindowDiagnosis {
+            verdict: super::verdict::verdict(&d),
+            effects: entries(&d),
+            report: title.map_or_else(Vec::new, |t| super::diagnose::files(t, rec, &d).to_vec()),
+            model: d.final_model.spec,
+        })
     })
 }
 
