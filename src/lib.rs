@@ -12,6 +12,7 @@
 //! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
 //! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
 //! - [`net`]: TCP servers that stay up (accept errors retried, connections capped).
+//! - [`priority`]: thread priorities (the loop's real-time priority, the lowest for analysis).
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`fleet`]: many recordings diagnosed in parallel, summed up and ranked for maintenance.
@@ -38,6 +39,7 @@ pub mod metrics;
 pub mod modbus;
 pub mod model;
 pub mod net;
+pub mod priority;
 pub mod recording;
 #[cfg(feature = "analysis")]
 pub mod report;

@@ -19,7 +19,7 @@ use super::compensation::{Compensation, CompensationReport};
 use super::config::{ClockKind, OnStop, ValveConfig};
 use super::error::DaemonError;
 use super::exporter::{LoopMetrics, ValveMetrics};
-use super::schedule::{self, Schedule, Slot};
+use super::schedule::{Schedule, Slot};
 use super::source::Source;
 use super::stats::{Live, Stats, StopAction, StopReason};
 use super::valve::{Backend, Fault};
@@ -175,9 +175,9 @@ impl Loop {
     /// The loop thread's body: the cycles, then each valve's stop action, also when a cycle
     /// failed (the logger gone) or panicked.
     fn run(mut self, rt: tokio::runtime::Runtime) -> Result<LoopEnd, DaemonError> {
-        schedule::tighten_timer_slack();
+        crate::priority::tighten_timer_slack();
         if self.realtime_priority > 0 && self.clock == ClockKind::Real {
-            match schedule::realtime_priority(self.realtime_priority) {
+            match crate::priority::realtime_priority(self.realtime_priority) {
                 Ok(()) => tracing::info!(
                     priority = self.realtime_priority,
                     "loop thread runs under SCHED_FIFO"

@@ -6,7 +6,7 @@
 //! The health thread feeds a [`Feed`] with the rows it gets from the loggers: a ring per
 //! valve, copied into a job when a diagnosis is due. Jobs go through an unbounded queue to the
 //! diagnosis thread (`vb-diagnosis`), so neither the health thread nor the loop ever waits for
-//! a diagnosis. It runs at the lowest priority (`SCHED_IDLE`, else nice 19, [`lowest_priority`],
+//! a diagnosis. It runs at the lowest priority (`SCHED_IDLE`, else nice 19, [`crate::priority::lowest_priority`],
 //! which the analysis layer's diagnosis also gives the threads of its parallel work): it takes
 //! only CPU time nothing else wants. Jobs are
 //! diagnosed in the order they were made, each from its own copy of the rows, so on the virtual
@@ -303,7 +303,7 @@ fn work(
     cfg: &DiagnosisConfig,
     period_s: f64,
 ) -> Result<Vec<DiagnosisReport>, DaemonError> {
-    lowest_priority();
+    crate::priority::lowest_priority();
     for job in rx {
         let Some(h) = histories.get_mut(job.valve) else {
             continue;
@@ -312,18 +312,6 @@ fn work(
         h.write(record)?;
     }
     Ok(histories.into_iter().map(|h| h.report).collect())
-}
-
-/// Puts the calling thread at the lowest priority: `SCHED_IDLE`, else nice 19.
-#[allow(unsafe_code)]
-pub fn lowest_priority() {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: plain system calls on the calling thread (pid 0) with a valid parameter.
-    let idle = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } == 0;
-    if !idle {
-        // SAFETY: as above; on Linux PRIO_PROCESS with 0 is the calling thread.
-        let _ = unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, 19) };
-    }
 }
 
 impl History {

@@ -6,11 +6,13 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
+use rayon::ThreadPool;
+
 use crate::daemon::analysis::{Analysis, WindowDiagnosis};
 use crate::daemon::diagnosis::history::Entry;
-use crate::daemon::diagnosis::lowest_priority;
 use crate::diagnose::{diagnose, Diagnosis};
 use crate::model::ModelSpec;
+use crate::priority::lowest_priority;
 use crate::recording::RecordingView;
 
 /// Everything the daemon can run beside its loop.
@@ -25,27 +27,29 @@ pub fn analysis() -> Analysis {
 
 /// The pool live diagnoses run on, built at the first: its threads (`vb-diagnose-<i>`) run at
 /// the lowest priority, as the daemon's diagnosis thread does, so a diagnosis's parallel work
-/// takes only CPU time nothing else wants.
-static POOL: OnceLock<Result<rayon::ThreadPool, String>> = OnceLock::new();
+/// takes only CPU time nothing else wants. A pool that cannot be started fails that window's
+/// diagnosis with the reason, and the next window tries again.
+fn pool() -> Result<&'static ThreadPool, String> {
+    static POOL: OnceLock<ThreadPool> = OnceLock::new();
+    if let Some(pool) = POOL.get() {
+        return Ok(pool);
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .thread_name(|i| format!("vb-diagnose-{i}"))
+        .start_handler(|_| lowest_priority())
+        .build()
+        .map_err(|e| format!("cannot start the diagnosis pool: {e}"))?;
+    Ok(POOL.get_or_init(|| pool))
+}
 
 /// Diagnoses a window as `diagnose` (with `--model base`) does a recording, on the low-priority
-/// [`POOL`]; with `title`, its report's files too.
+/// [`pool`]; with `title`, its report's files too.
 fn diagnose_window(
     rec: &RecordingView,
     base: Option<&ModelSpec>,
     title: Option<&str>,
 ) -> Result<WindowDiagnosis, String> {
-    let pool = POOL
-        .get_or_init(|| {
-            rayon::ThreadPoolBuilder::new()
-                .thread_name(|i| format!("vb-diagnose-{i}"))
-                .start_handler(|_| lowest_priority())
-                .build()
-                .map_err(|e| format!("cannot start the diagnosis pool: {e}"))
-        })
-        .as_ref()
-        .map_err(Clone::clone)?;
-    pool.install(|| {
+    pool()?.install(|| {
         let d = diagnose(rec, base, &|_, _| {}).map_err(|e| e.to_string())?;
         Ok(WindowDiagnosis {
             verdict: super::verdict::verdict(&d),
