@@ -96,20 +96,24 @@ def check_diagnosis(browser, page, url, name, seconds, problems):
 
 
 def check_sizes(page, name, problems):
-    """The effects the listed diagnoses of `name` name are charted over time: one chart per
-    unit of their sizes, each drawn."""
-    units = page.page.evaluate(
-        f"""() => {{
-          const u = new Set();
-          {section(name)}.querySelectorAll('table.diagnosis-history td:nth-child(4) > *')
-            .forEach(l => {{ const m = l.textContent.match(/: \\S+ (\\S+) \\(/); if (m) u.add(m[1]); }});
-          return Array.from(u);
-        }}""")
-    charts = page.page.evaluate(
-        f"""() => {{
-          const box = {section(name)}.querySelector('div.sizes');
-          return window.vbCharts.map((c, i) => box.contains(c.root) ? i : -1).filter(i => i >= 0);
-        }}""")
+    """The effects the diagnoses of `name` name (the history the page draws from,
+    /api/diagnoses/NAME) are charted over time: one chart per unit of their sizes, each drawn.
+    The page reads the history every few seconds, so a diagnosis newer than its last read is
+    waited for (up to 10 s)."""
+    units_and_charts = f"""async () => {{
+      const history = await (await fetch('/api/diagnoses/{name}', {{ cache: 'no-store' }})).json();
+      const u = new Set();
+      history.filter(r => !r.error).forEach(r => r.effects.forEach(e => u.add(e.size.unit)));
+      const box = {section(name)}.querySelector('div.sizes');
+      const charts = window.vbCharts.map((c, i) => box.contains(c.root) ? i : -1)
+        .filter(i => i >= 0);
+      return [Array.from(u).sort(), charts];
+    }}"""
+    for _ in range(10):
+        units, charts = page.page.evaluate(units_and_charts)
+        if len(charts) == len(units):
+            break
+        page.page.wait_for_timeout(1000)
     if not units:
         problems.append(f"{name}: its diagnoses name no effect to chart")
     if len(charts) != len(units):
