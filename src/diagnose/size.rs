@@ -267,15 +267,16 @@ pub(crate) fn interval(
             let mut s = spec.clone();
             composed::set(&mut s, knob, x);
             let sim = scorer.simulate(&s);
+            let here = self::size(effect, &s, facts, op, tuning);
             let value = match (effect, size.name) {
                 // One quantity along the whole profile, whichever way a grid point reads.
                 (Effect::Backlash, "crossing_half_open_s") => {
                     composed::get(&s, Knob::Crossing) * composed::half_open(&s)
                 }
                 (Effect::Backlash, _) => lost_motion(&s, facts, op).band_bound_pct(),
-                _ => measure(effect, &s, facts, op).2,
+                _ => here.value,
             };
-            let worth = self::size(effect, &s, facts, op, tuning).worth;
+            let worth = here.worth;
             Point {
                 at: [value, worth],
                 blocks: scorer.held_blocks(&sim),
