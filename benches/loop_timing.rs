@@ -4,10 +4,11 @@
 //! same with the two valves of `config/two-valves.toml` in each cycle, and the ratio of the two
 //! p99s (the two-valve loop should stay within 2x of the single one on an idle machine); then
 //! the two valves with `[health]` (a 60 s window each minute) without and with `[diagnosis]`
-//! (a 60 s window each minute, so the diagnosis thread works through most of the run), and the
-//! ratio of their p99s (live diagnosis should cost the loop nothing beyond the bench's noise).
+//! (a 60 s window each minute), alternated `VB_BENCH_REPEATS` times (default 3): each run's
+//! p99, the ratio of the medians, and how many runs with live diagnosis stay within the range
+//! of those without, the bench's noise (live diagnosis should cost the loop nothing beyond it).
 //!
-//! `cargo bench --bench loop_timing`; `VB_BENCH_SECS` sets the run time (default 60 s);
+//! `cargo bench --bench loop_timing`; `VB_BENCH_SECS` sets the time of each run (default 60 s);
 //! `VB_BENCH_PRIORITY=N` runs the loop thread under SCHED_FIFO priority N (`[loop] realtime_priority`).
 //! `VB_BENCH_TOKIO=1` also measures `tokio::time::interval` (MissedTickBehavior::Skip) over the
 //! same time, the baseline the daemon's schedule replaces.
@@ -30,6 +31,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map_err(|e| format!("VB_BENCH_PRIORITY={v}: {e}"))?,
         Err(_) => 0,
     };
+    let repeats: usize = match std::env::var("VB_BENCH_REPEATS") {
+        Ok(v) => v
+            .parse()
+            .map_err(|e| format!("VB_BENCH_REPEATS={v}: {e}"))?,
+        Err(_) => 3,
+    };
     println!("loop_timing: {secs} s at 100 Hz, real clock, SCHED_FIFO priority {priority}");
     let one = Config::embedded_default()?;
     let two = Config::from_toml(
@@ -51,16 +58,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         window_s: 60.0,
         ..HealthConfig::default()
     });
-    let without = timed("two valves, [health]", watched.clone(), secs)?;
-    watched.diagnosis = Some(DiagnosisConfig {
+    let mut diagnosed = watched.clone();
+    diagnosed.diagnosis = Some(DiagnosisConfig {
         window_s: 60.0,
         every_s: 60.0,
         ..DiagnosisConfig::default()
     });
-    let with = timed("two valves, [health] and [diagnosis]", watched, secs)?;
+    // Alternated, so that what the machine does meanwhile falls on both alike; the spread of
+    // the runs without live diagnosis is the bench's noise.
+    let (mut without, mut with) = (Vec::new(), Vec::new());
+    for run in 1..=repeats {
+        let what = format!("two valves, [health], run {run}/{repeats}");
+        without.push(timed(&what, watched.clone(), secs)?);
+        let what = format!("two valves, [health] and [diagnosis], run {run}/{repeats}");
+        with.push(timed(&what, diagnosed.clone(), secs)?);
+    }
     println!(
-        "p99 with live diagnosis / without: {:.2}",
-        with / without.max(f64::MIN_POSITIVE)
+        "p99 without live diagnosis: {}; with: {}",
+        list_us(&without),
+        list_us(&with)
+    );
+    println!(
+        "p99 with live diagnosis / without, medians: {:.2}; with inside the range without: {} of {}",
+        median(&with) / median(&without).max(f64::MIN_POSITIVE),
+        with.iter()
+            .filter(|p| **p <= without.iter().copied().fold(0.0, f64::max))
+            .count(),
+        with.len()
     );
     if std::env::var("VB_BENCH_TOKIO").is_ok_and(|v| v == "1") {
         let (hist, missed) = tokio_interval(secs)?;
@@ -108,6 +132,19 @@ fn timed(what: &str, config: Config, secs: f64) -> Result<f64, Box<dyn std::erro
         s.max_lateness_us()
     );
     Ok(s.lateness_us(0.99))
+}
+
+/// The median of `v` (the upper one of an even count).
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// `v` in µs, one decimal, comma-separated.
+fn list_us(v: &[f64]) -> String {
+    let each: Vec<String> = v.iter().map(|p| format!("{p:.1}")).collect();
+    format!("{} us", each.join(", "))
 }
 
 /// |tick - scheduled| of a 10 ms `tokio::time::interval` over `secs`, and the ticks it skipped.
