@@ -158,8 +158,14 @@ fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
 }
 
 /// How far O_P must ask beyond a stop, %, and for how long in total, s, for it to count.
-const STOP_MARGIN_PCT: f64 = 0.5;
-const STOP_ASKED_S: f64 = 5.0;
+pub(crate) const STOP_MARGIN_PCT: f64 = 0.5;
+pub(crate) const STOP_ASKED_S: f64 = 5.0;
+
+/// How far a reading held at one level can spread, %: six noise sigmas, a step of the sensor's
+/// lattice and a little more.
+pub(crate) fn held_spread_pct(sigma: f64, lattice_pct: f64) -> f64 {
+    6.0 * sigma + lattice_pct + 0.05
+}
 
 /// The level V_P stops at while O_P asks to go beyond it: V_P's 99.9th percentile (the 0.1th
 /// for the lower stop), when O_P, averaged over half a second (a controller's noise averages
@@ -173,8 +179,7 @@ fn stop(op: &[f64], vp: &[f64], dt: f64, sensor: (f64, f64), high: bool) -> Opti
     if (high && level >= 99.5) || (!high && level <= 0.5) {
         return None;
     }
-    let (sigma, lattice) = sensor;
-    let held = 6.0 * sigma + lattice + 0.05;
+    let held = held_spread_pct(sensor.0, sensor.1);
     let h = ((0.25 / dt).round() as usize).max(1);
     let s = Sums::new(op);
     let beyond = (h..op.len().saturating_sub(h))
@@ -287,24 +292,37 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
 }
 
 /// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
-/// taken out (windows with an end not measured left out): over each window, the 99.9th
-/// percentile of the speeds in each direction less what
-/// noise alone reaches there (2.8 sigmas of the difference of two readings, over the window);
-/// the largest over the windows. Short windows see fast strokes, long ones the slow moves that
-/// noise hides in short ones.
+/// taken out: for a window of h samples, the speed is the mean of the h/2 differences of V_P
+/// over h samples that end in the window's second half (pairs with a reading missing left
+/// out; a window with fewer than half its pairs measured too), each window starting where the
+/// last ended. Every pair spans the same time, so a speed limit bounds the mean as it bounds
+/// each pair, while the noise of the mean is that of one difference over the square root of
+/// the pairs (a sensor of 0.25 % hides a 2 %/s stroke from one difference over 0.3 s, not
+/// from fifteen). Per window length, the 99.9th percentile of the speeds in each direction
+/// less what noise alone reaches there (2.8 sigmas of the mean); the largest over the window
+/// lengths. Short windows see fast strokes, long ones the slow moves that noise hides in short
+/// ones.
 fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
     let mut best = (0.0f64, 0.0f64);
     for &window_s in windows_s {
         let h = ((window_s / dt).round() as usize).max(1);
+        let pairs = (h / 2).max(1);
         let w = h as f64 * dt;
-        let noise = 2.8 * sigma * std::f64::consts::SQRT_2 / w;
+        let noise = 2.8 * sigma * std::f64::consts::SQRT_2 / (w * (pairs as f64).sqrt());
         let mut up: Vec<f64> = Vec::new();
         let mut down: Vec<f64> = Vec::new();
-        for k in (h..vp.len()).step_by(h) {
-            let s = (vp[k] - vp[k - h]) / w;
+        for end in (h + pairs..=vp.len()).step_by(h + pairs) {
+            let (sum, n) = (end - pairs..end)
+                .map(|k| vp[k] - vp[k - h])
+                .filter(|d| d.is_finite())
+                .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
+            if 2 * n < pairs {
+                continue;
+            }
+            let s = sum / (n as f64 * w);
             if s > 0.0 {
                 up.push(s);
-            } else if s <= 0.0 {
+            } else {
                 down.push(-s);
             }
         }
