@@ -58,6 +58,9 @@ const WINDUP_STARTS: [f64; 5] = [0.05, 0.2, 0.4, 0.7, 0.95];
 const TIE_SHARE: f64 = 0.95;
 /// Share of the winner's held-out gain a look-alike must reach to be named beside it.
 const LOOK_ALIKE_SHARE: f64 = 0.8;
+/// How many times the winner's held-out gain an effect too small to name must remove to be put
+/// in the model before the winner is kept (see [`Search::nuisance`]).
+const DISPLACING_GAIN: f64 = 4.0;
 
 /// What a search reads and never changes: the recording, its split, what was measured on it.
 #[derive(Clone, Copy)]
@@ -170,6 +173,13 @@ impl<'a> Search<'a> {
                 })
                 .map(|t| t.effect)
                 .collect();
+            // A trace of this round that removed nearly as much as the winner stood in for the
+            // winner's error, not for an imperfection of its own.
+            let stood_in: Vec<Effect> = (best.iter())
+                .filter(|t| t.trace() && t.heldout_share >= LOOK_ALIKE_SHARE * winner.heldout_share)
+                .map(|t| t.effect)
+                .collect();
+            self.traces.retain(|x| !stood_in.contains(&x.effect));
             let alternatives = self.look_alikes(winner, &best);
             self.keep(winner, &alternatives, round > 0);
         }
@@ -275,18 +285,34 @@ impl<'a> Search<'a> {
     /// the model and the round tried again. The reading's calibration goes in even before a
     /// winner it beats: every sensor reads a few hundredths of a percent off, and an effect
     /// fitted without the offset stands in for it (an asymmetric speed limit makes the model
-    /// lag one way); other traces never displace a winner, whose look-alike they may be.
+    /// lag one way). Another effect too small to name displaces a winner only when it removes
+    /// [`DISPLACING_GAIN`] times as much held-out error: a look-alike of the winner removes
+    /// about as much as the winner, while a winner that removes a small part of what a small
+    /// imperfection does was fitted to a corner of that imperfection's error.
     fn nuisance(&self, best: &[&Trial]) -> Option<Trial> {
         let winner = self.winner(best);
         let winner_held = winner.map_or(self.cur.held, |w| w.errors.held);
+        let gain = |t: &Trial| self.cur.held - t.errors.held;
         best.iter()
             .find(|t| {
-                t.trace()
-                    && !self.absorbed(t.effect)
+                !self.absorbed(t.effect)
                     && t.errors.held < winner_held
-                    && (winner.is_none() || t.effect == Effect::Calibration)
+                    && match winner {
+                        None => t.trace(),
+                        Some(w) => {
+                            (t.trace() && t.effect == Effect::Calibration)
+                                || (self.too_small(t) && gain(t) >= DISPLACING_GAIN * gain(w))
+                        }
+                    }
             })
             .map(|t| (*t).clone())
+    }
+
+    /// Whether `t` is real beyond chance but too small to be worth maintenance, whether or not
+    /// the recording shows it directly (a speed ratio of 1.08 removes most of the error of a
+    /// valve read by a quiet sensor, but no measured speed tells it from 1).
+    fn too_small(&self, t: &Trial) -> bool {
+        t.significant && !t.material && t.size.worth < self.data.tuning.materiality
     }
 
     /// Whether `effect` was put in the model as a nuisance.
