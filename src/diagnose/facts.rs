@@ -163,8 +163,26 @@ pub(crate) const STOP_ASKED_S: f64 = 5.0;
 
 /// How far a reading held at one level can spread, %: six noise sigmas, a step of the sensor's
 /// lattice and a little more.
-pub(crate) fn held_spread_pct(sigma: f64, lattice_pct: f64) -> f64 {
+fn held_spread_pct(sigma: f64, lattice_pct: f64) -> f64 {
     6.0 * sigma + lattice_pct + 0.05
+}
+
+/// The samples in which V_P stays at a travel stop at `level` (within what a sensor of
+/// `(sigma, lattice_pct)` spreads a held reading over) while `free`, the valve without the stop
+/// (a model simulated on the same O_P), stands at least [`STOP_MARGIN_PCT`] beyond it: above
+/// the level for the upper stop (`high`), below it for the lower.
+pub(crate) fn held_at_stop(
+    vp: &[f64],
+    free: &[f64],
+    level: f64,
+    high: bool,
+    sensor: (f64, f64),
+) -> f64 {
+    let held = held_spread_pct(sensor.0, sensor.1);
+    let sign = if high { 1.0 } else { -1.0 };
+    (vp.iter().zip(free))
+        .filter(|(v, y)| sign * (**y - level) >= STOP_MARGIN_PCT && sign * (**v - level) <= held)
+        .count() as f64
 }
 
 /// The level V_P stops at while O_P asks to go beyond it: V_P's 99.9th percentile (the 0.1th
@@ -877,6 +895,52 @@ mod tests {
         assert!((1.0..1.1).contains(&barely), "{barely}");
         // A valve that never leaves the lower third says nothing of the upper one.
         assert!(speed_ratio(&op, &vec![20.0; n], dt, 0.1, (10.0, 90.0)).is_none());
+    }
+
+    #[test]
+    fn slow_strokes_of_small_steps_show_through_a_noisy_sensor() {
+        // Steps of 1.5 % every 5 s for 10 minutes, read with 0.25 % of noise; V_P moves at
+        // 8 |e| %/s, but closes at 2.4 %/s at most (a slow vent). One difference over a window
+        // is noisier than that closing speed over any window the stroke fills.
+        let (dt, n) = (0.01, 60000);
+        let op = steps(n, 500, &[50.0, 51.5]);
+        let e = noise(n, 0.25);
+        let mut x = op[0];
+        let vp: Vec<f64> = (0..n)
+            .map(|k| {
+                let v = (8.0 * (op[k] - x)).max(-2.4);
+                x += v * dt;
+                x + e[k]
+            })
+            .collect();
+        let f = measure(&Columns::new(op, vp, dt).view(), 0.25, 0.0);
+        assert!((1.4..=3.0).contains(&f.close_speed), "{}", f.close_speed);
+        assert!(f.open_speed >= 3.0, "{}", f.open_speed);
+    }
+
+    #[test]
+    fn a_stop_is_held_only_where_the_valve_without_it_goes_on() {
+        // O_P ramps 80 -> 90 -> 80 % over 20 s, five times; a stop at 85 % holds V_P there.
+        let n = 10000;
+        let op: Vec<f64> = (0..n)
+            .map(|k| 90.0 - (((k % 2000) as f64 - 1000.0).abs() / 100.0))
+            .collect();
+        let e = noise(n, 0.1);
+        let stopped: Vec<f64> = (op.iter().zip(&e)).map(|(u, e)| u.min(85.0) + e).collect();
+        // The valve without the stop goes on to 90 %: 5 x 9 s at least 0.5 % beyond 85 %.
+        let held = held_at_stop(&stopped, &op, 85.0, true, (0.1, 0.0)) * 0.01;
+        assert!((44.0..=46.0).contains(&held), "{held}");
+        // A valve that stops 1.5 % short of O_P (a deadband) tops out at 88.5 %, and a stop
+        // fitted at its highest reading is never held against a model that stops short too.
+        let short: Vec<f64> = op.iter().map(|u| u - 1.5).collect();
+        assert_eq!(held_at_stop(&short, &short, 88.5, true, (0.1, 0.0)), 0.0);
+        // The lower stop is the mirror image.
+        let low: Vec<f64> = op.iter().map(|u| 100.0 - u).collect();
+        let held_low: Vec<f64> = stopped.iter().map(|v| 100.0 - v).collect();
+        assert_eq!(
+            held_at_stop(&held_low, &low, 15.0, false, (0.1, 0.0)),
+            held / 0.01
+        );
     }
 
     #[test]

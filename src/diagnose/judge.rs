@@ -192,24 +192,18 @@ impl Judge<'_> {
     }
 
     /// Whether the recording shows each travel stop of `spec` holding the valve where the
-    /// current model (simulated as `ya`) goes on: for [`facts::STOP_ASKED_S`] in total the
-    /// current model stands at least [`facts::STOP_MARGIN_PCT`] beyond the stop while the
-    /// measured V_P stays at it (within [`facts::held_spread_pct`]). A valve whose deadband or
-    /// friction already keeps it short of where O_P asks at the top of its travel shows no stop
-    /// there, and a stop fitted at the highest reading it reached only takes up a small error
-    /// of something else.
+    /// current model (simulated as `ya`) goes on ([`facts::held_at_stop`] for
+    /// [`facts::STOP_ASKED_S`] or more). A valve whose deadband or friction already keeps it
+    /// short of where O_P asks at the top of its travel shows no stop there, and a stop fitted
+    /// at the highest reading it reached only takes up a small error of something else.
     fn stop_seen(&self, spec: &ModelSpec, ya: &[f64]) -> bool {
-        let held = facts::held_spread_pct(self.facts.noise_pct, self.facts.lattice_pct);
-        let margin = facts::STOP_MARGIN_PCT;
-        let vp = self.scorer.vp;
-        let seen = |stop: f64, sign: f64| {
-            let held_there = (vp.iter().zip(ya))
-                .filter(|(v, y)| sign * (**y - stop) >= margin && sign * (**v - stop) <= held)
-                .count();
-            held_there as f64 * self.scorer.dt >= facts::STOP_ASKED_S
+        let sensor = (self.facts.noise_pct, self.facts.lattice_pct);
+        let seen = |level: f64, high: bool| {
+            let held = facts::held_at_stop(self.scorer.vp, ya, level, high, sensor);
+            held * self.scorer.dt >= facts::STOP_ASKED_S
         };
         let (lo, hi) = (spec.travel.min_pct, spec.travel.max_pct);
-        (hi >= 100.0 || seen(hi, 1.0)) && (lo <= 0.0 || seen(lo, -1.0))
+        (hi >= 100.0 || seen(hi, true)) && (lo <= 0.0 || seen(lo, false))
     }
 }
 
