@@ -4,7 +4,9 @@
 //! same with the two valves of `config/two-valves.toml` in each cycle, and the ratio of the two
 //! p99s (the two-valve loop should stay within 2x of the single one on an idle machine); then
 //! the two valves with `[health]` (a 60 s window each minute) without and with `[diagnosis]`
-//! (a 60 s window each minute), alternated `VB_BENCH_REPEATS` times (default 3): each run's
+//! (a 60 s window each minute, and beside it a diagnosis of 5 minutes of random steps run back
+//! to back on the same pool at the same lowest priority, so diagnosis works through the whole
+//! run), alternated `VB_BENCH_REPEATS` times (default 3): each run's
 //! p99, the ratio of the medians, and how many runs with live diagnosis stay within the range
 //! of those without, the bench's noise (live diagnosis should cost the loop nothing beyond it).
 //!
@@ -13,12 +15,17 @@
 //! `VB_BENCH_TOKIO=1` also measures `tokio::time::interval` (MissedTickBehavior::Skip) over the
 //! same time, the baseline the daemon's schedule replaces.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use hdrhistogram::Histogram;
 use valve_bridge::daemon::config::{DiagnosisConfig, HealthConfig};
 use valve_bridge::daemon::{self, Config, RunOptions};
+use valve_bridge::model::{bundled, ModelKind};
 use valve_bridge::report;
+use valve_bridge::synth::{self, Excitation};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let secs: f64 = match std::env::var("VB_BENCH_SECS") {
@@ -65,13 +72,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..DiagnosisConfig::default()
     });
     // Alternated, so that what the machine does meanwhile falls on both alike; the spread of
-    // the runs without live diagnosis is the bench's noise.
+    // the runs without live diagnosis is the bench's noise. With it, a diagnosis also runs
+    // back to back for the whole run (what a daemon that always has a window to diagnose does
+    // beside its loop), not only the run's own one per minute.
     let (mut without, mut with) = (Vec::new(), Vec::new());
     for run in 1..=repeats {
         let what = format!("two valves, [health], run {run}/{repeats}");
         without.push(timed(&what, watched.clone(), secs)?);
+        let stop = Arc::new(AtomicBool::new(false));
+        let busy = busy_diagnosis(Arc::clone(&stop))?;
         let what = format!("two valves, [health] and [diagnosis], run {run}/{repeats}");
-        with.push(timed(&what, diagnosed.clone(), secs)?);
+        let p99 = timed(&what, diagnosed.clone(), secs);
+        stop.store(true, Ordering::Relaxed);
+        let done = busy
+            .join()
+            .map_err(|_| "the diagnosing thread panicked")??;
+        println!("  diagnoses beside the loop, back to back: {done}");
+        with.push(p99?);
     }
     println!(
         "p99 without live diagnosis: {}; with: {}",
@@ -132,6 +149,27 @@ fn timed(what: &str, config: Config, secs: f64) -> Result<f64, Box<dyn std::erro
         s.max_lateness_us()
     );
     Ok(s.lateness_us(0.99))
+}
+
+/// Diagnoses 5 minutes of pin-cart II on random steps over and over, as the daemon's live
+/// diagnosis does (its function, its pool, the lowest priority), until `stop`; returns how many
+/// it finished.
+fn busy_diagnosis(stop: Arc<AtomicBool>) -> Result<JoinHandle<Result<usize, String>>, String> {
+    let spec = bundled(ModelKind::Pincart2);
+    let rec = synth::generate(&spec, Excitation::RandomSteps, 300.0, 0.01, 0.05, 7)
+        .map_err(|e| e.to_string())?;
+    let diagnose = report::live::analysis()
+        .diagnose
+        .ok_or("the analysis layer has no diagnosis")?;
+    Ok(std::thread::spawn(move || {
+        valve_bridge::priority::lowest_priority();
+        let mut done = 0;
+        while !stop.load(Ordering::Relaxed) {
+            diagnose(&rec.view(), None, None)?;
+            done += 1;
+        }
+        Ok(done)
+    }))
 }
 
 /// The median of `v` (the upper one of an even count).
