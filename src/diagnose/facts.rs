@@ -5,6 +5,7 @@
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
+use super::speeds::speeds;
 use crate::metrics::stats::{self, median, quantile, Differences};
 use crate::metrics::steps::{self, StepOptions};
 use crate::recording::RecordingView;
@@ -307,47 +308,6 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
         a = b;
     }
     holds
-}
-
-/// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
-/// taken out: for a window of h samples, the speed is the mean of the h/2 differences of V_P
-/// over h samples that end in the window's second half (pairs with a reading missing left
-/// out; a window with fewer than half its pairs measured too), each window starting where the
-/// last ended. Every pair spans the same time, so a speed limit bounds the mean as it bounds
-/// each pair, while the noise of the mean is that of one difference over the square root of
-/// the pairs (a sensor of 0.25 % hides a 2 %/s stroke from one difference over 0.3 s, not
-/// from fifteen). Per window length, the 99.9th percentile of the speeds in each direction
-/// less what noise alone reaches there (2.8 sigmas of the mean); the largest over the window
-/// lengths. Short windows see fast strokes, long ones the slow moves that noise hides in short
-/// ones.
-fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
-    let mut best = (0.0f64, 0.0f64);
-    for &window_s in windows_s {
-        let h = ((window_s / dt).round() as usize).max(1);
-        let pairs = (h / 2).max(1);
-        let w = h as f64 * dt;
-        let noise = 2.8 * sigma * std::f64::consts::SQRT_2 / (w * (pairs as f64).sqrt());
-        let mut up: Vec<f64> = Vec::new();
-        let mut down: Vec<f64> = Vec::new();
-        for end in (h + pairs..=vp.len()).step_by(h + pairs) {
-            let (sum, n) = (end - pairs..end)
-                .map(|k| vp[k] - vp[k - h])
-                .filter(|d| d.is_finite())
-                .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
-            if 2 * n < pairs {
-                continue;
-            }
-            let s = sum / (n as f64 * w);
-            if s > 0.0 {
-                up.push(s);
-            } else {
-                down.push(-s);
-            }
-        }
-        best.0 = best.0.max(quantile(&mut up, 0.999) - noise);
-        best.1 = best.1.max(quantile(&mut down, 0.999) - noise);
-    }
-    best
 }
 
 /// The 5th and 95th percentiles of the measured values of `x`, %.

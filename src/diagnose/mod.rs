@@ -41,6 +41,7 @@ mod refit;
 mod rounds;
 mod scorer;
 pub mod size;
+mod speeds;
 mod stickslip;
 pub mod tuning;
 
