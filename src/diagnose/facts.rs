@@ -860,22 +860,25 @@ mod tests {
     #[test]
     fn slow_strokes_of_small_steps_show_through_a_noisy_sensor() {
         // Steps of 1.5 % every 5 s for 10 minutes, read with 0.25 % of noise; V_P moves at
-        // 8 |e| %/s, but closes at 2.4 %/s at most (a slow vent). One difference over a window
-        // is noisier than that closing speed over any window the stroke fills.
+        // 8 |e| %/s, but closes at 2.4 %/s at most (a slow vent). Four draws of the noise: the
+        // closing speed is measured within a quarter of its limit in each (one difference
+        // over a window, a noise allowance of 3.3 %/s at 0.3 s, gave 1.3-3.0 %/s).
         let (dt, n) = (0.01, 60000);
         let op = steps(n, 500, &[50.0, 51.5]);
-        let e = noise(n, 0.25);
-        let mut x = op[0];
-        let vp: Vec<f64> = (0..n)
-            .map(|k| {
-                let v = (8.0 * (op[k] - x)).max(-2.4);
-                x += v * dt;
-                x + e[k]
-            })
-            .collect();
-        let f = measure(&Columns::new(op, vp, dt).view(), 0.25, 0.0);
-        assert!((1.4..=3.0).contains(&f.close_speed), "{}", f.close_speed);
-        assert!(f.open_speed >= 3.0, "{}", f.open_speed);
+        let draws = noise(4 * n, 0.25);
+        for e in draws.chunks(n) {
+            let mut x = op[0];
+            let vp: Vec<f64> = (0..n)
+                .map(|k| {
+                    let v = (8.0 * (op[k] - x)).max(-2.4);
+                    x += v * dt;
+                    x + e[k]
+                })
+                .collect();
+            let f = measure(&Columns::new(op.clone(), vp, dt).view(), 0.25, 0.0);
+            assert!((1.8..=2.6).contains(&f.close_speed), "{}", f.close_speed);
+            assert!(f.open_speed >= 3.0, "{}", f.open_speed);
+        }
     }
 
     #[test]
