@@ -722,8 +722,8 @@ mod tests {
 
     #[test]
     fn a_small_imperfection_displaces_a_winner_only_when_it_removes_far_more() {
-        // From 928 %²: a stick-slip worth maintenance leaves 823, an open valve 1.08 times
-        // slower than closed (real, worth 0.27, not shown by any measured speed) leaves 84.
+        // From 928 %²: a stick-slip worth maintenance leaves 823, a closing 1.08 times slower
+        // than the opening (real, worth 0.27, not shown by any measured speed) leaves 84.
         let mut small = trial(Effect::Asymmetry, 84.0, false);
         small.size.worth = 0.27;
         let winner = trial(Effect::Stiction, 823.0, true);
