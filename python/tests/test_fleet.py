@@ -24,6 +24,19 @@ def _fleet_dir(tmp_path):
     return d
 
 
+def _to_12_digits(x):
+    """`x` with every float rounded to 12 significant digits: the CLI and the extension module
+    are separate builds of the library, and a fitted figure may differ between them in its
+    last bit."""
+    if isinstance(x, float):
+        return float(f"{x:.12g}")
+    if isinstance(x, dict):
+        return {k: _to_12_digits(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_to_12_digits(v) for v in x]
+    return x
+
+
 def test_dask_and_the_cli_give_the_same_fleet(tmp_path):
     d = _fleet_dir(tmp_path)
     code, out, err = cli("fleet", d, "--out", tmp_path / "cli")
@@ -32,7 +45,7 @@ def test_dask_and_the_cli_give_the_same_fleet(tmp_path):
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster, Client(cluster) as client:
         summary = dask_fleet.diagnose_fleet(client, d, tmp_path / "dask")
-    assert summary == expected
+    assert _to_12_digits(summary) == _to_12_digits(expected)
     assert [v["valve"] for v in summary["valves"]] == ["pub_asym_rs", "pub_clean_rs", "notes"]
     assert json.loads((tmp_path / "dask" / "summary.json").read_text())["valves"][0]["findings"] == ["asymmetry"]
     assert (tmp_path / "dask" / "valves" / "pub_asym_rs" / "report.html").is_file()
