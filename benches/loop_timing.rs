@@ -23,6 +23,7 @@ use std::time::{Duration, Instant};
 use hdrhistogram::Histogram;
 use valve_bridge::daemon::config::{DiagnosisConfig, HealthConfig};
 use valve_bridge::daemon::{self, Config, RunOptions};
+use valve_bridge::metrics::stats::median;
 use valve_bridge::model::{bundled, ModelKind};
 use valve_bridge::report;
 use valve_bridge::synth::{self, Excitation};
@@ -97,7 +98,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!(
         "p99 with live diagnosis / without, medians: {:.2}; with inside the range without: {} of {}",
-        median(&with) / median(&without).max(f64::MIN_POSITIVE),
+        median(&with).unwrap_or(f64::NAN) / median(&without).map_or(f64::NAN, |m| m.max(f64::MIN_POSITIVE)),
         with.iter()
             .filter(|p| **p <= without.iter().copied().fold(0.0, f64::max))
             .count(),
@@ -170,13 +171,6 @@ fn busy_diagnosis(stop: Arc<AtomicBool>) -> Result<JoinHandle<Result<usize, Stri
         }
         Ok(done)
     }))
-}
-
-/// The median of `v` (the upper one of an even count).
-fn median(v: &[f64]) -> f64 {
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// `v` in µs, one decimal, comma-separated.

@@ -6,12 +6,12 @@
 //! The health thread feeds a [`Feed`] with the rows it gets from the loggers: a ring per
 //! valve, copied into a job when a diagnosis is due. Jobs go through an unbounded queue to the
 //! diagnosis thread (`vb-diagnosis`), so neither the health thread nor the loop ever waits for
-//! a diagnosis. It runs at the lowest priority (`SCHED_IDLE`, else nice 19, [`crate::priority::lowest_priority`],
-//! which the analysis layer's diagnosis also gives the threads of its parallel work): it takes
-//! only CPU time nothing else wants. Jobs are
-//! diagnosed in the order they were made, each from its own copy of the rows, so on the virtual
-//! clock the history is the same on every run; at the end of a run the thread finishes the jobs
-//! still queued.
+//! a diagnosis. It runs at the lowest priority (`SCHED_IDLE`, else nice 19,
+//! [`crate::priority::lowest_priority`], which the analysis layer's diagnosis also gives the
+//! threads of its parallel work): it takes only CPU time nothing else wants. Jobs are diagnosed
+//! in the order they were made, each from its own copy of the rows, so on the virtual clock the
+//! history is the same on every run; at the end of a run the thread finishes the jobs still
+//! queued.
 //!
 //! Each diagnosis is a line of `diagnosis-<valve>.jsonl` beside the logs ([`history::Record`])
 //! and, with `reports`, the full report in `diagnosis-<valve>/<t_s>/`; the gauges are

@@ -178,12 +178,12 @@ pub(crate) fn held_at_stop(
     level: f64,
     high: bool,
     sensor: (f64, f64),
-) -> f64 {
+) -> usize {
     let held = held_spread_pct(sensor.0, sensor.1);
     let sign = if high { 1.0 } else { -1.0 };
     (vp.iter().zip(free))
         .filter(|(v, y)| sign * (**y - level) >= STOP_MARGIN_PCT && sign * (**v - level) <= held)
-        .count() as f64
+        .count()
 }
 
 /// The level V_P stops at while O_P asks to go beyond it: V_P's 99.9th percentile (the 0.1th
@@ -891,18 +891,18 @@ mod tests {
         let e = noise(n, 0.1);
         let stopped: Vec<f64> = (op.iter().zip(&e)).map(|(u, e)| u.min(85.0) + e).collect();
         // The valve without the stop goes on to 90 %: 5 x 9 s at least 0.5 % beyond 85 %.
-        let held = held_at_stop(&stopped, &op, 85.0, true, (0.1, 0.0)) * 0.01;
+        let held = held_at_stop(&stopped, &op, 85.0, true, (0.1, 0.0)) as f64 * 0.01;
         assert!((44.0..=46.0).contains(&held), "{held}");
         // A valve that stops 1.5 % short of O_P (a deadband) tops out at 88.5 %, and a stop
         // fitted at its highest reading is never held against a model that stops short too.
         let short: Vec<f64> = op.iter().map(|u| u - 1.5).collect();
-        assert_eq!(held_at_stop(&short, &short, 88.5, true, (0.1, 0.0)), 0.0);
+        assert_eq!(held_at_stop(&short, &short, 88.5, true, (0.1, 0.0)), 0);
         // The lower stop is the mirror image.
         let low: Vec<f64> = op.iter().map(|u| 100.0 - u).collect();
         let held_low: Vec<f64> = stopped.iter().map(|v| 100.0 - v).collect();
         assert_eq!(
             held_at_stop(&held_low, &low, 15.0, false, (0.1, 0.0)),
-            held / 0.01
+            held_at_stop(&stopped, &op, 85.0, true, (0.1, 0.0))
         );
     }
 

@@ -200,7 +200,7 @@ impl Judge<'_> {
         let sensor = (self.facts.noise_pct, self.facts.lattice_pct);
         let seen = |level: f64, high: bool| {
             let held = facts::held_at_stop(self.scorer.vp, ya, level, high, sensor);
-            held * self.scorer.dt >= facts::STOP_ASKED_S
+            held as f64 * self.scorer.dt >= facts::STOP_ASKED_S
         };
         let (lo, hi) = (spec.travel.min_pct, spec.travel.max_pct);
         (hi >= 100.0 || seen(hi, true)) && (lo <= 0.0 || seen(lo, false))

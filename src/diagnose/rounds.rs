@@ -282,13 +282,9 @@ impl<'a> Search<'a> {
     /// closed one) are real; judged against a model without them, an effect that is there can
     /// help less than the imperfection it does not describe, and the search would end there.
     /// So when no candidate passes, the trace that removes the most held-out error is put in
-    /// the model and the round tried again. The reading's calibration goes in even before a
-    /// winner it beats: every sensor reads a few hundredths of a percent off, and an effect
-    /// fitted without the offset stands in for it (an asymmetric speed limit makes the model
-    /// lag one way). Another effect too small to name displaces a winner only when it removes
-    /// [`DISPLACING_GAIN`] times as much held-out error: a look-alike of the winner removes
-    /// about as much as the winner, while a winner that removes a small part of what a small
-    /// imperfection does was fitted to a corner of that imperfection's error.
+    /// the model and the round tried again; which trace, and when one goes in before a winner
+    /// (the reading's calibration, or a small effect that removes far more), is
+    /// [`pick_nuisance`]'s rule.
     fn nuisance(&self, best: &[&Trial]) -> Option<Trial> {
         let winner = self.winner(best);
         let materiality = self.data.tuning.materiality;
@@ -633,7 +629,12 @@ impl Search<'_> {
 /// no winner, or the reading's calibration) or is too small to name (real beyond chance, worth
 /// less than `materiality`, whether or not the recording shows it directly: a speed ratio of
 /// 1.08 can remove most of the error of a valve read by a quiet sensor, but no measured speed
-/// tells it from 1) and removes [`DISPLACING_GAIN`] times the winner's error.
+/// tells it from 1) and removes [`DISPLACING_GAIN`] times the winner's error. The calibration
+/// goes in before a winner it beats because every sensor reads a few hundredths of a percent
+/// off, and an effect fitted without the offset stands in for it (an asymmetric speed limit
+/// makes the model lag one way). A look-alike of the winner removes about as much as the
+/// winner, while a winner that removes a small part of what a small imperfection does was
+/// fitted to a corner of that imperfection's error.
 fn pick_nuisance<'t>(
     best: &[&'t Trial],
     winner: Option<&Trial>,

@@ -13,9 +13,10 @@ use crate::metrics::stats::quantile;
 /// last ended. Every pair spans the same time, so a speed limit bounds the mean as it bounds
 /// each pair, while the noise of the mean is that of one difference over the square root of
 /// the pairs (a sensor of 0.25 % hides a 2 %/s stroke from one difference over 0.3 s, not
-/// from fifteen). Per window length, the 99.9th percentile of the speeds in each direction
-/// less what noise alone reaches there (2.8 sigmas of the mean); the largest over the window
-/// lengths. Short windows see fast strokes, long ones the slow moves that noise hides in short
+/// from fifteen). Per window length, the 99.9th percentile in each direction of the speeds
+/// less what noise alone reaches in their window (2.8 sigmas of the mean of the pairs it
+/// measured, so a window with rows missing gets its wider allowance); the largest over the
+/// window lengths. Short windows see fast strokes, long ones the slow moves that noise hides in short
 /// ones.
 pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
     let mut best = (0.0f64, 0.0f64);
@@ -23,7 +24,7 @@ pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64
         let h = ((window_s / dt).round() as usize).max(1);
         let pairs = (h / 2).max(1);
         let w = h as f64 * dt;
-        let noise = 2.8 * sigma * std::f64::consts::SQRT_2 / (w * (pairs as f64).sqrt());
+        let noise = |n: usize| 2.8 * sigma * std::f64::consts::SQRT_2 / (w * (n as f64).sqrt());
         let mut up: Vec<f64> = Vec::new();
         let mut down: Vec<f64> = Vec::new();
         for end in (h + pairs..=vp.len()).step_by(h + pairs) {
@@ -36,13 +37,36 @@ pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64
             }
             let s = sum / (n as f64 * w);
             if s > 0.0 {
-                up.push(s);
+                up.push(s - noise(n));
             } else {
-                down.push(-s);
+                down.push(-s - noise(n));
             }
         }
-        best.0 = best.0.max(quantile(&mut up, 0.999) - noise);
-        best.1 = best.1.max(quantile(&mut down, 0.999) - noise);
+        best.0 = best.0.max(quantile(&mut up, 0.999));
+        best.1 = best.1.max(quantile(&mut down, 0.999));
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_window_with_rows_missing_gets_the_allowance_of_the_pairs_it_measured() {
+        // V_P opens at 2 %/s, read every 10 ms with every other reading missing: each 1 s
+        // window measures 25 of its 50 pairs, so the noise of its mean is that of one
+        // difference over the square root of 25, not of 50.
+        let (dt, sigma, w) = (0.01, 0.25, 1.0);
+        let allowance = |n: f64| 2.8 * sigma * std::f64::consts::SQRT_2 / (w * n.sqrt());
+        let ramp: Vec<f64> = (0..3000).map(|k| 2.0 * k as f64 * dt).collect();
+        let holed: Vec<f64> = (ramp.iter().enumerate())
+            .map(|(k, &v)| if k % 2 == 1 { f64::NAN } else { v })
+            .collect();
+        for (vp, measured) in [(ramp, 50.0), (holed, 25.0)] {
+            let (open, close) = speeds(&vp, dt, sigma, &[w]);
+            assert!((open - (2.0 - allowance(measured))).abs() < 1e-9, "{open}");
+            assert_eq!(close, 0.0);
+        }
+    }
 }
