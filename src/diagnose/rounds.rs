@@ -129,15 +129,14 @@ impl<'a> Search<'a> {
         let mut worth: Vec<Effect> = Effect::ALL.to_vec();
         for round in 0..ROUNDS {
             self.refit_rest();
-            let trials = self.trials(&worth);
+            let first = self.trials(&worth);
             progress(((round + 1) * Effect::ALL.len()).min(total), total);
-            let mut best = best_per_effect(&trials);
-            let absorbed;
-            if let Some(nuisance) = self.nuisance(&best) {
+            let mut trials = first;
+            while let Some(nuisance) = self.nuisance(&best_per_effect(&trials)) {
                 self.absorb(nuisance);
-                absorbed = self.trials(&worth);
-                best = best_per_effect(&absorbed);
+                trials = self.trials(&worth);
             }
+            let best = best_per_effect(&trials);
             for t in &best {
                 let fitted = Value::Object(params(&t.spec, t.free.iter().map(|f| f.knob)));
                 tracing::debug!(
@@ -625,16 +624,17 @@ impl Search<'_> {
 
 /// The nuisance of a round ([`Search::nuisance`]): among `best` (sorted by held-out error),
 /// with `winner` the round's winner if any and `cur_held` the current model's held-out error,
-/// the first not yet `absorbed` that removes more than the winner and either is a trace (with
-/// no winner, or the reading's calibration) or is too small to name (real beyond chance, worth
-/// less than `materiality`, whether or not the recording shows it directly: a speed ratio of
-/// 1.08 can remove most of the error of a valve read by a quiet sensor, but no measured speed
-/// tells it from 1) and removes [`DISPLACING_GAIN`] times the winner's error. The calibration
-/// goes in before a winner it beats because every sensor reads a few hundredths of a percent
-/// off, and an effect fitted without the offset stands in for it (an asymmetric speed limit
-/// makes the model lag one way). A look-alike of the winner removes about as much as the
-/// winner, while a winner that removes a small part of what a small imperfection does was
-/// fitted to a corner of that imperfection's error.
+/// the first not yet `absorbed` that removes more than the winner and either is a trace or is
+/// too small to name (real beyond chance, worth less than `materiality`, whether or not the
+/// recording shows it directly: a speed ratio of 1.05 can remove most of the error of a valve
+/// read by a quiet sensor, but no measured speed tells it from 1) and, beside a winner, removes
+/// [`DISPLACING_GAIN`] times the winner's error. A winner that a trace beats is no evidence
+/// of an effect worth maintenance: a stickband fitted to a healthy positioner's deadband
+/// removes no more than the deadband of 0.06 % it stands in for, and the calibration every
+/// sensor has (a few hundredths of a percent off) makes an asymmetric speed limit lag one way.
+/// An effect the recording does not show displaces a winner only by far more: a look-alike of
+/// the winner removes about as much as the winner, while a winner that removes a small part of
+/// what a small imperfection does was fitted to a corner of that imperfection's error.
 fn pick_nuisance<'t>(
     best: &[&'t Trial],
     winner: Option<&Trial>,
@@ -647,15 +647,11 @@ fn pick_nuisance<'t>(
     best.iter().copied().find(|t| {
         !absorbed(t.effect)
             && t.errors.held < winner_held
-            && match winner {
-                None => t.trace(),
-                Some(w) => {
-                    (t.trace() && t.effect == Effect::Calibration)
-                        || (too_small(t)
-                            && cur_held - t.errors.held
-                                >= DISPLACING_GAIN * (cur_held - w.errors.held))
-                }
-            }
+            && (t.trace()
+                || too_small(t)
+                    && winner.is_none_or(|w| {
+                        cur_held - t.errors.held >= DISPLACING_GAIN * (cur_held - w.errors.held)
+                    }))
     })
 }
 
@@ -742,13 +738,29 @@ mod tests {
         let mut unshown = small.clone();
         unshown.size.worth = 3.0;
         assert_eq!(pick(&[&unshown, &winner], false), None);
-        // With no winner only a trace the recording shows goes in.
+        // With no winner, the one that removes most goes in, shown or not.
         let got = pick_nuisance(&best, None, 928.0, 1.0, |_| false).map(|t| t.effect);
-        assert_eq!(got, None);
+        assert_eq!(got, Some(Effect::Asymmetry));
         let mut shown = small.clone();
         shown.plausible = true;
         let got = pick_nuisance(&[&shown], None, 928.0, 1.0, |_| false).map(|t| t.effect);
         assert_eq!(got, Some(Effect::Asymmetry));
+    }
+
+    #[test]
+    fn a_winner_a_trace_beats_is_not_kept_before_the_trace() {
+        // From 97.8 %²: a positioner deadband of 0.06 % (a trace) leaves 60.1, a stickband of
+        // 0.51 % worth maintenance fitted to the same error leaves 60.3.
+        let mut deadband = trial(Effect::Deadband, 60.1, false);
+        (deadband.plausible, deadband.size.worth) = (true, 0.32);
+        let stiction = trial(Effect::Stiction, 60.3, true);
+        let best = [&deadband, &stiction];
+        let got = pick_nuisance(&best, Some(&stiction), 97.8, 1.0, |_| false);
+        assert_eq!(got.map(|t| t.effect), Some(Effect::Deadband));
+        // A trace that removes less than the winner leaves it the winner.
+        deadband.errors.held = 60.5;
+        let best = [&stiction, &deadband];
+        assert!(pick_nuisance(&best, Some(&stiction), 97.8, 1.0, |_| false).is_none());
     }
 
     #[test]
