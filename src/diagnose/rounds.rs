@@ -286,10 +286,17 @@ impl<'a> Search<'a> {
     /// [`pick_nuisance`]'s rule.
     fn nuisance(&self, best: &[&Trial]) -> Option<Trial> {
         let winner = self.winner(best);
-        let materiality = self.data.tuning.materiality;
-        pick_nuisance(best, winner, self.cur.held, materiality, |e| {
-            self.absorbed(e)
-        })
+        let tuning = self.data.tuning;
+        let dead_zone = |t: &Trial| size::dead_zone_worth(t.effect, &t.spec, tuning);
+        let absorbed = |e| self.absorbed(e);
+        pick_nuisance(
+            best,
+            winner,
+            self.cur.held,
+            tuning.materiality,
+            dead_zone,
+            absorbed,
+        )
         .cloned()
     }
 
@@ -624,11 +631,12 @@ impl Search<'_> {
 
 /// The nuisance of a round ([`Search::nuisance`]): among `best` (sorted by held-out error),
 /// with `winner` the round's winner if any and `cur_held` the current model's held-out error,
-/// the first not yet `absorbed` that removes more than the winner and either is a trace or is
-/// too small to name (real beyond chance, worth less than `materiality`, whether or not the
-/// recording shows it directly: a speed ratio of 1.05 can remove most of the error of a valve
-/// read by a quiet sensor, but no measured speed tells it from 1) and, beside a winner, removes
-/// [`DISPLACING_GAIN`] times the winner's error. A winner that a trace beats is no evidence
+/// the first not yet `absorbed` that removes more than the winner, holds no `dead_zone` worth
+/// `materiality` (a stickband with no jump is a deadband, whatever its slip), and either is a
+/// trace or is too small to name (real beyond chance, worth less than `materiality`, whether
+/// or not the recording shows it directly: a speed ratio of 1.05 can remove most of the error
+/// of a valve read by a quiet sensor, but no measured speed tells it from 1) and, beside a
+/// winner, removes [`DISPLACING_GAIN`] times the winner's error. A winner that a trace beats is no evidence
 /// of an effect worth maintenance: a stickband fitted to a healthy positioner's deadband
 /// removes no more than the deadband of 0.06 % it stands in for, and the calibration every
 /// sensor has (a few hundredths of a percent off) makes an asymmetric speed limit lag one way.
@@ -640,6 +648,7 @@ fn pick_nuisance<'t>(
     winner: Option<&Trial>,
     cur_held: f64,
     materiality: f64,
+    dead_zone: impl Fn(&Trial) -> f64,
     absorbed: impl Fn(Effect) -> bool,
 ) -> Option<&'t Trial> {
     let winner_held = winner.map_or(cur_held, |w| w.errors.held);
@@ -647,6 +656,7 @@ fn pick_nuisance<'t>(
     best.iter().copied().find(|t| {
         !absorbed(t.effect)
             && t.errors.held < winner_held
+            && dead_zone(t) < materiality
             && (t.trace()
                 || too_small(t)
                     && winner.is_none_or(|w| {
@@ -726,7 +736,7 @@ mod tests {
         let winner = trial(Effect::Stiction, 823.0, true);
         let best = [&small, &winner];
         let pick = |best: &[&Trial], absorbed: bool| {
-            pick_nuisance(best, Some(&winner), 928.0, 1.0, |_| absorbed).map(|t| t.effect)
+            pick_nuisance(best, Some(&winner), 928.0, 1.0, |_| 0.0, |_| absorbed).map(|t| t.effect)
         };
         assert_eq!(pick(&best, false), Some(Effect::Asymmetry));
         // Not twice, and not when it removes only twice the winner's error (a look-alike).
@@ -739,11 +749,11 @@ mod tests {
         unshown.size.worth = 3.0;
         assert_eq!(pick(&[&unshown, &winner], false), None);
         // With no winner, the one that removes most goes in, shown or not.
-        let got = pick_nuisance(&best, None, 928.0, 1.0, |_| false).map(|t| t.effect);
+        let got = pick_nuisance(&best, None, 928.0, 1.0, |_| 0.0, |_| false).map(|t| t.effect);
         assert_eq!(got, Some(Effect::Asymmetry));
         let mut shown = small.clone();
         shown.plausible = true;
-        let got = pick_nuisance(&[&shown], None, 928.0, 1.0, |_| false).map(|t| t.effect);
+        let got = pick_nuisance(&[&shown], None, 928.0, 1.0, |_| 0.0, |_| false).map(|t| t.effect);
         assert_eq!(got, Some(Effect::Asymmetry));
     }
 
@@ -755,12 +765,25 @@ mod tests {
         (deadband.plausible, deadband.size.worth) = (true, 0.32);
         let stiction = trial(Effect::Stiction, 60.3, true);
         let best = [&deadband, &stiction];
-        let got = pick_nuisance(&best, Some(&stiction), 97.8, 1.0, |_| false);
+        let got = pick_nuisance(&best, Some(&stiction), 97.8, 1.0, |_| 0.0, |_| false);
         assert_eq!(got.map(|t| t.effect), Some(Effect::Deadband));
         // A trace that removes less than the winner leaves it the winner.
         deadband.errors.held = 60.5;
         let best = [&stiction, &deadband];
-        assert!(pick_nuisance(&best, Some(&stiction), 97.8, 1.0, |_| false).is_none());
+        assert!(pick_nuisance(&best, Some(&stiction), 97.8, 1.0, |_| 0.0, |_| false).is_none());
+        // A stickband of 0.79 % with a jump of 0.009 % is a trace as stick-slip, but a deadband
+        // worth maintenance: it does not go in before the deadband of 0.8 % it stands for.
+        let mut zone = trial(Effect::Stiction, 533.0, false);
+        (zone.plausible, zone.size.worth) = (true, 0.04);
+        composed::set(&mut zone.spec, Knob::Stickband, 0.794);
+        composed::set(&mut zone.spec, Knob::JumpFraction, 0.0113);
+        let winner = trial(Effect::Deadband, 540.0, true);
+        let tuning = Tuning::default();
+        let dead_zone = |t: &Trial| size::dead_zone_worth(t.effect, &t.spec, &tuning);
+        assert!((dead_zone(&zone) - 0.785 / tuning.worth.deadband_pct).abs() < 1e-3);
+        let best = [&zone, &winner];
+        assert!(pick_nuisance(&best, Some(&winner), 6789.0, 1.0, dead_zone, |_| false).is_none());
+        assert!(pick_nuisance(&best, Some(&winner), 6789.0, 1.0, |_| 0.0, |_| false).is_some());
     }
 
     #[test]

@@ -37,6 +37,20 @@ const RESAMPLES: usize = 400;
 /// twice the crossing time as over the crossing time.
 const SETTLED: f64 = 1.1;
 
+/// What a trial of `effect` fitted as `spec` is worth as a deadband, in units of what is worth
+/// maintenance: Choudhury's stick-slip on the input sticks over its stickband S and jumps by J,
+/// so with a small jump it is a dead zone of S - J that its slip does not weigh. Other effects
+/// hold no deadband of their own (0).
+pub(crate) fn dead_zone_worth(effect: Effect, spec: &ModelSpec, tuning: &Tuning) -> f64 {
+    let g = |k| composed::get(spec, k);
+    match effect {
+        Effect::Stiction => {
+            g(Knob::Stickband) * (1.0 - g(Knob::JumpFraction)) / tuning.worth.deadband_pct
+        }
+        _ => 0.0,
+    }
+}
+
 /// The size of `effect` as fitted in `spec` (its interval not yet computed), for a recording
 /// with O_P `op` and the `facts` measured on it.
 pub(crate) fn size(
