@@ -658,10 +658,10 @@ fn pick_nuisance<'t>(
             && t.errors.held < winner_held
             && dead_zone(t) < materiality
             && (t.trace()
-                || too_small(t)
+                || (too_small(t)
                     && winner.is_none_or(|w| {
                         cur_held - t.errors.held >= DISPLACING_GAIN * (cur_held - w.errors.held)
-                    }))
+                    })))
     })
 }
 
