@@ -96,9 +96,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         list_us(&without),
         list_us(&with)
     );
+    let ratio = median(&with).unwrap_or(f64::NAN)
+        / median(&without).map_or(f64::NAN, |m| m.max(f64::MIN_POSITIVE));
     println!(
         "p99 with live diagnosis / without, medians: {:.2}; with inside the range without: {} of {}",
-        median(&with).unwrap_or(f64::NAN) / median(&without).map_or(f64::NAN, |m| m.max(f64::MIN_POSITIVE)),
+        ratio,
         with.iter()
             .filter(|p| **p <= without.iter().copied().fold(0.0, f64::max))
             .count(),

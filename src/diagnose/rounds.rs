@@ -129,9 +129,8 @@ impl<'a> Search<'a> {
         let mut worth: Vec<Effect> = Effect::ALL.to_vec();
         for round in 0..ROUNDS {
             self.refit_rest();
-            let first = self.trials(&worth);
+            let mut trials = self.trials(&worth);
             progress(((round + 1) * Effect::ALL.len()).min(total), total);
-            let mut trials = first;
             while let Some(nuisance) = self.nuisance(&best_per_effect(&trials)) {
                 self.absorb(nuisance);
                 trials = self.trials(&worth);
@@ -636,10 +635,11 @@ impl Search<'_> {
 /// trace or is too small to name (real beyond chance, worth less than `materiality`, whether
 /// or not the recording shows it directly: a speed ratio of 1.05 can remove most of the error
 /// of a valve read by a quiet sensor, but no measured speed tells it from 1) and, beside a
-/// winner, removes [`DISPLACING_GAIN`] times the winner's error. A winner that a trace beats is no evidence
-/// of an effect worth maintenance: a stickband fitted to a healthy positioner's deadband
-/// removes no more than the deadband of 0.06 % it stands in for, and the calibration every
-/// sensor has (a few hundredths of a percent off) makes an asymmetric speed limit lag one way.
+/// winner, removes [`DISPLACING_GAIN`] times the winner's error. A winner that a trace beats
+/// is no evidence of an effect worth maintenance: a stickband fitted to a healthy positioner's
+/// deadband removes no more than the deadband of 0.06 % it stands in for, and the calibration
+/// every sensor has (a few hundredths of a percent off) makes an asymmetric speed limit lag
+/// one way.
 /// An effect the recording does not show displaces a winner only by far more: a look-alike of
 /// the winner removes about as much as the winner, while a winner that removes a small part of
 /// what a small imperfection does was fitted to a corner of that imperfection's error.

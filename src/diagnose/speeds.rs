@@ -16,8 +16,8 @@ use crate::metrics::stats::quantile;
 /// from fifteen). Per window length, the 99.9th percentile in each direction of the speeds
 /// less what noise alone reaches in their window (2.8 sigmas of the mean of the pairs it
 /// measured, so a window with rows missing gets its wider allowance); the largest over the
-/// window lengths. Short windows see fast strokes, long ones the slow moves that noise hides in short
-/// ones.
+/// window lengths. Short windows see fast strokes, long ones the slow moves that noise hides
+/// in short ones.
 pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
     let mut best = (0.0f64, 0.0f64);
     for &window_s in windows_s {
