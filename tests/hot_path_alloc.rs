@@ -106,6 +106,9 @@ fn per_cycle_calls_do_not_allocate() {
                 reconnects: k / 100,
                 attempts: k / 100 + 1,
                 late_replies: k / 10,
+                noise_bytes: k,
+                unexpected_replies: k / 50,
+                late_reply_ms: Some(100),
             };
             valve.totals(link, source.watchdog_trips());
         });

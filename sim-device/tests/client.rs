@@ -185,7 +185,8 @@ async fn late_replies_are_timeouts_and_keep_the_connection() {
             fc: 23,
             ms: 20,
             partial: None,
-            late_replies: 0
+            late_replies: 0,
+            held: None,
         }))
     );
     assert_eq!(

@@ -11,6 +11,8 @@
 //!   fraction of full travel (0.45 = 45 %);
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
 //! - `valve_bridge_late_replies_total`: Modbus replies discarded as answers to earlier requests;
+//! - `valve_bridge_line_noise_bytes_total`, `valve_bridge_unexpected_replies_total`: Modbus RTU
+//!   bytes that formed no frame, and frames no request waited for (a noisy or slow line);
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
 //! - `valve_bridge_log_rows_dropped_total`: rows dropped because the logger fell behind;
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
@@ -231,6 +233,8 @@ pub struct ValveMetrics {
     vp_ratio: Gauge,
     reconnects: IntCounter,
     late_replies: IntCounter,
+    noise_bytes: IntCounter,
+    unexpected_replies: IntCounter,
     watchdog_trips: IntCounter,
     dropped_log_rows: IntCounter,
 }
@@ -281,6 +285,14 @@ impl LoopMetrics {
             "valve_bridge_late_replies_total",
             "Modbus replies discarded because they answered an earlier request, after its deadline",
         )?;
+        let noise_bytes = counter(
+            "valve_bridge_line_noise_bytes_total",
+            "Modbus RTU bytes received that formed no frame (line noise, broken frames), dropped",
+        )?;
+        let unexpected_replies = counter(
+            "valve_bridge_unexpected_replies_total",
+            "Modbus RTU frames no request was waiting for (replies later than late_reply_ms)",
+        )?;
         let dropped_log_rows = counter(
             "valve_bridge_log_rows_dropped_total",
             "Rows the loop dropped because the logger's queue was full",
@@ -315,6 +327,8 @@ impl LoopMetrics {
                     vp_ratio: vp_ratio.get_metric_with_label_values(&[v])?,
                     reconnects: reconnects.get_metric_with_label_values(&[v])?,
                     late_replies: late_replies.get_metric_with_label_values(&[v])?,
+                    noise_bytes: noise_bytes.get_metric_with_label_values(&[v])?,
+                    unexpected_replies: unexpected_replies.get_metric_with_label_values(&[v])?,
                     watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
                     dropped_log_rows: dropped_log_rows.get_metric_with_label_values(&[v])?,
                 })
@@ -327,6 +341,8 @@ impl LoopMetrics {
             missed,
             reconnects,
             late_replies,
+            noise_bytes,
+            unexpected_replies,
             watchdog_trips,
             dropped_log_rows,
         ] {
@@ -431,6 +447,8 @@ impl ValveMetrics {
         for (c, total) in [
             (&self.reconnects, link.reconnects),
             (&self.late_replies, link.late_replies),
+            (&self.noise_bytes, link.noise_bytes),
+            (&self.unexpected_replies, link.unexpected_replies),
             (&self.watchdog_trips, watchdog_trips),
         ] {
             c.inc_by(total.saturating_sub(c.get()));
@@ -532,6 +550,9 @@ mod tests {
             reconnects: 2,
             attempts: 3,
             late_replies: 4,
+            noise_bytes: 17,
+            unexpected_replies: 1,
+            late_reply_ms: Some(100),
         };
         a.totals(link, 1);
         a.totals(link, 1);
@@ -552,6 +573,8 @@ mod tests {
             "valve_bridge_vp_ratio{valve=\"b\"} 0.4",
             "valve_bridge_reconnects_total{valve=\"a\"} 2",
             "valve_bridge_late_replies_total{valve=\"a\"} 4",
+            "valve_bridge_line_noise_bytes_total{valve=\"a\"} 17",
+            "valve_bridge_unexpected_replies_total{valve=\"a\"} 1",
             "valve_bridge_watchdog_trips_total{valve=\"a\"} 1",
             "valve_bridge_watchdog_trips_total{valve=\"b\"} 0",
             "valve_bridge_server_up{server=\"modbus-server\"} 1",

@@ -379,6 +379,21 @@ impl ValveSummary {
                     l.late_replies
                 )?;
             }
+            if l.noise_bytes > 0 {
+                writeln!(
+                    f,
+                    "{indent}line noise: {} that formed no frame, dropped (check the RS-485 wiring, termination and earthing)",
+                    human::count(l.noise_bytes, "byte")
+                )?;
+            }
+            if l.unexpected_replies > 0 {
+                writeln!(
+                    f,
+                    "{indent}replies no request waited for: {} (a reply came later than late_reply_ms, now {} ms: one before it may have been taken for a later request's)",
+                    l.unexpected_replies,
+                    l.late_reply_ms.unwrap_or_default()
+                )?;
+            }
         }
         match &self.safe {
             Some(action) => writeln!(f, "{indent}stop action: {action}")?,

@@ -5,8 +5,11 @@
 //! Opening the link is [`crate::modbus::client`]'s job.
 
 use std::net::{SocketAddr, ToSocketAddrs};
+use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
+
+use super::wire::{DEFAULT_LATE_REPLY, MAX_HORIZON};
 
 /// `[valve.modbus-tcp]`: a positioner (or gateway) reached over Modbus TCP.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -63,6 +66,12 @@ pub struct RtuLink {
     /// bus budget (default 1 ms; measure your device and set it).
     #[serde(default = "default_turnaround")]
     pub turnaround_ms: f64,
+    /// The latest the device answers a request it answers at all, ms (default 100, or twice
+    /// `timeout_ms` if that is longer). After a request goes unanswered the line is held this
+    /// long for its reply before the next request goes out, so a late reply is never taken for
+    /// a later request's; raised on its own, up to 2000, when a later reply is seen.
+    #[serde(default)]
+    pub late_reply_ms: Option<f64>,
 }
 
 /// Where the valve is.
@@ -148,6 +157,7 @@ impl RtuLink {
             slave_id: 1,
             timeout_ms: None,
             turnaround_ms: default_turnaround(),
+            late_reply_ms: None,
         }
     }
 
@@ -192,7 +202,34 @@ impl RtuLink {
                 ),
             ));
         }
+        if let Some(ms) = self.late_reply_ms {
+            let most = MAX_HORIZON.as_millis() as f64;
+            if !(ms.is_finite() && ms >= 1.0 && ms <= most) {
+                return Some((
+                    "late_reply_ms",
+                    format!("{ms} is not allowed: the device's slowest answer in ms, 1-{most}"),
+                ));
+            }
+            if let Some(t) = self.timeout_ms.filter(|&t| t > ms) {
+                return Some((
+                    "late_reply_ms",
+                    format!(
+                        "{ms} is shorter than timeout_ms = {t}: a reply within the deadline is not \
+                         late; set late_reply_ms to at least {t}"
+                    ),
+                ));
+            }
+        }
         timeout_violation(self.timeout_ms)
+    }
+
+    /// How long the line is held for an unanswered request's reply, for a cycle deadline of
+    /// `timeout`: `late_reply_ms`, or [`DEFAULT_LATE_REPLY`] or twice the deadline.
+    pub fn late_reply(&self, timeout: Duration) -> Duration {
+        match self.late_reply_ms {
+            Some(ms) => Duration::from_secs_f64(ms / 1000.0),
+            None => DEFAULT_LATE_REPLY.max(2 * timeout).min(MAX_HORIZON),
+        }
     }
 }
 
@@ -245,5 +282,22 @@ mod tests {
         l.slave_id = 1;
         l.timeout_ms = Some(0.0);
         assert_eq!(l.violation().map(|v| v.0), Some("timeout_ms"));
+        l.timeout_ms = Some(20.0);
+        l.late_reply_ms = Some(10.0);
+        assert_eq!(l.violation().map(|v| v.0), Some("late_reply_ms"));
+        l.late_reply_ms = Some(5000.0);
+        assert_eq!(l.violation().map(|v| v.0), Some("late_reply_ms"));
+        l.late_reply_ms = Some(250.0);
+        assert_eq!(l.violation(), None);
+        assert_eq!(l.late_reply(Duration::ZERO), Duration::from_millis(250));
+    }
+
+    #[test]
+    fn late_replies_are_waited_for_at_least_twice_the_deadline() {
+        let l = RtuLink::new("/dev/null");
+        let ms = |ms| Duration::from_millis(ms);
+        assert_eq!(l.late_reply(ms(8)), ms(100));
+        assert_eq!(l.late_reply(ms(400)), ms(800));
+        assert_eq!(l.late_reply(ms(4000)), MAX_HORIZON);
     }
 }

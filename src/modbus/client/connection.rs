@@ -48,13 +48,24 @@ pub(super) struct Connection {
     backoff: Duration,
     /// How often the device's replies broke the stream lately.
     garbled: GarbleRate,
+    /// How long an unanswered RTU request's reply is waited for (raised by the wire when a
+    /// later one is seen, and kept across connections).
+    late_reply: Duration,
+    /// Line noise and unexpected replies counted on the connections before this one.
+    noise_before: u64,
+    unexpected_before: u64,
     pub(super) reconnects: u64,
     pub(super) attempts: u64,
 }
 
 impl Connection {
-    /// A link to `link` (resolved to `tcp_addr` on TCP), not connected yet.
-    pub(super) fn new(link: Link, tcp_addr: Option<SocketAddr>) -> Connection {
+    /// A link to `link` (resolved to `tcp_addr` on TCP), not connected yet; on RTU an
+    /// unanswered request's reply is waited for up to `late_reply`.
+    pub(super) fn new(
+        link: Link,
+        tcp_addr: Option<SocketAddr>,
+        late_reply: Duration,
+    ) -> Connection {
         Connection {
             link,
             tcp_addr,
@@ -68,6 +79,9 @@ impl Connection {
             next_attempt: Instant::now(),
             backoff: FIRST_BACKOFF,
             garbled: GarbleRate::default(),
+            late_reply,
+            noise_before: 0,
+            unexpected_before: 0,
             reconnects: 0,
             attempts: 0,
         }
@@ -76,6 +90,27 @@ impl Connection {
     /// Replies discarded as late, on every connection so far.
     pub(super) fn late_replies(&self) -> u64 {
         self.late_before + self.wire.stale_replies()
+    }
+
+    /// Waits at least `late_reply` for an unanswered RTU request's reply (a bus shared by
+    /// valves with different deadlines waits for the longest).
+    pub(super) fn wait_late_replies(&mut self, late_reply: Duration) {
+        self.late_reply = self.late_reply.max(late_reply);
+    }
+
+    /// Bytes of line noise dropped, on every connection so far.
+    pub(super) fn noise_bytes(&self) -> u64 {
+        self.noise_before + self.wire.noise_bytes()
+    }
+
+    /// Replies no request waited for, on every connection so far.
+    pub(super) fn unexpected_replies(&self) -> u64 {
+        self.unexpected_before + self.wire.unexpected_replies()
+    }
+
+    /// How long an unanswered RTU request's reply is waited for now.
+    pub(super) fn late_reply(&self) -> Duration {
+        (self.wire.raised_horizon()).map_or(self.late_reply, |h| h.max(self.late_reply))
     }
 
     /// True while a context is open.
@@ -88,6 +123,7 @@ impl Connection {
     pub(super) async fn attempt(&mut self, deadline: Instant) -> Result<(), ConnectError> {
         self.ctx = None;
         self.attempts += 1;
+        let (late_reply, raised) = (self.late_reply, self.wire.raised_horizon());
         let allowed = deadline.saturating_duration_since(Instant::now());
         let wire = Arc::new(WireState::default());
         let connecting = async {
@@ -104,7 +140,7 @@ impl Connection {
                 }
                 Link::Rtu(l) => {
                     let port = crate::modbus::serial::open(l)?;
-                    let wire = RtuWire::new(port, Arc::clone(&wire));
+                    let wire = RtuWire::new(port, Arc::clone(&wire), late_reply, raised);
                     Ok(rtu::attach_slave(wire, Slave(l.slave_id)))
                 }
             }
@@ -113,6 +149,8 @@ impl Connection {
             Ok(Ok(ctx)) => {
                 self.ctx = Some(ctx);
                 self.late_before = self.late_replies();
+                self.noise_before = self.noise_bytes();
+                self.unexpected_before = self.unexpected_replies();
                 self.wire = wire;
                 self.late_seen = 0;
                 self.answered = false;
@@ -220,13 +258,12 @@ impl Connection {
         ctx.set_slave(Slave(who.unit_id()));
         let fc = t.function_code();
         match tokio::time::timeout_at(deadline, call(ctx, t, setpoint)).await {
-            Ok(Ok(Ok(words))) => {
+            Ok(Ok(answer)) => {
                 self.heard();
-                Ok(words)
-            }
-            Ok(Ok(Err(code))) => {
-                self.heard();
-                Err(Fault::Error(ReplyError::Exception { fc, code }))
+                if let Some(u) = self.wire.window().unverified {
+                    return Err(Fault::Error(ReplyError::Unverified(u)));
+                }
+                answer.map_err(|code| Fault::Error(ReplyError::Exception { fc, code }))
             }
             Err(_) => {
                 let mut fault = self.classify_silence(timeout, t);
@@ -285,27 +322,31 @@ impl Connection {
 
     /// What a missed deadline means: silence, a partial reply, or a reply with a bad CRC.
     fn classify_silence(&self, timeout: Duration, t: Transaction) -> Fault {
-        let timed_out = |partial| {
+        let timed_out = |partial, held| {
             Fault::Timeout(Timeout {
                 fc: t.function_code(),
                 ms: timeout.as_millis(),
                 partial,
                 late_replies: 0,
+                held,
             })
         };
         if !matches!(self.link, Link::Rtu(_)) {
             return match self.wire.malformed() {
                 Some(m) => Fault::Error(ReplyError::Malformed(m)),
-                None => timed_out(None),
+                None => timed_out(None, None),
             };
+        }
+        if let Some(held) = self.wire.window().held {
+            return timed_out(None, Some(held));
         }
         let rx = self.wire.received();
         if rx.is_empty() {
-            return timed_out(None);
+            return timed_out(None, None);
         }
         match rtu_frame_fault(&rx, &t) {
             Some(bad) => Fault::Error(ReplyError::Frame(bad)),
-            None => timed_out(Some((rx.len(), t.rtu_response_bytes()))),
+            None => timed_out(Some((rx.len(), t.rtu_response_bytes())), None),
         }
     }
 

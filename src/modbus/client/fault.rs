@@ -13,7 +13,7 @@ use tokio_modbus::ExceptionCode;
 
 use super::super::exception;
 use super::super::map::ValueError;
-use super::super::wire::{BadFrame, Malformed};
+use super::super::wire::{BadFrame, Held, Malformed, Unverified};
 
 /// Why a cycle gave no V_P.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -146,14 +146,17 @@ pub struct Timeout {
     /// Replies the link has seen arrive after their deadline so far (the device is there,
     /// only slow).
     pub late_replies: u64,
+    /// The request was never sent: the RTU line was held for an earlier request's late reply.
+    pub held: Option<Held>,
 }
 
 impl fmt::Display for Timeout {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let (fc, ms) = (self.fc, self.ms);
-        match self.partial {
-            None => write!(f, "no reply to FC {fc} within {ms} ms")?,
-            Some((got, want)) => write!(
+        match (self.held, self.partial) {
+            (Some(held), _) => write!(f, "FC {fc} not sent within {ms} ms: {held}")?,
+            (None, None) => write!(f, "no reply to FC {fc} within {ms} ms")?,
+            (None, Some((got, want))) => write!(
                 f,
                 "reply to FC {fc} incomplete within {ms} ms: {got} of {want} bytes"
             )?,
@@ -191,6 +194,9 @@ pub enum ReplyError {
     /// A value that does not fit its register (the set-point) or its valid range (V_P).
     #[error("{0}")]
     Value(#[from] ValueError),
+    /// An RTU reply that cannot be told from an earlier request's late reply.
+    #[error("{0}")]
+    Unverified(Unverified),
     /// The status word flags the set-point as refused.
     #[error("device flags the set-point as refused (status 0x{word:04X}, bit {bit}) after O_P {op_pct:.2} %")]
     Refused { word: u16, bit: u8, op_pct: f64 },
@@ -207,6 +213,7 @@ mod tests {
             ms: 8,
             partial: Some((5, 11)),
             late_replies: 0,
+            held: None,
         };
         assert_eq!(
             Fault::Timeout(t.clone()).to_string(),

@@ -116,6 +116,12 @@ pub struct LinkStats {
     pub attempts: u64,
     /// Replies discarded because they answered an earlier request (late replies).
     pub late_replies: u64,
+    /// RTU: bytes received that formed no frame (line noise, broken frames), dropped.
+    pub noise_bytes: u64,
+    /// RTU: frames no request was waiting for (a reply later than `late_reply_ms`).
+    pub unexpected_replies: u64,
+    /// RTU: how long an unanswered request's reply is waited for now, ms.
+    pub late_reply_ms: Option<u128>,
 }
 
 /// A Modbus positioner driven one cycle at a time (see the module documentation).
@@ -203,6 +209,10 @@ impl ModbusValve {
                 link.describe()
             );
         }
+        let late_reply = match &link {
+            Link::Rtu(l) => l.late_reply(timeout),
+            Link::Tcp(_) => Duration::ZERO,
+        };
         let (tcp_addr, budget) = match &link {
             Link::Tcp(l) => {
                 let addr = l.resolve().map_err(|reason| OpenError::Address {
@@ -213,8 +223,19 @@ impl ModbusValve {
             }
             Link::Rtu(l) => (None, Some(Budget::rtu(l, &plan, period_s))),
         };
-        let conn =
-            conn.unwrap_or_else(|| Arc::new(Mutex::new(Connection::new(link.clone(), tcp_addr))));
+        let conn = match conn {
+            Some(conn) => {
+                if let Ok(mut c) = conn.try_lock() {
+                    c.wait_late_replies(late_reply);
+                }
+                conn
+            }
+            None => Arc::new(Mutex::new(Connection::new(
+                link.clone(),
+                tcp_addr,
+                late_reply,
+            ))),
+        };
         Ok(ModbusValve {
             link,
             map,
@@ -297,7 +318,8 @@ impl ModbusValve {
         self.conn.try_lock().map_or(0, |c| c.attempts)
     }
 
-    /// Reconnects, attempts and late replies so far (on a shared bus, the bus's).
+    /// Reconnects, attempts, late replies and (RTU) line noise so far (on a shared bus, the
+    /// bus's).
     pub fn link_stats(&self) -> LinkStats {
         self.conn
             .try_lock()
@@ -305,6 +327,10 @@ impl ModbusValve {
                 reconnects: c.reconnects,
                 attempts: c.attempts,
                 late_replies: c.late_replies(),
+                noise_bytes: c.noise_bytes(),
+                unexpected_replies: c.unexpected_replies(),
+                late_reply_ms: matches!(self.link, Link::Rtu(_))
+                    .then(|| c.late_reply().as_millis()),
             })
     }
 
