@@ -194,18 +194,24 @@ fn a_set_may_end_with_a_short_file() {
     let opts = ReadOptions::default();
     let a = rotated(dir.path(), "vb-1.csv", 0.0, 100);
     // The last file of a rotated set with one row; a file with none (a restart that wrote
-    // only the header) is skipped, with a warning.
+    // only the header) or nothing at all (a crash right after a rotation) is skipped, with a
+    // warning.
     let b = rotated(dir.path(), "vb-2.csv", 10.0, 1);
     let c = rotated(dir.path(), "vb-3.csv", 10.5, 0);
-    let rec = read_all(&[a, b.clone(), c], &opts).unwrap();
+    let d = dir.path().join("vb-4.csv");
+    std::fs::write(&d, "").unwrap();
+    let rec = read_all(&[a, b.clone(), c, d], &opts).unwrap();
     assert_eq!(rec.t.len(), 101);
-    assert!(
-        rec.warnings
-            .iter()
-            .any(|w| w.ends_with("vb-3.csv: no data rows, skipped")),
-        "{:?}",
-        rec.warnings
-    );
+    for skipped in [
+        "vb-3.csv: no data rows, skipped",
+        "vb-4.csv: no data rows (empty file, not even a header), skipped",
+    ] {
+        assert!(
+            rec.warnings.iter().any(|w| w.ends_with(skipped)),
+            "{skipped}: {:?}",
+            rec.warnings
+        );
+    }
     // Alone, a one-row file is no recording.
     let e = read_all(&[b], &opts).unwrap_err().to_string();
     assert!(

@@ -6,9 +6,10 @@
 //! file are prefixed with its name. A directory stands for its `.csv` files: when it holds the
 //! daemon's logs (`vb-STAMP.csv`, `vb-NAME-STAMP.csv`), those of one valve (`--valve NAME` when
 //! there are several), and never the daemon's `health*.csv`; the files read are logged. Logs the
-//! daemon compressed (`.csv.gz`) are read as they are. A file
-//! of a set may hold a single row (the last of a rotated set often does) or none (skipped, with
-//! a warning); the set as a whole needs two rows, and holds at most [`ReadOptions::max_rows`].
+//! daemon compressed (`.csv.gz`) are read as they are. A file of a set may hold a single row
+//! (the last of a rotated set often does), or none: a file with only its header, or an empty
+//! one (a crash just after the log rotated), is skipped with a warning naming it. The set as a
+//! whole needs two rows, and holds at most [`ReadOptions::max_rows`].
 
 use std::path::{Path, PathBuf};
 
@@ -28,7 +29,12 @@ pub fn read_all(paths: &[PathBuf], opts: &ReadOptions) -> Result<Recording, Reco
         let label = f.display().to_string();
         let (rows, ws) = read_file(f, opts, if set { 0 } else { MIN_ROWS }, count)?;
         if rows.t.is_empty() {
-            warnings.push(format!("{label}: no data rows, skipped"));
+            let why = if ws.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", ws.join("; "))
+            };
+            warnings.push(format!("{label}: no data rows{why}, skipped"));
             continue;
         }
         count += rows.t.len();

@@ -9,11 +9,12 @@
 //!   one-line [`RecordingError`] naming file, line, column, what was expected and the option
 //!   that fixes it. Tolerated: a UTF-8 BOM, CRLF line ends, non-UTF-8 text in unmapped
 //!   columns; with a warning: a last line cut off by a crash, irregular sampling, values that
-//!   look like fractions instead of percent. Refused before they fill memory: a line longer
-//!   than [`MAX_LINE_BYTES`], more rows than [`MAX_ROWS`]. With options: rows with missing
-//!   values (`--skip-missing`), newest-row-first files (`--reverse`), wall-clock timestamps in
-//!   one or two columns (`--timestamps`, `t=DATE+TIME`), files without V_P (`vp=`), scaling
-//!   (`--scale`). See [`ReadOptions`].
+//!   look like fractions instead of percent, an empty file among several ([`read_all`]).
+//!   Refused before they fill memory: a line longer than [`MAX_LINE_BYTES`], more rows than
+//!   [`MAX_ROWS`]. With options: rows with missing values (`--skip-missing`),
+//!   newest-row-first files (`--reverse`), wall-clock timestamps in one or two columns
+//!   (`--timestamps`, `t=DATE+TIME`), files without V_P (`vp=`), scaling (`--scale`). See
+//!   [`ReadOptions`].
 //! - [`write()`] / [`write_columns`]: save columns with shortest round-trip number formatting, so
 //!   reading back gives the identical `f64` values.
 //! - [`gzip`]: the daemon's compressed logs (`.csv.gz`), read as they are by every reader.

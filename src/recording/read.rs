@@ -98,7 +98,7 @@ pub(super) fn read_file(
 
 /// The checked rows of one file in time order (times from its first row for timestamps, with
 /// that row's time in ns since 1970), and what was tolerated; fewer than `min_rows` rows is an
-/// error (a file of a set may be short: the set is a recording), and so are more
+/// error (a file of a set may be short, or empty: the set is a recording), and so are more
 /// than [`ReadOptions::max_rows`] with the `rows_before` of the set's files already read.
 pub(super) fn read_rows<R: Read>(
     reader: R,
@@ -119,6 +119,9 @@ pub(super) fn read_rows<R: Read>(
     let (mut csv, header) = parser(reader, label)?;
     let mut rows = Rows::default();
     rows.files.push((0, label.to_string()));
+    if header.is_empty() && min_rows == 0 {
+        return Ok((rows, vec!["empty file, not even a header".into()]));
+    }
     let mut cols = Columns::find(&header, &opts.columns, opts.timestamps).map_err(|missing| {
         RecordingError::MissingColumns {
             file: label.into(),
