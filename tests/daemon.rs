@@ -446,30 +446,13 @@ fn a_closed_stdout_loses_only_the_printed_summary() {
     assert!(stderr.contains("summary not printed on stdout"), "{stderr}");
 }
 
-/// The peak resident memory of `valve-bridge run ARGS` (in `cwd`), KiB, from wait4(2)'s
-/// accounting of that one child.
-// The child is reaped by wait4, not by `Child::wait`, which would not return its rusage.
-#[allow(clippy::zombie_processes)]
+/// The peak resident memory of `valve-bridge run ARGS` (in `cwd`), KiB.
 fn peak_rss_kib(args: &[&str], cwd: &Path) -> i64 {
-    let child = Command::new(BIN)
-        .arg("run")
-        .args(args)
-        .current_dir(cwd)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut status = 0;
-    // SAFETY: wait4 on our own child's pid, with valid pointers to a status and an rusage.
-    #[allow(unsafe_code)]
-    let usage = unsafe {
-        let mut usage: libc::rusage = std::mem::zeroed();
-        let pid = libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage);
-        assert_eq!(pid, child.id() as libc::pid_t);
-        usage
-    };
-    assert!(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0);
-    usage.ru_maxrss
+    let mut cmd = Command::new(BIN);
+    cmd.arg("run").args(args).current_dir(cwd);
+    let run = common::run_watched(&mut cmd, i64::MAX, Duration::from_secs(3600));
+    assert_eq!(run.code, Some(0), "{}", run.stderr);
+    run.peak_kib
 }
 
 #[test]

@@ -103,14 +103,12 @@ fn a_directory_of_recordings_is_ranked_with_a_report_per_valve() {
     );
 }
 
-#[test]
-fn a_wide_export_is_split_by_the_mapping_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = tempfile::tempdir().unwrap();
-    // Two valves side by side, 40 s each, in one historian export.
+/// Two valves side by side, 40 s each, in one historian export: the healthy valve's columns
+/// `A_OP`, `A_PV` and the slow-closing one's `B_OP`, `B_PV`, each prefix as given.
+fn wide_export(path: &Path, a_prefix: &str, b_prefix: &str) {
     let read = |f: &str| std::fs::read_to_string(case(f)).unwrap();
     let (a, b) = (read("pub_clean_rs.csv"), read("pub_asym_rs.csv"));
-    let mut wide = String::from("time,FV1_OP,FV1_PV,FV2_OP,FV2_PV\n");
+    let mut wide = format!("time,{a_prefix}_OP,{a_prefix}_PV,{b_prefix}_OP,{b_prefix}_PV\n");
     for (la, lb) in a.lines().zip(b.lines()).skip(1).take(4000) {
         let (ca, cb): (Vec<&str>, Vec<&str>) = (la.split(',').collect(), lb.split(',').collect());
         wide.push_str(&format!(
@@ -118,7 +116,14 @@ fn a_wide_export_is_split_by_the_mapping_file() {
             ca[0], ca[1], ca[2], cb[1], cb[2]
         ));
     }
-    std::fs::write(dir.path().join("export.csv"), wide).unwrap();
+    std::fs::write(path, wide).unwrap();
+}
+
+#[test]
+fn a_wide_export_is_split_by_the_mapping_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    wide_export(&dir.path().join("export.csv"), "FV1", "FV2");
     let map = out.path().join("valves.toml");
     std::fs::write(
         &map,
@@ -149,6 +154,101 @@ fn a_wide_export_is_split_by_the_mapping_file() {
         (s["diagnosed"].as_u64(), s["failed"].as_u64()),
         (Some(2), Some(1))
     );
+}
+
+#[test]
+fn tags_that_collide_or_name_paths_each_get_a_folder_and_a_link_of_their_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    wide_export(&dir.path().join("export.csv"), "A", "B");
+    // The slow-closing valve (B) under tags that were once one folder with the healthy one's
+    // (A), or the output directory itself, or its parent.
+    let tags = [
+        ("FV 101", "A"),
+        ("FV/101", "B"),
+        ("fv 101", "A"),
+        ("..", "B"),
+        (".", "A"),
+        ("", "B"),
+        ("/etc", "A"),
+    ];
+    let mut map = String::from("time = \"time\"\n[valves]\n");
+    for (tag, c) in tags {
+        map += &format!("{tag:?} = {{ op = \"{c}_OP\", vp = \"{c}_PV\" }}\n");
+    }
+    let map_file = out.path().join("valves.toml");
+    std::fs::write(&map_file, map).unwrap();
+    let fleet = out.path().join("fleet");
+    run(&[
+        "fleet",
+        dir.path().to_str().unwrap(),
+        "--out",
+        fleet.to_str().unwrap(),
+        "--valves",
+        map_file.to_str().unwrap(),
+    ]);
+
+    let s = json(&fleet.join("summary.json"));
+    let valves = s["valves"].as_array().unwrap();
+    assert_eq!(s["diagnosed"].as_u64(), Some(7), "{s}");
+    let page = std::fs::read_to_string(fleet.join("index.html")).unwrap();
+    let mut folders = std::collections::BTreeSet::new();
+    let mut diagnoses = std::collections::BTreeMap::new();
+    for (tag, c) in tags {
+        let v = valves
+            .iter()
+            .find(|v| {
+                v["source"]
+                    .as_str()
+                    .unwrap()
+                    .ends_with(&format!("export.csv [{tag}]"))
+            })
+            .unwrap();
+        let (name, report) = (v["valve"].as_str().unwrap(), v["report"].as_str().unwrap());
+        // One folder of `valves/`, named like no other but for case.
+        let folder = report
+            .strip_prefix("valves/")
+            .and_then(|r| r.strip_suffix("/report.html"))
+            .unwrap();
+        assert_eq!(folder, name);
+        assert!(
+            !folder.contains('/') && !folder.trim_matches('.').is_empty(),
+            "{folder}"
+        );
+        assert!(folders.insert(folder.to_lowercase()), "{folder} twice");
+        // The page links the valve to the report of its own tag, which shows its own data.
+        assert!(
+            page.contains(&format!("<a href=\"{report}\">{name}</a>")),
+            "{name}"
+        );
+        let html = std::fs::read_to_string(fleet.join(report)).unwrap();
+        let source = v["source"].as_str().unwrap();
+        assert!(
+            html.contains(&format!("<h1>Diagnosis: {source}</h1>")),
+            "{tag}"
+        );
+        let d = json(&fleet.join(format!("valves/{folder}/diagnosis.json")));
+        let first = diagnoses.entry(c).or_insert_with(|| d.clone());
+        assert_eq!(
+            *first, d,
+            "{tag}: the diagnosis of the columns {c}_OP, {c}_PV"
+        );
+    }
+    assert_ne!(diagnoses["A"], diagnoses["B"]);
+    // Nothing was written beside the fleet's own files, or above them.
+    let mut top: Vec<String> = std::fs::read_dir(&fleet)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    top.sort();
+    assert_eq!(top, ["index.html", "summary.csv", "summary.json", "valves"]);
+    assert_eq!(std::fs::read_dir(fleet.join("valves")).unwrap().count(), 7);
+    let mut beside: Vec<String> = std::fs::read_dir(out.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    beside.sort();
+    assert_eq!(beside, ["fleet", "valves.toml"]);
 }
 
 #[test]

@@ -1,13 +1,15 @@
 //! A log directory reads back as written: a run of exactly `rotate_after_s` leaves no file that
 //! holds only the stop row, and a directory with several valves' logs and their `health-*.csv`
 //! is read one valve at a time (`--valve`), the health files left out; rotated files are
-//! gzipped and read as they are.
+//! gzipped and read as they are; the empty and header-only files a crash just after a rotation
+//! leaves are skipped, each named in a warning.
 
 use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Output};
 
 use valve_bridge::recording::gzip;
+use valve_bridge::recording::log_format::HEADER;
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 
@@ -125,4 +127,67 @@ fn a_log_directory_reads_back_one_valve_at_a_time() {
     );
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(json.is_object(), "{json}");
+}
+
+#[test]
+fn the_empty_and_header_only_files_of_a_crash_are_skipped_with_a_warning_naming_each() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    let logs_arg = logs.to_str().unwrap();
+    std::fs::write(
+        dir.path().join("one.toml"),
+        "[log]\nrotate_after_s = 10.0\n[source]\nkind = \"random-steps\"\n\
+         [source.random-steps]\nhold_min_s = 1.0\nhold_max_s = 4.0\nseed = 5\n",
+    )
+    .unwrap();
+    let run = valve_bridge(
+        &[
+            "run",
+            "--config",
+            "one.toml",
+            "--as-fast-as-possible",
+            "--duration",
+            "20",
+            "--log-dir",
+            logs_arg,
+        ],
+        dir.path(),
+    );
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    // What a kill -9 right after rotations leaves: the newest files empty, or with only their
+    // header.
+    let empty = logs.join("vb-29991231T235958Z.csv");
+    let header_only = logs.join("vb-29991231T235959Z.csv");
+    std::fs::write(&empty, "").unwrap();
+    std::fs::write(&header_only, format!("{}\n", HEADER.join(","))).unwrap();
+    let sim = dir.path().join("sim.csv");
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/models/pincart2.toml");
+    for args in [
+        vec!["steps", logs_arg],
+        vec![
+            "simulate",
+            "--model",
+            model.to_str().unwrap(),
+            "--input",
+            logs_arg,
+            "--out",
+            sim.to_str().unwrap(),
+        ],
+    ] {
+        let out = valve_bridge(&args, dir.path());
+        let stderr = text(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {stderr}");
+        for warning in [
+            format!(
+                "{}: no data rows (empty file, not even a header), skipped",
+                empty.display()
+            ),
+            format!("{}: no data rows, skipped", header_only.display()),
+        ] {
+            assert!(stderr.contains(&warning), "{args:?}: {warning}: {stderr}");
+        }
+    }
+    // The rows of the run are all there: 20 s at 100 Hz and the stop row.
+    let rows = std::fs::read_to_string(&sim).unwrap().lines().count() - 1;
+    assert_eq!(rows, 2001);
 }

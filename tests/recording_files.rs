@@ -2,9 +2,13 @@
 //! names) and two industrial loop files (BOM, newest row first, date and time columns, `NULL`
 //! cells, no valve position). Each is loaded with the right options, and the one-line error it
 //! gives without them is checked. The files and their provenance are in `tests/data/real/`.
+//! Rotated logs join; gzip files read as gzip(1) reads them; the row limit holds for a set.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use flate2::write::GzEncoder;
+use flate2::Compression;
 use valve_bridge::recording::{read, read_all, ReadOptions, Recording};
 
 fn data(rel: &str) -> PathBuf {
@@ -190,22 +194,115 @@ fn a_set_may_end_with_a_short_file() {
     let opts = ReadOptions::default();
     let a = rotated(dir.path(), "vb-1.csv", 0.0, 100);
     // The last file of a rotated set with one row; a file with none (a restart that wrote
-    // only the header) is skipped, with a warning.
+    // only the header) or nothing at all (a crash right after a rotation) is skipped, with a
+    // warning.
     let b = rotated(dir.path(), "vb-2.csv", 10.0, 1);
     let c = rotated(dir.path(), "vb-3.csv", 10.5, 0);
-    let rec = read_all(&[a, b.clone(), c], &opts).unwrap();
+    let d = dir.path().join("vb-4.csv");
+    std::fs::write(&d, "").unwrap();
+    let rec = read_all(&[a, b.clone(), c, d], &opts).unwrap();
     assert_eq!(rec.t.len(), 101);
-    assert!(
-        rec.warnings
-            .iter()
-            .any(|w| w.ends_with("vb-3.csv: no data rows, skipped")),
-        "{:?}",
-        rec.warnings
-    );
+    for skipped in [
+        "vb-3.csv: no data rows, skipped",
+        "vb-4.csv: no data rows (empty file, not even a header), skipped",
+    ] {
+        assert!(
+            rec.warnings.iter().any(|w| w.ends_with(skipped)),
+            "{skipped}: {:?}",
+            rec.warnings
+        );
+    }
     // Alone, a one-row file is no recording.
     let e = read_all(&[b], &opts).unwrap_err().to_string();
     assert!(
         e.ends_with("1 usable data row(s); a recording needs at least 2"),
         "{e}"
+    );
+}
+
+/// `text` as one gzip member.
+fn member(text: &str) -> Vec<u8> {
+    let mut e = GzEncoder::new(Vec::new(), Compression::default());
+    e.write_all(text.as_bytes()).unwrap();
+    e.finish().unwrap()
+}
+
+#[test]
+fn a_csv_gz_reads_as_gzip_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = ReadOptions::default();
+    let plain = rotated(dir.path(), "plain.csv", 0.0, 100);
+    let text = std::fs::read_to_string(&plain).unwrap();
+    let want = read(&plain, &opts).unwrap();
+    let cut = text.match_indices('\n').nth(50).unwrap().0 + 1;
+    let gz = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    // Two members, as `cat a.gz b.gz` makes them: one recording.
+    let two = gz(
+        "two.csv.gz",
+        &[member(&text[..cut]), member(&text[cut..])].concat(),
+    );
+    let rec = read(&two, &opts).unwrap();
+    assert_eq!((&rec.t, &rec.op, &rec.vp), (&want.t, &want.op, &want.vp));
+    assert!(rec.warnings.is_empty(), "{:?}", rec.warnings);
+    // The zero padding a crash can leave after the data, and garbage: ignored, with a warning.
+    let padded = gz("padded.csv.gz", &[member(&text), vec![0; 8192]].concat());
+    let rec = read(&padded, &opts).unwrap();
+    assert_eq!(rec.t, want.t);
+    assert_eq!(
+        rec.warnings,
+        ["8192 zero bytes after the last gzip member ignored (padding; gzip(1) ignores it too)"]
+    );
+    let garbage = gz(
+        "garbage.csv.gz",
+        &[member(&text), b"\0\0\0garbage\n".to_vec()].concat(),
+    );
+    let rec = read(&garbage, &opts).unwrap();
+    assert_eq!(rec.t, want.t);
+    assert!(
+        rec.warnings[0].contains("trailing garbage"),
+        "{:?}",
+        rec.warnings
+    );
+    // In a set, the warning names the file.
+    let later = rotated(dir.path(), "later.csv", 20.0, 10);
+    let rec = read_all(&[padded.clone(), later], &opts).unwrap();
+    assert!(
+        rec.warnings
+            .iter()
+            .any(|w| w.starts_with(&format!("{}: 8192 zero bytes", padded.display()))),
+        "{:?}",
+        rec.warnings
+    );
+}
+
+#[test]
+fn the_row_limit_counts_every_file_of_a_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = rotated(dir.path(), "vb-1.csv", 0.0, 100);
+    let b = rotated(dir.path(), "vb-2.csv", 20.0, 100);
+    let limit = |max_rows| ReadOptions {
+        max_rows,
+        ..ReadOptions::default()
+    };
+    assert_eq!(
+        read_all(&[a.clone(), b.clone()], &limit(200))
+            .unwrap()
+            .len(),
+        200
+    );
+    let e = read_all(&[a, b.clone()], &limit(150))
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        format!(
+            "{}:52: more than 150 rows on the time grid (0.000416667 h at 100 Hz), the most a \
+             recording holds: cut the file, or read fewer files",
+            b.display()
+        )
     );
 }

@@ -122,7 +122,7 @@ fn read(
         skip_missing,
         reverse_sorted: reverse,
         scale,
-        valve: None,
+        ..ReadOptions::default()
     };
     let rec = py
         .allow_threads(|| recording::read(&path, &opts))

@@ -41,6 +41,7 @@ impl RecordingArgs {
             timestamps: self.timestamps,
             scale: self.scale,
             valve: self.valve.clone(),
+            ..ReadOptions::default()
         })
     }
 }

@@ -1,8 +1,11 @@
 //! Which valves a fleet directory holds: [`jobs`] lists every `*.csv` file (one valve each,
 //! named after the file), or, with a [`ValveMap`] for wide historian exports, every valve tag
-//! of the map in every file.
+//! of the map in every file. Each valve's name is its folder of the fleet's report: made safe
+//! (no path, never `.` or `..`) and unique ignoring case, so no two valves share a folder.
+//!
+//! Not here: reading the files (a file that is no recording is a valve that fails later).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -50,7 +53,8 @@ impl ValveMap {
 /// One valve to diagnose: a file, and the columns of its valve when the file holds several.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Job {
-    /// The valve's name in the fleet (file stem, tag, or `stem.tag`), safe as a directory name.
+    /// The valve's name in the fleet (file stem, tag, or `stem.tag`), safe as a directory name
+    /// and, ignoring case, unique in the fleet ([`jobs`]).
     pub valve: String,
     /// The recording file.
     pub path: PathBuf,
@@ -107,9 +111,12 @@ pub enum FleetError {
     Map(#[from] TomlError),
 }
 
-/// A name safe as one directory: letters, digits, `.`, `-` and `_` kept, anything else `_`.
-fn safe(name: &str) -> String {
-    name.chars()
+/// A name safe as one directory: letters, digits, `.`, `-` and `_` kept, anything else `_`
+/// (`FV/101` and `/etc` name no path); a name of dots only (`.`, `..`) or empty gets a leading
+/// `_`, so that it never names the directory it is in, or that one's parent.
+pub(super) fn safe(name: &str) -> String {
+    let kept: String = name
+        .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || "._-".contains(c) {
                 c
@@ -117,11 +124,40 @@ fn safe(name: &str) -> String {
                 '_'
             }
         })
+        .collect();
+    if kept.chars().all(|c| c == '.') {
+        format!("_{kept}")
+    } else {
+        kept
+    }
+}
+
+/// `names` made unique ignoring case, as a case-insensitive file system sees them (`FV 101`,
+/// `FV/101` and `fv 101` are all `FV_101` but for case): the first of each keeps its name,
+/// each later one gets the first free `-2`, `-3`, ...
+fn unique(names: Vec<String>) -> Vec<String> {
+    let mut taken: HashSet<String> = names.iter().map(|n| n.to_ascii_lowercase()).collect();
+    let mut kept = HashSet::new();
+    names
+        .into_iter()
+        .map(|name| {
+            if kept.insert(name.to_ascii_lowercase()) {
+                return name;
+            }
+            let mut k = 2;
+            while taken.contains(&format!("{name}-{k}").to_ascii_lowercase()) {
+                k += 1;
+            }
+            let free = format!("{name}-{k}");
+            taken.insert(free.to_ascii_lowercase());
+            free
+        })
         .collect()
 }
 
-/// The valves of `dir`: every `*.csv` (or `*.csv.gz`) file (sorted by name) as one valve, or with `map` every
-/// tag of the map in every file (named by the tag, or `stem.tag` when there are several files).
+/// The valves of `dir`: every `*.csv` (or `*.csv.gz`) file (sorted by name) as one valve, or
+/// with `map` every tag of the map in every file (named by the tag, or `stem.tag` when there
+/// are several files). Names are made [`safe`] and unique, ignoring case.
 pub fn jobs(dir: &Path, map: Option<&ValveMap>) -> Result<Vec<Job>, FleetError> {
     let list = |source| FleetError::List {
         dir: dir.to_path_buf(),
@@ -141,10 +177,10 @@ pub fn jobs(dir: &Path, map: Option<&ValveMap>) -> Result<Vec<Job>, FleetError> 
     files.sort();
     let stem = |p: &Path| {
         let name = p.file_name().unwrap_or_default().to_string_lossy();
-        safe(crate::recording::gzip::stem(&name))
+        crate::recording::gzip::stem(&name).to_string()
     };
-    let Some(map) = map else {
-        return Ok(files
+    let mut jobs: Vec<Job> = match map {
+        None => files
             .iter()
             .map(|p| Job {
                 valve: stem(p),
@@ -152,28 +188,35 @@ pub fn jobs(dir: &Path, map: Option<&ValveMap>) -> Result<Vec<Job>, FleetError> 
                 tag: None,
                 columns: None,
             })
-            .collect());
+            .collect(),
+        Some(map) => {
+            let several = files.len() > 1;
+            files
+                .iter()
+                .flat_map(|p| {
+                    map.valves.iter().map(move |(tag, c)| Job {
+                        valve: if several {
+                            format!("{}.{tag}", stem(p))
+                        } else {
+                            tag.clone()
+                        },
+                        path: p.clone(),
+                        tag: Some(tag.clone()),
+                        columns: Some(Columns {
+                            t: map.time.clone(),
+                            op: c.op.clone(),
+                            vp: c.vp.clone(),
+                        }),
+                    })
+                })
+                .collect()
+        }
     };
-    let several = files.len() > 1;
-    Ok(files
-        .iter()
-        .flat_map(|p| {
-            map.valves.iter().map(move |(tag, c)| Job {
-                valve: if several {
-                    format!("{}.{}", stem(p), safe(tag))
-                } else {
-                    safe(tag)
-                },
-                path: p.clone(),
-                tag: Some(tag.clone()),
-                columns: Some(Columns {
-                    t: map.time.clone(),
-                    op: c.op.clone(),
-                    vp: c.vp.clone(),
-                }),
-            })
-        })
-        .collect())
+    let names = unique(jobs.iter().map(|j| safe(&j.valve)).collect());
+    for (job, name) in jobs.iter_mut().zip(names) {
+        job.valve = name;
+    }
+    Ok(jobs)
 }
 
 #[cfg(test)]
@@ -208,6 +251,41 @@ mod tests {
         let o = j[1].read_options(&ReadOptions::default());
         assert!(o.timestamps);
         assert_eq!(o.columns.op, "F1");
+    }
+
+    #[test]
+    fn tags_that_collide_or_name_paths_get_unique_safe_names() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("export.csv"), "t\n").unwrap();
+        let map_file = dir.path().join("map.toml");
+        let tags = [
+            "FV 101", "FV/101", "fv 101", "FV_101-2", "..", ".", "", "/etc",
+        ];
+        let mut toml = String::from("time = \"t\"\n[valves]\n");
+        for t in tags {
+            toml += &format!("{t:?} = {{ op = \"o\", vp = \"v\" }}\n");
+        }
+        std::fs::write(&map_file, toml).unwrap();
+        let map = ValveMap::load(&map_file).unwrap();
+        let j = jobs(dir.path(), Some(&map)).unwrap();
+        let named: Vec<(&str, &str)> = j
+            .iter()
+            .map(|j| (j.tag.as_deref().unwrap(), j.valve.as_str()))
+            .collect();
+        // In the map's order of tags; the first of each name keeps it.
+        assert_eq!(
+            named,
+            [
+                ("", "_"),
+                (".", "_."),
+                ("..", "_.."),
+                ("/etc", "_etc"),
+                ("FV 101", "FV_101"),
+                ("FV/101", "FV_101-3"),
+                ("FV_101-2", "FV_101-2"),
+                ("fv 101", "fv_101-4"),
+            ]
+        );
     }
 
     #[test]

@@ -35,8 +35,17 @@ pub fn valve_dir(valve: &str) -> String {
 }
 
 /// Reads, diagnoses and summarises one valve; with `out`, writes its report, final model and
-/// diagnosis JSON under `out/valves/<valve>/`. Never fails: a problem is the summary's `error`.
+/// diagnosis JSON under `out/valves/<valve>/` (a valve name that is no safe folder name, as a
+/// job built by hand may hold, is refused). Never fails: a problem is the summary's `error`.
 pub fn diagnose_valve(job: &Job, read: &ReadOptions, out: Option<&Path>) -> ValveSummary {
+    if out.is_some() && jobs::safe(&job.valve) != job.valve {
+        let e = format!(
+            "valve name `{}` cannot name its report's folder: use letters, digits, `.`, `-` and \
+             `_`, and not `.` or `..` alone (the fleet's jobs are named so)",
+            job.valve
+        );
+        return ValveSummary::failed(job, e);
+    }
     let opts = job.read_options(read);
     let rec = match recording::read(&job.path, &opts) {
         Ok(r) => r,
@@ -89,4 +98,33 @@ pub fn write(out: &Path, fleet: &Fleet) -> Result<Vec<PathBuf>, WriteError> {
             ("index.html", report::fleet::html(fleet)),
         ],
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_job_whose_name_is_no_safe_folder_writes_nothing() {
+        let out = tempfile::tempdir().unwrap();
+        let fleet = out.path().join("fleet");
+        for valve in ["..", "a/../..", "/etc", ""] {
+            let job = Job {
+                valve: valve.into(),
+                path: out.path().join("missing.csv"),
+                tag: None,
+                columns: None,
+            };
+            let s = diagnose_valve(&job, &ReadOptions::default(), Some(&fleet));
+            let e = s.error.unwrap_or_default();
+            assert!(
+                e.starts_with(&format!(
+                    "valve name `{valve}` cannot name its report's folder"
+                )),
+                "{e}"
+            );
+            assert!(s.report.is_none());
+        }
+        assert!(!fleet.exists());
+    }
 }

@@ -42,6 +42,29 @@ pub enum RecordingError {
         /// The header as found.
         found: Vec<String>,
     },
+    /// A line (or a run of blank lines) longer than
+    /// [`MAX_LINE_BYTES`](super::MAX_LINE_BYTES): a damaged file, a decompression bomb,
+    /// or a device that never ends, refused before it fills memory.
+    #[error("{file}:{line}: no line ends within {limit} bytes (1 MiB, the longest line a recording may have); the file is damaged or no recording (a decompression bomb, a device such as /dev/zero)")]
+    LineTooLong {
+        /// Path or label.
+        file: String,
+        /// The line where the long one starts.
+        line: u64,
+        /// The limit, bytes.
+        limit: usize,
+    },
+    /// More rows than a recording holds ([`MAX_ROWS`](super::MAX_ROWS), or fewer for a
+    /// replay), as read or with its gaps filled.
+    #[error("{file}:{line}: more than {limit} rows on the time grid ({} h at 100 Hz), the most a recording holds: cut the file, or read fewer files", crate::human::num(*limit as f64 / 360_000.0))]
+    TooManyRows {
+        /// Path or label.
+        file: String,
+        /// The line read, or after the gap filled, when the rows passed the limit.
+        line: u64,
+        /// The limit, rows.
+        limit: usize,
+    },
     /// A row with fewer cells than the header, before the last line.
     #[error("{file}:{line}: {cells} cells but the header has {expected}; only a cut-off last line is tolerated")]
     ShortRow {

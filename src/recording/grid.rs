@@ -78,15 +78,21 @@ impl Rows {
         self.status.append(&mut other.status);
     }
 
-    /// `file:line` of row `i`.
-    fn place(&self, i: usize) -> String {
+    /// The file and line of row `i`.
+    fn file_line(&self, i: usize) -> (&str, u64) {
         let file = self
             .files
             .iter()
             .rev()
             .find(|(start, _)| *start <= i)
             .map_or("in-memory", |(_, f)| f.as_str());
-        format!("{file}:{}", self.line.get(i).copied().unwrap_or(0))
+        (file, self.line.get(i).copied().unwrap_or(0))
+    }
+
+    /// `file:line` of row `i`.
+    fn place(&self, i: usize) -> String {
+        let (file, line) = self.file_line(i);
+        format!("{file}:{line}")
     }
 
     /// Reverses a newest-first file when asked, then checks that time increases strictly.
@@ -117,9 +123,15 @@ impl Rows {
         }
     }
 
-    /// The recording: gaps filled or kept as restarts, with the warnings (logged too). The rows
-    /// are in strictly increasing time, at least two.
-    pub(super) fn into_recording(self, source: String, mut warnings: Vec<String>) -> Recording {
+    /// The recording: gaps filled or kept as restarts, with the warnings (logged too); an error
+    /// when filling the gaps would make more than `max_rows` rows. The rows are in strictly
+    /// increasing time, at least two.
+    pub(super) fn into_recording(
+        self,
+        source: String,
+        mut warnings: Vec<String>,
+        max_rows: usize,
+    ) -> Result<Recording, RecordingError> {
         let (period, irregular) = sampling(&self.t);
         warnings.extend(irregular);
         if let Some(first) = self.vp.iter().position(|v| v.is_nan()) {
@@ -140,6 +152,14 @@ impl Rows {
                     let missing = ((d / period).round() as usize).saturating_sub(1).max(1);
                     if missing <= FILLED_ROWS_ANY || (missing <= FILLED_ROWS_MAX && d <= LONG_GAP_S)
                     {
+                        if out.t.len() + missing + (self.t.len() - i) > max_rows {
+                            let (file, line) = self.file_line(i);
+                            return Err(RecordingError::TooManyRows {
+                                file: file.into(),
+                                line,
+                                limit: max_rows,
+                            });
+                        }
                         out.fill(self.t[i - 1], d, missing, self.op[i - 1]);
                         filled.0 += 1;
                         filled.1 += missing;
@@ -172,7 +192,7 @@ impl Rows {
                 long.len() - NAMED_GAPS
             ));
         }
-        Recording::assemble(out, period, source, warnings)
+        Ok(Recording::assemble(out, period, source, warnings))
     }
 }
 

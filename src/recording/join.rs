@@ -6,16 +6,16 @@
 //! file are prefixed with its name. A directory stands for its `.csv` files: when it holds the
 //! daemon's logs (`vb-STAMP.csv`, `vb-NAME-STAMP.csv`), those of one valve (`--valve NAME` when
 //! there are several), and never the daemon's `health*.csv`; the files read are logged. Logs the
-//! daemon compressed (`.csv.gz`) are read as they are. A file
-//! of a set may
-//! hold a single row (the last of a rotated set often does) or none (skipped, with a warning);
-//! the set as a whole needs two.
+//! daemon compressed (`.csv.gz`) are read as they are. A file of a set may hold a single row
+//! (the last of a rotated set often does), or none: a file with only its header, or an empty
+//! one (a crash just after the log rotated), is skipped with a warning naming it. The set as a
+//! whole needs two rows, and holds at most [`ReadOptions::max_rows`].
 
 use std::path::{Path, PathBuf};
 
 use super::grid::Rows;
 use super::gzip;
-use super::read::{read_rows, MIN_ROWS};
+use super::read::{read_file, MIN_ROWS};
 use super::{ReadOptions, Recording, RecordingError};
 
 /// Reads `paths` (files, or directories of `.csv` files) as one recording in time order.
@@ -24,18 +24,20 @@ pub fn read_all(paths: &[PathBuf], opts: &ReadOptions) -> Result<Recording, Reco
     let set = files.len() > 1;
     let mut parts = Vec::with_capacity(files.len());
     let mut warnings = Vec::new();
+    let mut count = 0;
     for f in &files {
         let label = f.display().to_string();
-        let file = super::gzip::open(f).map_err(|source| RecordingError::Io {
-            file: label.clone(),
-            action: "cannot read",
-            source,
-        })?;
-        let (rows, ws) = read_rows(file, &label, opts, if set { 0 } else { MIN_ROWS })?;
+        let (rows, ws) = read_file(f, opts, if set { 0 } else { MIN_ROWS }, count)?;
         if rows.t.is_empty() {
-            warnings.push(format!("{label}: no data rows, skipped"));
+            let why = if ws.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", ws.join("; "))
+            };
+            warnings.push(format!("{label}: no data rows{why}, skipped"));
             continue;
         }
+        count += rows.t.len();
         parts.push((label, rows, ws));
     }
     let rows = join(parts, set, &mut warnings)?;
@@ -52,7 +54,7 @@ pub fn read_all(paths: &[PathBuf], opts: &ReadOptions) -> Result<Recording, Reco
             dropped: 0,
         });
     }
-    Ok(rows.into_recording(source, warnings))
+    rows.into_recording(source, warnings, opts.max_rows)
 }
 
 /// The files `paths` stand for: the path itself, or a directory's recordings by name (see the

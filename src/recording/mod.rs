@@ -9,10 +9,12 @@
 //!   one-line [`RecordingError`] naming file, line, column, what was expected and the option
 //!   that fixes it. Tolerated: a UTF-8 BOM, CRLF line ends, non-UTF-8 text in unmapped
 //!   columns; with a warning: a last line cut off by a crash, irregular sampling, values that
-//!   look like fractions instead of percent. With options: rows
-//!   with missing values (`--skip-missing`), newest-row-first files (`--reverse`), wall-clock
-//!   timestamps in one or two columns (`--timestamps`, `t=DATE+TIME`), files without V_P
-//!   (`vp=`), scaling (`--scale`). See [`ReadOptions`].
+//!   look like fractions instead of percent, an empty file among several ([`read_all`]).
+//!   Refused before they fill memory: a line longer than [`MAX_LINE_BYTES`], more rows than
+//!   [`MAX_ROWS`]. With options: rows with missing values (`--skip-missing`),
+//!   newest-row-first files (`--reverse`), wall-clock timestamps in one or two columns
+//!   (`--timestamps`, `t=DATE+TIME`), files without V_P (`vp=`), scaling (`--scale`). See
+//!   [`ReadOptions`].
 //! - [`write()`] / [`write_columns`]: save columns with shortest round-trip number formatting, so
 //!   reading back gives the identical `f64` values.
 //! - [`gzip`]: the daemon's compressed logs (`.csv.gz`), read as they are by every reader.
@@ -28,6 +30,7 @@ mod error;
 pub mod grid;
 pub mod gzip;
 mod join;
+mod limits;
 pub mod log_format;
 mod read;
 mod resample;
@@ -36,6 +39,7 @@ mod write;
 pub use columns::{ColumnMap, ColumnMapError};
 pub use error::RecordingError;
 pub use join::read_all;
+pub use limits::{MAX_LINE_BYTES, MAX_ROWS};
 pub use read::{read, read_from, ReadOptions};
 pub use resample::resample_zoh;
 pub use write::{write, write_columns};
@@ -167,7 +171,7 @@ impl Recording {
             files: Vec::new(),
             t_ref_ns: None,
         };
-        Ok(rows.into_recording("in-memory".into(), Vec::new()))
+        rows.into_recording("in-memory".into(), Vec::new(), MAX_ROWS)
     }
 
     /// Number of samples.

@@ -1,17 +1,20 @@
 //! Reading recording files: [`read`], [`read_from`] and their [`ReadOptions`].
 //!
-//! The whole input is read into memory (recordings are a few MB), a UTF-8 BOM is skipped, and
-//! the CSV is parsed with surrounding whitespace trimmed. Only the mapped columns are parsed;
-//! the others may hold anything. A problem on the last line is forgiven when that line looks
-//! cut off (fewer cells than the header, or no trailing newline); a cut inside the last cell
-//! that still leaves a valid number cannot be told from a complete row.
+//! The input is parsed as it is read (only the rows are kept), a UTF-8 BOM is skipped, and the
+//! CSV is parsed with surrounding whitespace trimmed; a line longer than
+//! [`MAX_LINE_BYTES`](super::MAX_LINE_BYTES) or more rows than [`ReadOptions::max_rows`] stop
+//! the reading with an error. Only the mapped columns are parsed; the others may hold anything.
+//! A problem on the last line is forgiven when that line looks cut off (fewer cells than the
+//! header, or no trailing newline); a cut inside the last cell that still leaves a valid number
+//! cannot be told from a complete row.
 
-use std::io::Read;
+use std::io::{self, Read};
 use std::path::Path;
 
 use super::cells::{Columns, Problem};
 use super::grid::Rows;
-use super::{ColumnMap, Recording, RecordingError};
+use super::limits::{Capped, MAX_LINE_BYTES, MAX_ROWS, READ_AHEAD};
+use super::{gzip, ColumnMap, Recording, RecordingError};
 
 /// How to read a recording file. Each field matches the command-line flag named in the errors.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,6 +38,10 @@ pub struct ReadOptions {
     /// Of a directory holding the daemon logs of several valves, the valve whose logs to read
     /// (`--valve`, its `[[valve]] name`).
     pub valve: Option<String>,
+    /// Most rows the recording holds, of all its files together and with its gaps filled
+    /// ([`MAX_ROWS`] by default; the `replay` source asks for fewer); more is an error naming
+    /// the limit and the file.
+    pub max_rows: usize,
 }
 
 impl Default for ReadOptions {
@@ -46,19 +53,15 @@ impl Default for ReadOptions {
             timestamps: false,
             scale: 1.0,
             valve: None,
+            max_rows: MAX_ROWS,
         }
     }
 }
 
 /// Reads and checks the recording at `path`.
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<Recording, RecordingError> {
-    let label = path.display().to_string();
-    let file = super::gzip::open(path).map_err(|source| RecordingError::Io {
-        file: label.clone(),
-        action: "cannot read",
-        source,
-    })?;
-    read_from(file, &label, opts)
+    let (rows, warnings) = read_file(path, opts, MIN_ROWS, 0)?;
+    rows.into_recording(path.display().to_string(), warnings, opts.max_rows)
 }
 
 /// Reads and checks a recording from any reader; `label` names it in errors and in
@@ -68,21 +71,41 @@ pub fn read_from<R: Read>(
     label: &str,
     opts: &ReadOptions,
 ) -> Result<Recording, RecordingError> {
-    let (rows, warnings) = read_rows(reader, label, opts, MIN_ROWS)?;
-    Ok(rows.into_recording(label.into(), warnings))
+    let (rows, warnings) = read_rows(reader, label, opts, MIN_ROWS, 0)?;
+    rows.into_recording(label.into(), warnings, opts.max_rows)
 }
 
 /// The fewest rows a recording has.
 pub(super) const MIN_ROWS: usize = 2;
 
+/// [`read_rows`] of the file at `path`, gzip or not, with what the gzip reader tolerated.
+pub(super) fn read_file(
+    path: &Path,
+    opts: &ReadOptions,
+    min_rows: usize,
+    rows_before: usize,
+) -> Result<(Rows, Vec<String>), RecordingError> {
+    let label = path.display().to_string();
+    let mut input = gzip::open(path).map_err(|source| RecordingError::Io {
+        file: label.clone(),
+        action: "cannot read",
+        source,
+    })?;
+    let (rows, mut warnings) = read_rows(&mut input, &label, opts, min_rows, rows_before)?;
+    warnings.extend(input.warning());
+    Ok((rows, warnings))
+}
+
 /// The checked rows of one file in time order (times from its first row for timestamps, with
 /// that row's time in ns since 1970), and what was tolerated; fewer than `min_rows` rows is an
-/// error (a file of a set may be short: the set is a recording).
+/// error (a file of a set may be short, or empty: the set is a recording), and so are more
+/// than [`ReadOptions::max_rows`] with the `rows_before` of the set's files already read.
 pub(super) fn read_rows<R: Read>(
-    mut reader: R,
+    reader: R,
     label: &str,
     opts: &ReadOptions,
     min_rows: usize,
+    rows_before: usize,
 ) -> Result<(Rows, Vec<String>), RecordingError> {
     if !(opts.scale.is_finite() && opts.scale != 0.0 && opts.scale.abs() <= MAX_SCALE) {
         return Err(RecordingError::Invalid {
@@ -93,33 +116,12 @@ pub(super) fn read_rows<R: Read>(
             ),
         });
     }
-    let mut bytes = Vec::new();
-    reader
-        .read_to_end(&mut bytes)
-        .map_err(|source| RecordingError::Io {
-            file: label.into(),
-            action: "cannot read",
-            source,
-        })?;
-    let body = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
-    let ends_with_newline = matches!(body.last(), Some(b'\n' | b'\r'));
-    let mut csv = csv::ReaderBuilder::new()
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(body);
-    let csv_error = |e: csv::Error| RecordingError::Csv {
-        file: label.into(),
-        line: e.position().map_or(1, |p| p.line()),
-        message: e.to_string(),
-    };
-    // Bytes, not strings: only the mapped cells need to be text, so a Latin-1 unit in another
-    // column's name or cells does not stop the load.
-    let header: Vec<String> = csv
-        .byte_headers()
-        .map_err(csv_error)?
-        .iter()
-        .map(|h| String::from_utf8_lossy(h).into_owned())
-        .collect();
+    let (mut csv, header) = parser(reader, label)?;
+    let mut rows = Rows::default();
+    rows.files.push((0, label.to_string()));
+    if header.is_empty() && min_rows == 0 {
+        return Ok((rows, vec!["empty file, not even a header".into()]));
+    }
     let mut cols = Columns::find(&header, &opts.columns, opts.timestamps).map_err(|missing| {
         RecordingError::MissingColumns {
             file: label.into(),
@@ -128,13 +130,27 @@ pub(super) fn read_rows<R: Read>(
         }
     })?;
 
-    let mut rows = Rows::default();
-    rows.files.push((0, label.to_string()));
     let mut skipped = (0usize, 0u64); // (count, first line)
     let mut pending: Option<(u64, Problem)> = None; // a bad row, forgiven only if it is the last
     let mut record = csv::ByteRecord::new();
-    while csv.read_byte_record(&mut record).map_err(csv_error)? {
-        let line = record.position().map_or(0, |p| p.line());
+    let mut count = rows_before;
+    loop {
+        csv.get_mut().row_done();
+        let start = csv.position().line();
+        match csv.read_byte_record(&mut record) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) => return Err(csv_error(&csv, e, label, start)),
+        }
+        let line = record.position().map_or(start, |p| p.line());
+        count += 1;
+        if count > opts.max_rows {
+            return Err(RecordingError::TooManyRows {
+                file: label.into(),
+                line,
+                limit: opts.max_rows,
+            });
+        }
         if let Some((line, problem)) = pending.take() {
             return Err(problem.into_error(label, line, header.len()));
         }
@@ -153,6 +169,7 @@ pub(super) fn read_rows<R: Read>(
             Err(problem) => pending = Some((line, problem)),
         }
     }
+    let ends_with_newline = csv.get_ref().ends_with_newline();
 
     let mut warnings = Vec::new();
     let mut dropped = skipped.0;
@@ -194,6 +211,70 @@ pub(super) fn read_rows<R: Read>(
         rows.t_ref_ns = Some(t_ref + (t0 * 1e9).round() as i128);
     }
     Ok((rows, warnings))
+}
+
+/// The CSV parser of a recording, over its input without BOM, its lines capped.
+type Parser<R> = csv::Reader<Capped<io::Chain<io::Cursor<Vec<u8>>, R>>>;
+
+/// The parser of `reader` (named `label`), and the header it has read.
+fn parser<R: Read>(reader: R, label: &str) -> Result<(Parser<R>, Vec<String>), RecordingError> {
+    let input = without_bom(reader).map_err(|source| RecordingError::Io {
+        file: label.into(),
+        action: "cannot read",
+        source,
+    })?;
+    let mut csv = csv::ReaderBuilder::new()
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .buffer_capacity(READ_AHEAD)
+        .from_reader(Capped::new(input));
+    // Bytes, not strings: only the mapped cells need to be text, so a Latin-1 unit in another
+    // column's name or cells does not stop the load.
+    let header = match csv.byte_headers() {
+        Ok(h) => h
+            .iter()
+            .map(|h| String::from_utf8_lossy(h).into_owned())
+            .collect(),
+        Err(e) => return Err(csv_error(&csv, e, label, 1)),
+    };
+    Ok((csv, header))
+}
+
+/// `reader` without the UTF-8 byte order mark it may start with.
+fn without_bom<R: Read>(mut reader: R) -> io::Result<io::Chain<io::Cursor<Vec<u8>>, R>> {
+    let mut head = Vec::with_capacity(3);
+    (&mut reader).take(3).read_to_end(&mut head)?;
+    if head == b"\xEF\xBB\xBF" {
+        head.clear();
+    }
+    Ok(io::Cursor::new(head).chain(reader))
+}
+
+/// The error of a CSV read that failed in the row starting at `line`: the line limit, the
+/// input (a damaged gzip stream, a device), or the CSV itself.
+fn csv_error<R: Read>(csv: &Parser<R>, e: csv::Error, label: &str, line: u64) -> RecordingError {
+    let file = label.to_string();
+    if csv.get_ref().exceeded() {
+        return RecordingError::LineTooLong {
+            file,
+            line,
+            limit: MAX_LINE_BYTES,
+        };
+    }
+    let message = e.to_string();
+    let line = e.position().map_or(line, |p| p.line());
+    match e.into_kind() {
+        csv::ErrorKind::Io(source) => RecordingError::Io {
+            file,
+            action: "cannot read",
+            source,
+        },
+        _ => RecordingError::Csv {
+            file,
+            line,
+            message,
+        },
+    }
 }
 
 /// Largest magnitude of `--scale`: with values within ±1e6, scaled values stay far from

@@ -553,16 +553,20 @@ impl ModbusServerConfig {
 
 /// Most grid slots a replay holds in memory (80 MB; 27.8 h at 10 ms).
 const MAX_REPLAY_SLOTS: f64 = 1e7;
+/// Most rows of the replayed file (as many as slots): a source that never ends, such as a pipe
+/// or a device, is refused once it has given these.
+const MAX_REPLAY_ROWS: usize = MAX_REPLAY_SLOTS as usize;
 
 /// The O_P column of a recording (V_P is not read, so a log with failed reads replays too),
-/// held onto a grid of `period_s` from its first row; refused when that grid would exceed
-/// [`MAX_REPLAY_SLOTS`].
+/// held onto a grid of `period_s` from its first row; refused when it holds more than
+/// [`MAX_REPLAY_ROWS`] rows or that grid would exceed [`MAX_REPLAY_SLOTS`].
 fn load_replay(file: &Path, period_s: f64) -> Result<Vec<f64>, RecordingError> {
     let opts = ReadOptions {
         columns: ColumnMap {
             vp: None,
             ..ColumnMap::default()
         },
+        max_rows: MAX_REPLAY_ROWS,
         ..ReadOptions::default()
     };
     let rec = recording::read(file, &opts)?;
