@@ -362,6 +362,7 @@ async fn run(args: Args) -> anyhow::Result<()> {
         let limits = Limits {
             max_connections: args.max_connections as usize,
             idle_timeout: Duration::from_secs_f64(args.idle_timeout_s),
+            controllers: Arc::default(),
         };
         let serving = tcp::serve(
             listener,

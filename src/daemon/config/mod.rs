@@ -42,8 +42,8 @@ use crate::toml_file::{self, Layout, Lines, TomlError};
 pub use diagnosis::DiagnosisConfig;
 pub use health::HealthConfig;
 pub use source::{
-    ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
-    SineConfig, SourceConfig, SourceSpec, StepsConfig,
+    ConstantConfig, ControllerAddr, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig,
+    ReplayConfig, SineConfig, SourceConfig, SourceSpec, StepsConfig,
 };
 pub use valve::{Device, EmulatedConfig, ValveConfig, ValveSpec, UNNAMED};
 
