@@ -7,7 +7,7 @@
 //! after [`ACCEPT_RETRY`]. At most [`Limits::max_connections`] connections are open at once, so
 //! a flood of clients cannot use up the file descriptors; a new connection is not turned away
 //! for another client's, though: at the limit one open connection is closed to make room, chosen
-//! by [`admission`]: never a process controller's, first from the host holding the most
+//! by the `admission` module: never a process controller's, first from the host holding the most
 //! connections, a socket that never sent a request before one that did, then the one idle
 //! longest. A controller is a configured address ([`Limits::controllers`], with slots kept for
 //! it) or a connection its handler raised to [`Standing::Controller`] (the HIL server does on an
@@ -47,7 +47,7 @@ pub const FIRST_REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 /// for another's.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Limits {
-    /// Connections open at once; at the limit one makes room for a new one ([`admission`]).
+    /// Connections open at once; at the limit one makes room for a new one (see [`serve`]).
     pub max_connections: usize,
     /// A connection without a request for this long is closed.
     pub idle_timeout: Duration,
@@ -118,7 +118,7 @@ impl Activity {
     }
 
     /// Its standing now.
-    pub fn standing(&self) -> Standing {
+    fn standing(&self) -> Standing {
         Standing::from_u8(self.0.standing.load(Ordering::Relaxed))
     }
 

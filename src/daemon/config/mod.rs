@@ -159,7 +159,8 @@ pub enum ClockKind {
 pub struct MetricsConfig {
     /// Address of the HTTP endpoint (`GET /metrics`).
     pub listen: ListenAddr,
-    /// Connections open at once; at the limit the longest idle one makes room for a new one.
+    /// Connections open at once; at the limit one makes room for a new one (first from the host
+    /// holding the most; a scraper's after the others of its host).
     pub max_connections: usize,
 }
 
