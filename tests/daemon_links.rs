@@ -258,3 +258,23 @@ fn a_lost_reply_costs_one_cycle() {
         "{share} {longest}\n{summary}"
     );
 }
+
+#[test]
+fn a_device_that_closes_after_each_answer_gets_few_connections() {
+    let _turn = real_time_turn();
+    // Each connection's first request is answered, its second closes it.
+    let device = SimDevice::start(&["--tcp", "127.0.0.1:0", "--disconnect-after", "2"]);
+    let (summary, stderr, sockets, device_log) = watch(device, 5.0, |_| {});
+    let accepted = connections(&device_log);
+    let reconnects = summary_count(&summary, "reconnects: ");
+    println!(
+        "a device closing each connection after one answer, 5 s: {accepted} connections \
+         accepted, at most {sockets} TCP socket(s) open in the daemon"
+    );
+    assert!(
+        (3..=12).contains(&accepted),
+        "{accepted} connections\n{summary}\n{stderr}"
+    );
+    assert_eq!(sockets, 1, "{summary}");
+    assert!(reconnects >= 2, "{summary}");
+}

@@ -24,8 +24,8 @@
 //!
 //! On start it prints one line per endpoint on stdout, `tcp: 127.0.0.1:5502` and
 //! `pty: /dev/pts/5`, for a client (or a test) to connect to. The TCP server survives accept
-//! errors, keeps at most `--max-connections` (at the limit the longest idle makes room for a new
-//! one) and closes connections idle for
+//! errors, keeps at most `--max-connections` (at the limit one makes room for a new one, chosen
+//! as in the daemon's servers) and closes connections idle for
 //! `--idle-timeout-s`; each connection is logged (`client connected from ...`), and SIGINT or
 //! SIGTERM logs what the server went through before exiting. It is a test instrument: no
 //! persistence, no device identification, no coils.
@@ -153,7 +153,8 @@ struct Args {
     /// Close a TCP connection on its N-th request, unanswered (the client must reconnect).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     disconnect_after: Option<u64>,
-    /// TCP connections open at once; at the limit the longest idle one makes room for a new one.
+    /// TCP connections open at once; at the limit one makes room for a new one (first from the
+    /// host holding the most, one that never sent a request, then the longest idle).
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1000))]
     max_connections: u64,
     /// Close a TCP connection that sends no request for this long, s.
@@ -362,6 +363,7 @@ async fn run(args: Args) -> anyhow::Result<()> {
         let limits = Limits {
             max_connections: args.max_connections as usize,
             idle_timeout: Duration::from_secs_f64(args.idle_timeout_s),
+            controllers: Arc::default(),
         };
         let serving = tcp::serve(
             listener,

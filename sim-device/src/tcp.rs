@@ -63,7 +63,7 @@ pub(crate) async fn serve(
     limits: Limits,
     health: Arc<Health>,
 ) {
-    tcp_server::serve("Modbus TCP", listener, limits, health, move |peer| {
+    tcp_server::serve("Modbus TCP", listener, limits, health, move |peer, _| {
         tracing::info!("client connected from {peer}");
         Connection {
             banks: banks.clone(),

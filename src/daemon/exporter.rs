@@ -32,8 +32,9 @@
 //!   (registered by [`super::diagnosis::DiagnosisMetrics`]);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
-//!   `valve_bridge_server_connections_accepted_total`, `..._evicted_total` (idle ones closed at the
-//!   connection limit), `..._idle_closed_total` and `valve_bridge_server_accept_errors_total`.
+//!   `valve_bridge_server_connections_accepted_total`, `..._evicted_total` (closed at the
+//!   connection limit for a new one), `..._refused_total` (new ones closed at once: every slot
+//!   a controller's), `..._idle_closed_total` and `valve_bridge_server_accept_errors_total`.
 //!
 //! [`LoopMetrics`] registers every metric once at start-up and keeps each valve's handles
 //! ([`ValveMetrics`]), so the loop updates its own with atomic operations only (no lookup by label, no allocation); the server
@@ -68,6 +69,7 @@ struct ServerMetrics {
     open: IntGaugeVec,
     accepted: IntCounterVec,
     evicted: IntCounterVec,
+    refused: IntCounterVec,
     idle_closed: IntCounterVec,
     accept_errors: IntCounterVec,
 }
@@ -473,7 +475,12 @@ impl ServerMetrics {
             )?,
             evicted: counter(
                 "valve_bridge_server_connections_evicted_total",
-                "Idle connections closed at the connection limit to make room for a new one",
+                "Connections closed at the connection limit to make room for a new one",
+            )?,
+            refused: counter(
+                "valve_bridge_server_connections_refused_total",
+                "New connections closed at once at the connection limit: every slot was a \
+                 process controller's",
             )?,
             idle_closed: counter(
                 "valve_bridge_server_connections_idle_closed_total",
@@ -493,6 +500,7 @@ impl ServerMetrics {
         let counters = [
             &self.accepted,
             &self.evicted,
+            &self.refused,
             &self.idle_closed,
             &self.accept_errors,
         ];
@@ -508,6 +516,7 @@ impl ServerMetrics {
         for (c, total) in [
             (&self.accepted, v.accepted),
             (&self.evicted, v.evicted),
+            (&self.refused, v.refused),
             (&self.idle_closed, v.idle_closed),
             (&self.accept_errors, v.accept_errors),
         ] {
@@ -580,6 +589,7 @@ mod tests {
             "valve_bridge_server_up{server=\"modbus-server\"} 1",
             "valve_bridge_server_connections{server=\"modbus-server\"} 0",
             "valve_bridge_server_connections_idle_closed_total{server=\"modbus-server\"} 1",
+            "valve_bridge_server_connections_refused_total{server=\"modbus-server\"} 0",
             "valve_bridge_server_accept_errors_total{server=\"modbus-server\"} 0",
             "valve_bridge_timing_error_seconds_bucket{le=\"0.00005\"} 2",
             "valve_bridge_timing_error_seconds_bucket{le=\"0.00001\"} 1",

@@ -29,20 +29,29 @@
 //! The server runs on the daemon's network thread ([`serve`], a [`tcp_server`] that retries
 //! accept errors, caps its connections at `max_connections` and closes a connection idle for
 //! `idle_timeout_s`); the loop only touches the bank, whose lock is held for a few loads and
-//! stores, so the loop never waits on the network.
+//! stores, so the loop never waits on the network. The controller always gets through: with
+//! `controllers` configured, only their addresses may write (any other client's write gets
+//! exception 01, its reads are answered), their connections are never closed for another
+//! client's and a slot each is kept for them; without, anyone may write and a connection whose
+//! write was accepted is a controller's from then on ([`Standing::Controller`]: never closed for
+//! a reader's). Which connection gives way at the limit is [`crate::net`]'s choice.
+//!
+//! Not here: the choice of whom to close at the limit ([`crate::net`]), the Modbus framing
+//! ([`tcp_server`]), the register map ([`RegisterBank`]).
 
-use std::sync::Arc;
-use std::time::Duration;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use tokio::net::TcpListener;
-use tokio_modbus::Request;
+use tokio_modbus::{ExceptionCode, Request};
 
 use super::config::{ModbusServerConfig, OnStop, SafetyConfig};
 use crate::modbus::blocks::Blocks;
 use crate::modbus::map::{VALVE_FAULT_BIT, WATCHDOG_BIT};
 use crate::modbus::server::{OutOfRange, RegisterBank};
 use crate::modbus::tcp_server::{self, Reply, Respond};
-use crate::net::{Health, Limits};
+use crate::net::{Activity, Health, Limits, PeerLog, Standing};
 use crate::recording::log_format::Sample;
 
 /// The status bits the loop owns (the health thread owns
@@ -158,21 +167,79 @@ impl Controller {
     }
 }
 
-/// A process controller's connection: every request is answered from the banks at once.
-struct Controlled(Arc<Blocks>);
+/// A client's connection: every request is answered from the banks at once, but a write from a
+/// client that is not a configured controller (when there are some) gets exception 01.
+struct Controlled {
+    blocks: Arc<Blocks>,
+    peer: SocketAddr,
+    activity: Activity,
+    /// Where its refused writes are told, when it may not write.
+    refusals: Option<Arc<Mutex<PeerLog>>>,
+}
 
 impl Respond for Controlled {
     fn respond(&mut self, _unit: u8, request: &Request<'_>) -> Reply {
-        Reply::Answer(self.0.handle(request), Duration::ZERO)
+        let writes = matches!(
+            request,
+            Request::WriteSingleRegister(..)
+                | Request::WriteMultipleRegisters(..)
+                | Request::ReadWriteMultipleRegisters(..)
+                | Request::MaskWriteRegister(..)
+                | Request::WriteSingleCoil(..)
+                | Request::WriteMultipleCoils(..)
+        );
+        if let (true, Some(told)) = (writes, &self.refusals) {
+            let ip = self.peer.ip().to_canonical();
+            let admitted = told
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .admit(ip, Instant::now());
+            if let Some(held) = admitted {
+                tracing::warn!(
+                    "{SERVER}: refused a write from {}: it is not one of the configured \
+                     controllers ([source.modbus-server] controllers), which alone may write; \
+                     its reads are answered{held}",
+                    self.peer
+                );
+            }
+            return Reply::Answer(Err(ExceptionCode::IllegalFunction), Duration::ZERO);
+        }
+        let answer = self.blocks.handle(request);
+        if writes && answer.is_ok() {
+            // It writes set-points: a process controller, never closed for a reader.
+            self.activity.raise(Standing::Controller);
+        }
+        Reply::Answer(answer, Duration::ZERO)
     }
 }
 
+/// The server's name in the log.
+const SERVER: &str = "Modbus server for the process controller";
+
 /// Serves `banks` over Modbus TCP on `listener`, within `limits`, forever (drop the task to stop).
+/// With configured controllers (`limits.controllers`) only they may write. New connections are
+/// told once a minute per host, with how many more there were.
 pub async fn serve(listener: TcpListener, bank: Arc<Blocks>, limits: Limits, health: Arc<Health>) {
-    let what = "Modbus server for the process controller";
-    tcp_server::serve(what, listener, limits, health, move |peer| {
-        tracing::info!("process controller connected from {peer}");
-        Controlled(Arc::clone(&bank))
+    let refusals = Arc::new(Mutex::new(PeerLog::default()));
+    let connections = Mutex::new(PeerLog::default());
+    let checked = limits.clone();
+    tcp_server::serve(SERVER, listener, limits, health, move |peer, activity| {
+        let may_write = checked.controllers.is_empty() || checked.is_controller(peer.ip());
+        let mut told = connections.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(held) = told.admit(peer.ip().to_canonical(), Instant::now()) {
+            let who = if may_write {
+                "process controller"
+            } else {
+                "reader (not a configured controller)"
+            };
+            tracing::info!("{who} connected from {peer}{held}");
+        }
+        Controlled {
+            blocks: Arc::clone(&bank),
+            peer,
+            activity: activity.clone(),
+            refusals: (!may_write).then(|| Arc::clone(&refusals)),
+        }
     })
     .await
 }

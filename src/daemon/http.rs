@@ -1,6 +1,8 @@
 //! The daemon's HTTP server on `[metrics] listen`: hyper (HTTP/1.1, keep-alive) on the network
 //! thread, over a [`crate::net`] server that keeps the connections (accept errors retried, at
-//! most `max_connections` open, the longest idle closed to make room for a new one). It serves
+//! most `max_connections` open, one closed to make room for a new one: first from the host
+//! holding the most). A connection that has asked for `/metrics` is a scraper's: within its
+//! host it gives way after the others ([`Standing::Preferred`]). It serves
 //! - `GET /metrics`: the Prometheus text format ([`super::exporter`]);
 //! - `GET /`: the live page ([`super::page`]); `GET /api/live[?since=T]`: its figures, with each
 //!   valve's trace after loop time `T`; `GET /api/diagnoses/NAME`: a valve's diagnosis history
@@ -32,7 +34,7 @@ use tokio::net::TcpListener;
 
 use super::exporter::LoopMetrics;
 use super::page::{self, board::Board};
-use crate::net::{self, Health, Limits};
+use crate::net::{self, Health, Limits, Standing};
 
 /// Time a client of the daemon gets to send a request head: its first, or the next after an
 /// answer (its connection is closed after it).
@@ -190,6 +192,7 @@ fn not_found() -> Reply {
 pub(crate) async fn serve(listener: TcpListener, site: Site, limits: Limits, health: Arc<Health>) {
     let site = Arc::new(site);
     let counts = Arc::clone(&health);
+    let head_timeout = limits.idle_timeout;
     net::serve(
         "metrics endpoint",
         listener,
@@ -198,14 +201,17 @@ pub(crate) async fn serve(listener: TcpListener, site: Site, limits: Limits, hea
         move |stream, _, activity| {
             let (site, counts) = (Arc::clone(&site), Arc::clone(&counts));
             async move {
-                let service = service_fn(move |req| {
+                let service = service_fn(move |req: Request<Incoming>| {
                     activity.request();
+                    if req.uri().path() == "/metrics" {
+                        activity.raise(Standing::Preferred);
+                    }
                     let site = Arc::clone(&site);
                     async move { Ok::<_, Infallible>(site.answer(req).await) }
                 });
                 let served = http1::Builder::new()
                     .timer(TokioTimer::new())
-                    .header_read_timeout(limits.idle_timeout)
+                    .header_read_timeout(head_timeout)
                     .serve_connection(TokioIo::new(stream), service)
                     .await;
                 match served {
@@ -238,6 +244,7 @@ mod tests {
         let limits = Limits {
             max_connections: 4,
             idle_timeout: Duration::from_millis(300),
+            controllers: Arc::default(),
         };
         let site = Site::new(metrics, servers, board);
         tokio::spawn(serve(listener, site, limits, Arc::clone(&health)));

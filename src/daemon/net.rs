@@ -74,6 +74,7 @@ impl Listeners {
                     limits: Limits {
                         max_connections: cfg.max_connections,
                         idle_timeout: http::HEAD_TIMEOUT,
+                        controllers: Arc::default(),
                     },
                     health: Arc::default(),
                     what: (m.clone(), Arc::clone(board)),

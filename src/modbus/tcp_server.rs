@@ -7,7 +7,8 @@
 //! id it is for, and writes the reply with the request's transaction and unit id. A connection
 //! that sends no request for [`Limits::idle_timeout`] (no first one for
 //! [`net::FIRST_REQUEST_TIMEOUT`]) is closed and counted in [`Health`]; at the connection limit
-//! the longest idle makes room for a new one ([`net::serve`]).
+//! one makes room for a new one as [`net::serve`] chooses (the responder may raise its
+//! connection's standing through the [`Activity`] it is given).
 //!
 //! Written here rather than with tokio-modbus's `server::tcp::Server` because that one stops
 //! serving at the first `accept()` error (and cancels every open connection when it returns),
@@ -69,7 +70,7 @@ pub trait Respond: Send + 'static {
 }
 
 /// Serves Modbus TCP on `listener` forever (drop the task to stop); `what` names it in the log,
-/// `connected(peer)` makes the responder of each new connection.
+/// `connected(peer, activity)` makes the responder of each new connection.
 pub async fn serve<R, C>(
     what: &'static str,
     listener: TcpListener,
@@ -78,20 +79,22 @@ pub async fn serve<R, C>(
     connected: C,
 ) where
     R: Respond,
-    C: Fn(SocketAddr) -> R,
+    C: Fn(SocketAddr, &Activity) -> R,
 {
     let conn_health = Arc::clone(&health);
+    let conn_limits = limits.clone();
     net::serve(
         what,
         listener,
         limits,
         health,
         move |stream, peer, activity| {
+            let responder = connected(peer, &activity);
             connection(
                 what,
                 (stream, peer, activity),
-                connected(peer),
-                limits,
+                responder,
+                conn_limits.clone(),
                 Arc::clone(&conn_health),
             )
         },
@@ -198,6 +201,7 @@ mod tests {
         let limits = Limits {
             max_connections: 4,
             idle_timeout: Duration::from_millis(200),
+            controllers: Arc::default(),
         };
         let served = Arc::clone(&bank);
         let server = tokio::spawn(serve(
@@ -205,7 +209,7 @@ mod tests {
             listener,
             limits,
             Arc::clone(&health),
-            move |_| Bank(Arc::clone(&served)),
+            move |_, _| Bank(Arc::clone(&served)),
         ));
         let mut ctx = tokio_modbus::client::tcp::connect(addr).await.unwrap();
         ctx.write_multiple_registers(0, &[420])

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub(crate) mod diagnosis;
+pub(crate) mod servers;
 pub(crate) mod sim;
 pub(crate) mod tools;
 

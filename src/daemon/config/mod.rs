@@ -42,8 +42,8 @@ use crate::toml_file::{self, Layout, Lines, TomlError};
 pub use diagnosis::DiagnosisConfig;
 pub use health::HealthConfig;
 pub use source::{
-    ConstantConfig, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig, ReplayConfig,
-    SineConfig, SourceConfig, SourceSpec, StepsConfig,
+    ConstantConfig, ControllerAddr, ModbusServerConfig, PrbsConfig, RampConfig, RandomStepsConfig,
+    ReplayConfig, SineConfig, SourceConfig, SourceSpec, StepsConfig,
 };
 pub use valve::{Device, EmulatedConfig, ValveConfig, ValveSpec, UNNAMED};
 
@@ -159,7 +159,8 @@ pub enum ClockKind {
 pub struct MetricsConfig {
     /// Address of the HTTP endpoint (`GET /metrics`).
     pub listen: ListenAddr,
-    /// Connections open at once; at the limit the longest idle one makes room for a new one.
+    /// Connections open at once; at the limit one makes room for a new one (first from the host
+    /// holding the most; a scraper's after the others of its host).
     pub max_connections: usize,
 }
 

@@ -8,7 +8,7 @@
 //!
 //! Not here: running a source is [`crate::daemon::source`] and [`crate::daemon::hil`].
 
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
@@ -175,10 +175,16 @@ pub struct ModbusServerConfig {
     /// `[source.modbus-server.registers]`: the map served (default: per-mille set-point in
     /// holding 0, position in holding 1, status in holding 2).
     pub registers: RegisterMap,
-    /// Connections open at once; at the limit the longest idle one makes room for a new one.
+    /// Connections open at once; at the limit one makes room for a new one, never a
+    /// controller's ([`crate::net`]).
     pub max_connections: usize,
     /// A connection without a request for this long is closed, s.
     pub idle_timeout_s: f64,
+    /// The process controllers' addresses: only they may write (others get exception 01),
+    /// their connections are never closed for another client's, and one slot each is kept for
+    /// them. Empty (the default): anyone may write, and a connection whose write was accepted
+    /// is a controller's from then on.
+    pub controllers: Vec<ControllerAddr>,
     /// With several valves driven by the controller: registers per valve's block; the k-th
     /// such valve (from 0, in the order of the file) is served at the map's addresses plus
     /// k × block_size.
@@ -191,7 +197,29 @@ impl ModbusServerConfig {
         Limits {
             max_connections: self.max_connections,
             idle_timeout: Duration::from_secs_f64(self.idle_timeout_s),
+            controllers: self.controllers.iter().map(|c| c.0).collect(),
         }
+    }
+}
+
+/// A process controller's IP address, from a string such as `"10.0.0.5"` (no port: a client's
+/// port changes with each connection; names are not resolved).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ControllerAddr(pub IpAddr);
+
+impl<'de> Deserialize<'de> for ControllerAddr {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        if let Ok(ip) = text.parse::<IpAddr>() {
+            return Ok(ControllerAddr(ip.to_canonical()));
+        }
+        let fix = match text.parse::<SocketAddr>() {
+            Ok(with_port) => format!("write the address without its port, \"{}\" (a client's port changes with each connection)", with_port.ip()),
+            Err(_) => "write e.g. \"10.0.0.5\", the address the controller connects from (host names are not resolved)".to_string(),
+        };
+        Err(serde::de::Error::custom(format!(
+            "`{text}` is not an IP address: {fix}"
+        )))
     }
 }
 
@@ -204,6 +232,7 @@ impl Default for ModbusServerConfig {
             registers: RegisterMap::device_default(),
             max_connections: 8,
             idle_timeout_s: 60.0,
+            controllers: Vec::new(),
             block_size: 10,
         }
     }
@@ -484,6 +513,7 @@ impl ModbusServerConfig {
             }
         }
         c.max_connections(t, self.max_connections)?;
+        self.check_controllers(c)?;
         c.range(
             t,
             "idle_timeout_s",
@@ -519,6 +549,34 @@ impl ModbusServerConfig {
                     ),
                 });
             }
+        }
+        Ok(())
+    }
+
+    /// `controllers`: each listed once, reachable on `listen`, and fewer than `max_connections`
+    /// (a slot is kept for each).
+    fn check_controllers(&self, c: &Check<'_>) -> Result<(), TomlError> {
+        let t = "source.modbus-server";
+        let (n, max) = (self.controllers.len(), self.max_connections);
+        for (i, ControllerAddr(ip)) in self.controllers.iter().enumerate() {
+            if self.controllers[..i].contains(&ControllerAddr(*ip)) {
+                return Err(c.bad(t, "controllers", format!("{ip} is listed twice")));
+            }
+            let listen = self.listen.0;
+            if listen.ip().is_loopback() && !ip.is_loopback() {
+                return Err(c.bad(
+                    t,
+                    "controllers",
+                    format!("{ip} cannot connect: listen = \"{listen}\" serves this machine only; set listen to the interface the controller reaches (e.g. \"0.0.0.0:{}\")", listen.port()),
+                ));
+            }
+        }
+        if n >= max {
+            return Err(c.bad(
+                t,
+                "controllers",
+                format!("{n} controllers keep {n} of the max_connections = {max} slots, leaving none for other clients: raise max_connections above {n}"),
+            ));
         }
         Ok(())
     }

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::model::ModelKind;
+use std::net::IpAddr;
 
 /// The emulated valve's settings of `c`'s first valve.
 fn emulated(c: &Config) -> &EmulatedConfig {
@@ -180,6 +181,26 @@ fn modbus_server_and_metrics_errors_name_their_key() {
             "c.toml:4: source.modbus-server.registers.position.address: 0 overlaps setpoint",
         ),
         (
+            format!("{hil}[source.modbus-server]\ncontrollers = [\"plc-1\"]\n"),
+            "c.toml:4: source.modbus-server.controllers: `plc-1` is not an IP address: write e.g. \"10.0.0.5\"",
+        ),
+        (
+            format!("{hil}[source.modbus-server]\ncontrollers = [\"127.0.0.2:502\"]\n"),
+            "c.toml:4: source.modbus-server.controllers: `127.0.0.2:502` is not an IP address: write the address without its port, \"127.0.0.2\"",
+        ),
+        (
+            format!("{hil}[source.modbus-server]\ncontrollers = [\"127.0.0.2\", \"127.0.0.2\"]\n"),
+            "c.toml:4: source.modbus-server.controllers: 127.0.0.2 is listed twice",
+        ),
+        (
+            format!("{hil}[source.modbus-server]\ncontrollers = [\"10.0.0.5\"]\n"),
+            "c.toml:4: source.modbus-server.controllers: 10.0.0.5 cannot connect: listen = \"127.0.0.1:5020\" serves this machine only",
+        ),
+        (
+            format!("{hil}[source.modbus-server]\nmax_connections = 2\ncontrollers = [\"127.0.0.2\", \"::1\"]\n"),
+            "c.toml:5: source.modbus-server.controllers: 2 controllers keep 2 of the max_connections = 2 slots",
+        ),
+        (
             format!("[loop]\nclock = \"virtual\"\n{hil}"),
             "c.toml:2: loop.clock: \"virtual\" cannot serve a process controller",
         ),
@@ -204,6 +225,17 @@ fn modbus_server_and_metrics_errors_name_their_key() {
     assert_eq!(m.watchdog_s, 1.0);
     assert_eq!(m.registers.status.map(|s| s.address), Some(2));
     assert!(c.metrics.is_none());
+    assert!(m.limits().controllers.is_empty());
+    // Controllers, an IPv4 address mapped into IPv6 as the one it maps.
+    let text = format!("{hil}[source.modbus-server]\nlisten = \"[::]:5020\"\ncontrollers = [\"10.0.0.5\", \"::ffff:10.0.0.6\"]\n");
+    let c = Config::from_toml(&text, Path::new("c.toml")).unwrap();
+    let limits = c.source.server().unwrap().limits();
+    assert_eq!(
+        *limits.controllers,
+        [IpAddr::from([10, 0, 0, 5]), IpAddr::from([10, 0, 0, 6])]
+    );
+    assert!(limits.is_controller("::ffff:10.0.0.5".parse().unwrap()));
+    assert!(!limits.is_controller("10.0.0.7".parse().unwrap()));
     let c = Config::from_toml("[metrics]\n", Path::new("c.toml")).unwrap();
     assert_eq!(c.metrics.unwrap().listen.0.to_string(), "127.0.0.1:9100");
 }
@@ -221,6 +253,16 @@ fn shipped_hil_config_serves_loopback_with_metrics() {
     assert_eq!(
         c.metrics.map(|x| x.listen.0.to_string()).as_deref(),
         Some("127.0.0.1:9100")
+    );
+    assert!(m.controllers.is_empty());
+    // Its commented `controllers` line, uncommented, is valid.
+    let text = std::fs::read_to_string(path).unwrap();
+    let text = text.replace("# controllers = ", "controllers = ");
+    let c = Config::from_toml(&text, path).unwrap();
+    let m = c.source.server().unwrap();
+    assert_eq!(
+        m.controllers,
+        [ControllerAddr(IpAddr::from([127, 0, 0, 1]))]
     );
 }
 

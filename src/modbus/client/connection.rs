@@ -46,8 +46,8 @@ pub(super) struct Connection {
     late_before: u64,
     next_attempt: Instant,
     backoff: Duration,
-    /// How often the device's replies broke the stream lately.
-    garbled: GarbleRate,
+    /// How often the link was dropped lately.
+    drops: DropRate,
     /// How long an unanswered RTU request's reply is waited for (raised by the wire when a
     /// later one is seen, and kept across connections).
     late_reply: Duration,
@@ -78,7 +78,7 @@ impl Connection {
             late_before: 0,
             next_attempt: Instant::now(),
             backoff: FIRST_BACKOFF,
-            garbled: GarbleRate::default(),
+            drops: DropRate::default(),
             late_reply,
             noise_before: 0,
             unexpected_before: 0,
@@ -170,39 +170,35 @@ impl Connection {
         }
     }
 
-    /// Drops the link because `why`. It is reopened at once if it had answered (a device that
-    /// restarted), otherwise after the backoff (a device that takes connections but never
-    /// answers on them).
-    fn drop_link(&mut self, why: Down) {
+    /// Drops the link of the valve `who` because `why`. It is reopened at once if it had
+    /// answered (a device that restarted), otherwise after the backoff (a device that takes
+    /// connections but never answers on them); either way no sooner than the rate of drops
+    /// allows ([`DropRate`]): a device that answers on every new connection, but then closes it
+    /// or garbles a reply, now and then or after every answer, would otherwise be reconnected
+    /// at once each time.
+    fn drop_link(&mut self, who: &Link, why: Down) {
         self.ctx = None;
+        let now = Instant::now();
+        let wait = self.drops.hit(now);
         if self.answered {
-            self.next_attempt = Instant::now();
+            self.next_attempt = now;
             self.backoff = FIRST_BACKOFF;
         } else {
-            self.next_attempt = Instant::now() + self.backoff;
+            self.next_attempt = now + self.backoff;
             self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
         }
-        self.down_because = why;
-    }
-
-    /// Drops the link because the device's replies broke the stream (`why`). A device that
-    /// answers on every new connection, but garbled now and then, would otherwise be reconnected
-    /// at once each time: the reopening waits by the rate of such failures instead
-    /// ([`GarbleRate`]), not by how many came in a row.
-    fn drop_garbled(&mut self, who: &Link, why: Down) {
-        let wait = self.garbled.hit(Instant::now());
-        self.drop_link(why);
         if !wait.is_zero() {
-            self.next_attempt = self.next_attempt.max(Instant::now() + wait);
+            self.next_attempt = self.next_attempt.max(now + wait);
             tracing::warn!(
-                "{}: replies break the stream often ({:.1} times in the last {} s): next \
-                 connection in {} ms",
+                "{}: the link was dropped {:.1} times in the last {} s (the last time: {why}): \
+                 next connection in {} ms",
                 who.describe(),
-                self.garbled.level,
-                GarbleRate::HALF_LIFE.as_secs(),
-                wait.as_millis()
+                self.drops.level,
+                DropRate::HALF_LIFE.as_secs(),
+                (self.next_attempt - now).as_millis()
             );
         }
+        self.down_because = why;
     }
 
     /// Reopens the link if the backoff allows, within `deadline`, for the valve `who` (its
@@ -282,19 +278,14 @@ impl Connection {
                 if matches!(self.link, Link::Tcp(_)) && silent >= SILENT_LINK {
                     let why = Down::Silent(silent);
                     tracing::warn!("{}: {why}", who.describe());
-                    self.drop_link(why);
+                    self.drop_link(who, why);
                 }
                 Err(fault)
             }
             Ok(Err(tokio_modbus::Error::Transport(e))) => {
-                let garbled = e.kind() == io::ErrorKind::InvalidData;
                 let (fault, broken) = self.classify_transport(who, t, e);
                 if let Some(why) = broken {
-                    if garbled {
-                        self.drop_garbled(who, why);
-                    } else {
-                        self.drop_link(why);
-                    }
+                    self.drop_link(who, why);
                 }
                 Err(fault)
             }
@@ -306,7 +297,7 @@ impl Connection {
                     why: e.to_string(),
                 };
                 if matches!(self.link, Link::Tcp(_)) {
-                    self.drop_garbled(who, Down::Reply(fault.clone()));
+                    self.drop_link(who, Down::Reply(fault.clone()));
                 }
                 Err(Fault::Error(fault))
             }
@@ -394,17 +385,21 @@ impl Connection {
     }
 }
 
-/// Stream-breaking replies as a count that halves every [`GarbleRate::HALF_LIFE`]: the wait
-/// before reopening grows with it, whatever good replies came between.
+/// Dropped links (the device closed or reset the connection, a reply broke the stream, the
+/// device went silent) as a count that halves every [`DropRate::HALF_LIFE`]: the wait before
+/// reopening grows with it, whatever good replies came between. At about one drop a second
+/// the wait and the drops balance: a device that closes each connection after one answer gets
+/// about a connection a second, not one every other cycle.
 #[derive(Debug, Default)]
-struct GarbleRate {
+struct DropRate {
     level: f64,
     at: Option<Instant>,
 }
 
-impl GarbleRate {
+impl DropRate {
     const HALF_LIFE: Duration = Duration::from_secs(5);
-    /// Failures within about a half-life before the reopening waits.
+    /// Drops within about a half-life before the reopening waits (a device that restarts is
+    /// reconnected at once).
     const FREE: f64 = 2.0;
 
     /// Counts one failure at `now`; the wait before the next connection.
@@ -469,9 +464,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_wait_grows_with_the_rate_of_broken_streams_not_the_run_of_them() {
+    fn the_wait_grows_with_the_rate_of_drops_not_the_run_of_them() {
         let t0 = Instant::now();
-        let mut rate = GarbleRate::default();
+        let mut rate = DropRate::default();
         let at = |ms: u64| t0 + Duration::from_millis(ms);
         // Two within a half-life: reopened at once.
         assert_eq!(rate.hit(at(0)), Duration::ZERO);

@@ -16,7 +16,10 @@
 //! has answered nothing for [`SILENT_LINK`] on an open connection. It is then reopened on a
 //! later cycle: at once after a connection that had answered, otherwise after a backoff that
 //! starts at [`FIRST_BACKOFF`] and doubles up to [`MAX_BACKOFF`] with each further failure (a
-//! device that accepts connections and then never answers is not flooded with new ones). A
+//! device that accepts connections and then never answers is not flooded with new ones); and
+//! never sooner than the rate of dropped links allows: past two drops in about 5 s the wait
+//! grows with their rate up to [`MAX_BACKOFF`], so a device that closes each connection after
+//! one answer gets about one connection a second, not one every other cycle. A
 //! cycle never waits for a reconnect beyond its own deadline, so the loop keeps its rhythm.
 //!
 //! Faults come back as [`Fault`]: `timeout` (no complete reply in time), `error` (exception,

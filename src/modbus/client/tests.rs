@@ -109,13 +109,14 @@ async fn device_reading(raw: u16) -> std::net::SocketAddr {
     let limits = crate::net::Limits {
         max_connections: 2,
         idle_timeout: Duration::from_secs(5),
+        controllers: Arc::default(),
     };
     tokio::spawn(tcp_server::serve(
         "test",
         listener,
         limits,
         Arc::default(),
-        move |_| NoValue(raw),
+        move |_, _| NoValue(raw),
     ));
     addr
 }

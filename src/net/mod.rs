@@ -5,25 +5,37 @@
 //! never stops on its own: an `accept()` error (too many open files, no buffer space, a
 //! connection aborted before it was taken) is logged once per outage, counted, and retried
 //! after [`ACCEPT_RETRY`]. At most [`Limits::max_connections`] connections are open at once, so
-//! a flood of clients cannot use up the file descriptors; a new connection is never turned
-//! away for an idle one, though: at the limit the open connection that has waited longest
-//! without a request is closed to make room (one that never sent a request first), and the
-//! log names its peer. A client that sends requests, a process controller, so keeps its place
-//! against any number of idle sockets. Each handler tells [`serve`] of its requests through its
+//! a flood of clients cannot use up the file descriptors; a new connection is not turned away
+//! for another client's, though: at the limit one open connection is closed to make room, chosen
+//! by the `admission` module: never a process controller's, first from the host holding the most
+//! connections, a socket that never sent a request before one that did, then the one idle
+//! longest. A controller is a configured address ([`Limits::controllers`], with slots kept for
+//! it) or a connection its handler raised to [`Standing::Controller`] (the HIL server does on an
+//! accepted set-point write); the metrics endpoint raises a scraper's to
+//! [`Standing::Preferred`]. Only when every slot is a controller's is a new connection refused.
+//! The closings and refusals are logged through a [`PeerLog`]: one line per host a minute, with
+//! how many more there were. Each handler tells [`serve`] of its requests through its
 //! [`Activity`] and closes its connection after [`Limits::idle_timeout`] without one, or
 //! [`FIRST_REQUEST_TIMEOUT`] without a first (it knows what a request is). [`Health`] keeps the
-//! figures (accepted, evicted, idle-closed, open, accept errors, time spent unable to accept)
-//! for the summary and the metrics.
+//! figures (accepted, evicted, refused, idle-closed, open, accept errors, time spent unable to
+//! accept) for the summary and the metrics.
 //!
 //! Not here: any protocol (see [`crate::modbus::tcp_server`] and the daemon's exporter).
 
+mod admission;
+mod peer_log;
+
 use std::future::Future;
-use std::net::SocketAddr;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::net::{IpAddr, SocketAddr};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use tokio::net::{TcpListener, TcpStream};
+
+pub use admission::Standing;
+use admission::{Held, Room};
+pub use peer_log::{HeldBack, PeerLog};
 
 /// Pause after a failed `accept()` before the next try.
 pub const ACCEPT_RETRY: Duration = Duration::from_millis(100);
@@ -31,13 +43,18 @@ pub const ACCEPT_RETRY: Duration = Duration::from_millis(100);
 /// is closed: a client connects to talk.
 pub const FIRST_REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// How many connections a server keeps, and for how long an idle one.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How many connections a server keeps, for how long an idle one, and whose it never closes
+/// for another's.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Limits {
-    /// Connections open at once; at the limit the longest idle one makes room for a new one.
+    /// Connections open at once; at the limit one makes room for a new one (see [`serve`]).
     pub max_connections: usize,
     /// A connection without a request for this long is closed.
     pub idle_timeout: Duration,
+    /// The process controllers' addresses: their connections have [`Standing::Controller`]
+    /// from the start and one slot each is kept for them (the others hold at most
+    /// `max_connections` minus their number). Fewer than `max_connections`.
+    pub controllers: Arc<[IpAddr]>,
 }
 
 impl Limits {
@@ -50,10 +67,16 @@ impl Limits {
             self.idle_timeout
         }
     }
+
+    /// True when `ip` is a configured controller's address.
+    pub fn is_controller(&self, ip: IpAddr) -> bool {
+        self.controllers.contains(&ip.to_canonical())
+    }
 }
 
-/// When a connection last sent a request, shared by its handler (which calls
-/// [`Activity::request`]) and [`serve`] (which evicts the longest idle at the limit).
+/// When a connection last sent a request and its standing, shared by its handler (which calls
+/// [`Activity::request`] and [`Activity::raise`]) and [`serve`] (which chooses whom to close at
+/// the limit).
 #[derive(Debug, Clone)]
 pub struct Activity(Arc<ActivityInner>);
 
@@ -63,14 +86,17 @@ struct ActivityInner {
     /// ns after `opened` of the last request.
     last_ns: AtomicU64,
     requests: AtomicU64,
+    /// A [`Standing`] as its `u8`.
+    standing: AtomicU8,
 }
 
 impl Activity {
-    fn new() -> Activity {
+    fn new(standing: Standing) -> Activity {
         Activity(Arc::new(ActivityInner {
             opened: Instant::now(),
             last_ns: AtomicU64::new(0),
             requests: AtomicU64::new(0),
+            standing: AtomicU8::new(standing as u8),
         }))
     }
 
@@ -86,6 +112,16 @@ impl Activity {
         self.0.requests.load(Ordering::Relaxed)
     }
 
+    /// The connection has shown it is worth `standing` (kept if it already had a higher one).
+    pub fn raise(&self, standing: Standing) {
+        self.0.standing.fetch_max(standing as u8, Ordering::Relaxed);
+    }
+
+    /// Its standing now.
+    fn standing(&self) -> Standing {
+        Standing::from_u8(self.0.standing.load(Ordering::Relaxed))
+    }
+
     /// Time since the last request (since the connection opened, before the first).
     fn idle(&self) -> Duration {
         let last = Duration::from_nanos(self.0.last_ns.load(Ordering::Relaxed));
@@ -98,6 +134,7 @@ impl Activity {
 pub struct Health {
     accepted: AtomicU64,
     evicted: AtomicU64,
+    refused: AtomicU64,
     idle_closed: AtomicU64,
     open: AtomicU64,
     accept_errors: AtomicU64,
@@ -109,10 +146,12 @@ pub struct Health {
 /// A snapshot of [`Health`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct HealthView {
-    /// Connections accepted.
+    /// Connections accepted (the refused ones too).
     pub accepted: u64,
-    /// Idle connections closed at the limit to make room for a new one.
+    /// Connections closed at the limit to make room for a new one.
     pub evicted: u64,
+    /// New connections closed at once at the limit: every slot was a controller's.
+    pub refused: u64,
     /// Connections closed for being idle.
     pub idle_closed: u64,
     /// Connections open now.
@@ -133,6 +172,7 @@ impl Health {
         HealthView {
             accepted: self.accepted.load(Ordering::Relaxed),
             evicted: self.evicted.load(Ordering::Relaxed),
+            refused: self.refused.load(Ordering::Relaxed),
             idle_closed: self.idle_closed.load(Ordering::Relaxed),
             open: self.open.load(Ordering::Relaxed),
             accept_errors: self.accept_errors.load(Ordering::Relaxed),
@@ -153,12 +193,16 @@ impl Health {
 }
 
 impl std::fmt::Display for HealthView {
-    /// `12 connections (1 open), 3 evicted at the limit, 2 closed idle, 5 accept errors (the
-    /// last: ...), unable to accept for 0.5 s`: the figures that are not zero.
+    /// `12 connections (1 open), 3 evicted at the limit, 1 refused at the limit, 2 closed idle,
+    /// 5 accept errors (the last: ...), unable to accept for 0.5 s`: the figures that are not
+    /// zero.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} connections ({} open)", self.accepted, self.open)?;
         if self.evicted > 0 {
             write!(f, ", {} evicted at the limit", self.evicted)?;
+        }
+        if self.refused > 0 {
+            write!(f, ", {} refused at the limit", self.refused)?;
         }
         if self.idle_closed > 0 {
             write!(f, ", {} closed idle", self.idle_closed)?;
@@ -208,6 +252,12 @@ pub async fn serve<F, Fut>(
 {
     let mut down_since: Option<Instant> = None;
     let mut open: Vec<Open> = Vec::with_capacity(limits.max_connections);
+    let mut door = Door {
+        what,
+        limits: &limits,
+        health: &health,
+        told: PeerLog::default(),
+    };
     loop {
         let (stream, peer) = match listener.accept().await {
             Ok(accepted) => accepted,
@@ -237,17 +287,15 @@ pub async fn serve<F, Fut>(
                 down.as_secs_f64()
             );
         }
-        open.retain(|c| !c.task.is_finished());
-        if open.len() >= limits.max_connections {
-            evict(what, &mut open, &health, peer);
-        }
         health.accepted.fetch_add(1, Ordering::Relaxed);
+        let Some(activity) = door.admit(&mut open, peer) else {
+            continue;
+        };
         health.open.fetch_add(1, Ordering::Relaxed);
         let guard = OpenGuard(Arc::clone(&health));
         if let Err(e) = stream.set_nodelay(true) {
             tracing::debug!("{what}: TCP_NODELAY on {peer}: {e}");
         }
-        let activity = Activity::new();
         let task = handle(stream, peer, activity.clone());
         let task = tokio::spawn(async move {
             let _open = guard;
@@ -263,28 +311,85 @@ pub async fn serve<F, Fut>(
     }
 }
 
-/// Closes the connection of `open` that waited longest for a request (one that never sent any
-/// first), for the new one from `new_peer`.
-fn evict(what: &str, open: &mut Vec<Open>, health: &Health, new_peer: SocketAddr) {
-    let longest = (open.iter().enumerate())
-        .max_by_key(|(_, c)| (c.activity.requests() == 0, c.activity.idle()))
-        .map(|(i, _)| i);
-    let Some(i) = longest else { return };
-    let gone = open.swap_remove(i);
-    gone.task.abort();
-    health.evicted.fetch_add(1, Ordering::Relaxed);
-    let requests = gone.activity.requests();
-    tracing::warn!(
-        "{what}: at the limit of {} connections: closed the one from {} ({}, idle for {:.1} s) \
-         to take the new one from {new_peer}",
-        open.len() + 1,
-        gone.peer,
-        match requests {
-            0 => "no request".to_string(),
-            n => format!("{n} requests"),
-        },
-        gone.activity.idle().as_secs_f64()
-    );
+/// What [`serve`] decides a new connection by, and the log of what it closed or refused.
+struct Door<'a> {
+    what: &'static str,
+    limits: &'a Limits,
+    health: &'a Health,
+    told: PeerLog,
+}
+
+impl Door<'_> {
+    /// Makes room for the new connection from `peer` among `open` (closing one if need be):
+    /// its [`Activity`], or None when it is refused.
+    fn admit(&mut self, open: &mut Vec<Open>, peer: SocketAddr) -> Option<Activity> {
+        open.retain(|c| !c.task.is_finished());
+        let ip = peer.ip().to_canonical();
+        let standing = if self.limits.is_controller(ip) {
+            Standing::Controller
+        } else {
+            Standing::Ordinary
+        };
+        let max = self.limits.max_connections;
+        let reserved = self.limits.controllers.len();
+        // Below the limit, with room for either kind, no list of the open ones is needed.
+        let room = if open.len() + reserved < max {
+            Room::Free
+        } else {
+            let held: Vec<Held> = open
+                .iter()
+                .map(|c| Held {
+                    ip: c.peer.ip().to_canonical(),
+                    standing: c.activity.standing(),
+                    silent: c.activity.requests() == 0,
+                    idle: c.activity.idle(),
+                })
+                .collect();
+            admission::room(&held, (ip, standing), max, reserved)
+        };
+        match room {
+            Room::Free => {}
+            Room::Close(i) => self.evict(open, i, peer),
+            Room::Refuse => {
+                self.health.refused.fetch_add(1, Ordering::Relaxed);
+                if let Some(held) = self.told.admit(ip, Instant::now()) {
+                    tracing::warn!(
+                        "{}: at the limit of {max} connections, every one a process \
+                         controller's: refused the new one from {peer}{held}",
+                        self.what
+                    );
+                }
+                return None;
+            }
+        }
+        Some(Activity::new(standing))
+    }
+
+    /// Closes `open[i]` for the new connection from `new_peer`.
+    fn evict(&mut self, open: &mut Vec<Open>, i: usize, new_peer: SocketAddr) {
+        let gone = open.swap_remove(i);
+        gone.task.abort();
+        self.health.evicted.fetch_add(1, Ordering::Relaxed);
+        let Some(held) = self
+            .told
+            .admit(gone.peer.ip().to_canonical(), Instant::now())
+        else {
+            return;
+        };
+        let requests = gone.activity.requests();
+        tracing::warn!(
+            "{}: at the limit of {} connections: closed the one from {} ({}, idle for {:.1} s) \
+             to take the new one from {new_peer}{held}",
+            self.what,
+            self.limits.max_connections,
+            gone.peer,
+            match requests {
+                0 => "no request".to_string(),
+                n => format!("{n} requests"),
+            },
+            gone.activity.idle().as_secs_f64()
+        );
+    }
 }
 
 #[cfg(test)]
@@ -309,6 +414,7 @@ mod tests {
         let limits = Limits {
             max_connections: 3,
             idle_timeout: Duration::from_secs(60),
+            controllers: Arc::default(),
         };
         // Handlers count every byte as a request and hold their connection until it closes.
         let server = tokio::spawn(serve(
@@ -351,6 +457,65 @@ mod tests {
         assert!(v
             .to_string()
             .starts_with("13 connections (3 open), 10 evicted at the limit"));
+        server.abort();
+    }
+
+    #[tokio::test]
+    async fn a_controller_is_never_closed_for_another_and_when_all_are_the_new_one_is_refused() {
+        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let health = Arc::new(Health::default());
+        let limits = Limits {
+            max_connections: 2,
+            idle_timeout: Duration::from_secs(60),
+            controllers: Arc::default(),
+        };
+        // A `w` is an accepted set-point write: the connection is a controller's from then on.
+        let server = tokio::spawn(serve(
+            "test",
+            listener,
+            limits,
+            Arc::clone(&health),
+            |mut s, _, activity| async move {
+                let mut b = [0u8; 1];
+                while s.read(&mut b).await? > 0 {
+                    activity.request();
+                    if b[0] == b'w' {
+                        activity.raise(Standing::Controller);
+                    }
+                }
+                Ok(())
+            },
+        ));
+        let pause = || tokio::time::sleep(Duration::from_millis(30));
+        let mut controller = TcpStream::connect(addr).await.unwrap();
+        controller.write_all(b"w").await.unwrap();
+        pause().await;
+        // Readers keep coming, each busier than the controller: they take each other's place.
+        let mut readers = Vec::new();
+        for _ in 0..5 {
+            let mut r = TcpStream::connect(addr).await.unwrap();
+            r.write_all(b"rrr").await.unwrap();
+            readers.push(r);
+            pause().await;
+        }
+        assert!(!closed(&mut controller, 50).await);
+        let mut open = 0;
+        for r in &mut readers {
+            open += usize::from(!closed(r, 20).await);
+        }
+        assert_eq!(open, 1);
+        // Once every slot is a controller's, a new connection is closed at once.
+        readers.last_mut().unwrap().write_all(b"w").await.unwrap();
+        pause().await;
+        let mut late = TcpStream::connect(addr).await.unwrap();
+        assert!(closed(&mut late, 200).await);
+        assert!(!closed(&mut controller, 20).await);
+        let v = health.view();
+        assert_eq!((v.accepted, v.evicted, v.refused, v.open), (7, 4, 1, 2));
+        assert!(v
+            .to_string()
+            .contains("4 evicted at the limit, 1 refused at the limit"));
         server.abort();
     }
 }
