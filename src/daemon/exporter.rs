@@ -304,19 +304,7 @@ impl LoopMetrics {
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
-        let compensation_active = gauge(
-            "valve_bridge_compensation_active",
-            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
-        )?;
-        let compensation_tracking = GaugeVec::new(
-            Opts::new(
-                "valve_bridge_compensation_tracking_error_ratio",
-                "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
-            ),
-            &["valve", "case"],
-        )?;
-        registry.register(Box::new(compensation_active.clone()))?;
-        registry.register(Box::new(compensation_tracking.clone()))?;
+        let (compensation_active, compensation_tracking) = compensation_metrics(&registry)?;
         let valves_names = valves;
         let valves = (valves.iter())
             .map(|&v| {
@@ -456,6 +444,28 @@ impl ValveMetrics {
             c.inc_by(total.saturating_sub(c.get()));
         }
     }
+}
+
+/// The compensation gauges, registered in `registry`: whether it is on, and its tracking
+/// errors.
+fn compensation_metrics(registry: &Registry) -> Result<(GaugeVec, GaugeVec), prometheus::Error> {
+    let active = GaugeVec::new(
+        Opts::new(
+            "valve_bridge_compensation_active",
+            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
+        ),
+        &["valve"],
+    )?;
+    let tracking = GaugeVec::new(
+        Opts::new(
+            "valve_bridge_compensation_tracking_error_ratio",
+            "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
+        ),
+        &["valve", "case"],
+    )?;
+    registry.register(Box::new(active.clone()))?;
+    registry.register(Box::new(tracking.clone()))?;
+    Ok((active, tracking))
 }
 
 impl ServerMetrics {
