@@ -74,6 +74,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     outln!("2. A fitted FOPDT looks fine by eye (whole recording):")?;
     outln!("   {}", metrics::table1_header())?;
     outln!("   {}", metrics::table1_row("FOPDT", &base))?;
+    out!("{}", metrics::table1_notes([&base]))?;
     outln!("3. valve-bridge diagnose {}:", args.out.display())?;
     if d.findings.is_empty() {
         outln!("   found nothing: {}", report::verdict(&d))?;
