@@ -41,6 +41,7 @@ use super::DaemonError;
 use crate::model::composed::Effect;
 use crate::model::ModelSpec;
 use crate::recording::RecordingView;
+use crate::vocabulary;
 use history::{Baseline, Record};
 
 /// What the live diagnosis of one valve did, for the summary.
@@ -110,11 +111,8 @@ impl DiagnosisMetrics {
             }
         }
         for e in Effect::ALL {
-            let on = r
-                .alarms
-                .iter()
-                .any(|a| a.starts_with(&format!("{}:", e.name())));
-            let was = (before.alarms.iter()).any(|a| a.starts_with(&format!("{}:", e.name())));
+            let on = r.alarm_effects.contains(&e);
+            let was = before.alarm_effects.contains(&e);
             if on || was {
                 if let Ok(g) = self.alarm.get_metric_with_label_values(&[valve, e.name()]) {
                     g.set(f64::from(u8::from(on)));
@@ -335,8 +333,11 @@ impl History {
             window_s: job.op.len() as f64 * period_s,
             trigger: job.trigger,
             verdict: String::new(),
+            compared: self.model.is_some(),
             effects: Vec::new(),
+            advice: Vec::new(),
             alarms: Vec::new(),
+            alarm_effects: Vec::new(),
             report: None,
             error: None,
         };
@@ -353,17 +354,19 @@ impl History {
         };
         record.verdict = d.verdict;
         record.effects = d.effects;
+        let findings = record.effects.iter().filter(|e| e.finding);
+        record.advice = vocabulary::advice(findings.map(|e| (e.effect, &e.size)));
         let whole = job.trigger == "every_s";
         let (standing, raised) = self.baseline.compare(job.t_s, whole, &record.effects);
         if self.model.is_none() && self.baseline.is_set() {
             self.model = Some(d.model);
         }
-        for a in &raised {
+        for (_, a) in &raised {
             tracing::warn!(valve = %self.name, t_s = job.t_s, "diagnosis alarm: {a}");
             self.report.first_alarm_t_s.get_or_insert(job.t_s);
         }
-        self.report.alarms.extend(raised);
-        record.alarms = standing;
+        self.report.alarms.extend(raised.into_iter().map(|a| a.1));
+        (record.alarm_effects, record.alarms) = standing.into_iter().unzip();
         if !d.report.is_empty() {
             record.report = self.write_report(&rel, &d.report);
         }
@@ -402,6 +405,7 @@ impl History {
             let empty = Record {
                 effects: Vec::new(),
                 alarms: Vec::new(),
+                alarm_effects: Vec::new(),
                 ..record.clone()
             };
             m.publish(&self.name, &record, self.last.as_ref().unwrap_or(&empty));

@@ -1,6 +1,10 @@
-//! The figures of one health window (dead time, reversal delay, stroke speeds, tracking error)
-//! and their limits against a baseline: what the health thread estimates and compares, and what
-//! the exporter and the live page publish.
+//! The figures of one health window (dead time, reversal delay, stroke speeds, tracking error),
+//! their limits against a baseline, and which of them are in alarm ([`Held`]): what the health
+//! thread estimates and compares, and what the exporter and the live page publish.
+//!
+//! A figure is in alarm from the first window that measures it past its limit until a window
+//! measures it within it; a window with too few steps to measure a delay leaves that delay's
+//! state as it was (not measuring is a state, never a reason for an alarm).
 //!
 //! Not here: the windows, the baseline's choice, the alarm and its outputs ([`super::health`]).
 
@@ -203,6 +207,64 @@ pub struct Judged {
     pub highest: bool,
     /// Past its limit: a drift the alarm is raised for.
     pub past: bool,
+}
+
+/// A figure in alarm: what it was when last measured against its limit, and since when.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Held {
+    /// `dead time`, `opening speed`, ...
+    pub name: &'static str,
+    pub unit: &'static str,
+    /// The figure when last measured, its limit and its baseline then.
+    pub now: f64,
+    pub limit: f64,
+    pub base: f64,
+    /// The limit is the highest value allowed, not the lowest.
+    pub highest: bool,
+    /// Loop time of the window that first measured it past its limit in this alarm, s.
+    pub since_t_s: f64,
+    /// Loop time of the last window that measured it, s.
+    pub measured_t_s: f64,
+}
+
+impl Held {
+    /// Each figure's alarm after the window ending at `t_s` judged `judged` (in the order of
+    /// [`FIGURES`]): raised or renewed where measured past its limit, cleared where measured
+    /// within it, kept where not measured.
+    pub fn update(held: &mut [Option<Held>; 5], judged: &[Judged; 5], t_s: f64) {
+        for (h, j) in held.iter_mut().zip(judged) {
+            let (Some(now), Some(limit)) = (j.now, j.limit) else {
+                continue;
+            };
+            *h = j.past.then(|| Held {
+                name: j.name,
+                unit: j.unit,
+                now,
+                limit,
+                base: j.base.unwrap_or(f64::NAN),
+                highest: j.highest,
+                since_t_s: h.map_or(t_s, |h| h.since_t_s),
+                measured_t_s: t_s,
+            });
+        }
+    }
+
+    /// The alarm of a figure this window could not measure: `reversal delay not measured in
+    /// this window (too few steps): in alarm since 1020.0 s, last 1.290 s against its limit
+    /// 1.260 s at 1080.0 s`.
+    pub fn unmeasured(&self) -> String {
+        let d = if self.unit == "s" { 3 } else { 2 };
+        format!(
+            "{} not measured in this window (too few steps): in alarm since {:.1} s, last {:.d$} {u} \
+             against its limit {:.d$} {u} at {:.1} s",
+            self.name,
+            self.since_t_s,
+            self.now,
+            self.limit,
+            self.measured_t_s,
+            u = self.unit
+        )
+    }
 }
 
 /// The limit of each figure against a baseline (a delay's: none while the baseline has none);

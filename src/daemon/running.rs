@@ -172,7 +172,11 @@ fn bind(config: &Config, sources: &[Source], dir: &Path) -> Result<Bound, Daemon
         .as_ref()
         .map(|_| LoopMetrics::new(&names, config.health.is_some()))
         .transpose()?;
-    let runs = (config.health.is_some(), config.diagnosis.is_some());
+    // The loop time of the first health window and of the first diagnosis, for the page.
+    let runs = (
+        config.health.as_ref().map(|h| h.window_s),
+        config.diagnosis.as_ref().map(|d| d.window_s),
+    );
     let board = (config.metrics.as_ref())
         .map(|_| Arc::new(Board::new(&names, config.loop_.rate_hz, runs, dir)));
     let listeners = Listeners::bind(config, sources, (metrics.as_ref(), board.as_ref()))?;
