@@ -1,9 +1,11 @@
 //! The report pages in a real browser: identify's and diagnose's `report.html` (of a 30 s
-//! recording) and fleet's `index.html` with one of its valves' pages, written by the binary and
-//! opened in headless Chromium by `tests/browser/check_reports.py` (Playwright for Python driving
-//! Debian's Chromium). Fails on a console error, a chart that drew nothing, or a drag that does
-//! not zoom (Shift+wheel that does not pan, a double-click that does not reset) a chart's time
-//! range.
+//! recording), fleet's `index.html` with one of its valves' pages and a daemon's health plot,
+//! written by the binary and opened in headless Chromium by `tests/browser/check_reports.py`
+//! (Playwright for Python driving Debian's Chromium). Fails on a console error, a chart that
+//! drew nothing, a drag that does not zoom (Shift+wheel that does not pan, a double-click that
+//! does not reset) a chart's time range, chart text under 11 px or overlapping, and a page that
+//! does not say at first sight what it must (identify's best model, diagnose's mismatch, the
+//! fleet's rule and severities; see the script).
 //!
 //! With `VB_SCREENSHOTS=DIR` the pages' screenshots are saved as `DIR/report-{identify,
 //! diagnose,fleet,fleet-valve}.png` (README's with `VB_SCREENSHOTS=docs`), identify's and
@@ -62,6 +64,14 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
     std::fs::copy(&recording, d("valves/fv-101.csv")).unwrap();
     cut("pub_asym_rs.csv", 60, &dir.path().join("valves/fv-102.csv"));
     run(&["fleet", &d("valves"), "--out", &d("fleet")]);
+    // A health plot: 15 minutes of the wearing valve, two windows.
+    let worn = format!("{ROOT}/config/worn-valve.toml");
+    let duration = ["--as-fast-as-possible", "--duration", "900"];
+    run(&[
+        &["run", "--config", &worn, "--log-dir", &d("worn")][..],
+        &duration[..],
+    ]
+    .concat());
 
     let mut cmd = Command::new("python3");
     cmd.arg(format!("{ROOT}/tests/browser/check_reports.py"))
@@ -77,6 +87,7 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
         ("diagnose", d("diagnose/report.html"), "2"),
         ("fleet", d("fleet/index.html"), "0"),
         ("fleet-valve", d("fleet/valves/fv-102/report.html"), "2"),
+        ("health", d("worn/health-worn.svg"), "0"),
     ] {
         cmd.args(["--page", name, &page, charts]);
     }
@@ -86,7 +97,7 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
         out.status.success(),
         "the pages failed in Chromium:\n{text}"
     );
-    for name in ["identify", "diagnose", "fleet"] {
+    for name in ["identify", "diagnose", "fleet", "health"] {
         assert!(
             text.contains(&format!("{name}: ")),
             "{name} was not checked:\n{text}"

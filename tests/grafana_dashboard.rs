@@ -79,6 +79,7 @@ fn exported() -> BTreeSet<String> {
         trigger: "every_s",
         verdict: String::new(),
         compared: true,
+        reference: false,
         effects: vec![Entry::new(Effect::Backlash, true, band)],
         advice: Vec::new(),
         alarms: vec![

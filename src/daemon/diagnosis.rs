@@ -334,6 +334,7 @@ impl History {
             trigger: job.trigger,
             verdict: String::new(),
             compared: self.model.is_some(),
+            reference: false,
             effects: Vec::new(),
             advice: Vec::new(),
             alarms: Vec::new(),
@@ -357,7 +358,9 @@ impl History {
         let findings = record.effects.iter().filter(|e| e.finding);
         record.advice = vocabulary::advice(findings.map(|e| (e.effect, &e.size)));
         let whole = job.trigger == "every_s";
+        let had = self.baseline.is_set();
         let (standing, raised) = self.baseline.compare(job.t_s, whole, &record.effects);
+        record.reference = !had && self.baseline.is_set();
         if self.model.is_none() && self.baseline.is_set() {
             self.model = Some(d.model);
         }

@@ -169,7 +169,7 @@ fn draw_panel<DB: DrawingBackend>(
     let pad = ((hi - lo) * 0.08).max(1e-3);
     let (t0, t1) = (t[0], t[t.len() - 1].max(t[0] + 1e-9));
     let chart = ChartBuilder::on(plot)
-        .caption(format!("{title} ({unit})"), ("sans-serif", 13))
+        .caption(format!("{title} ({unit})"), AXIS_FONT)
         .margin(6)
         .x_label_area_size(44)
         .y_label_area_size(68)
@@ -213,7 +213,7 @@ fn draw_panel<DB: DrawingBackend>(
     for (i, (name, style)) in entries.iter().enumerate() {
         let y = 40 + 20 * i as i32;
         drawn(side.draw(&Rectangle::new([(4, y - 4), (22, y + 4)], *style)));
-        drawn(side.draw(&Text::new(*name, (28, y - 6), ("sans-serif", 12))));
+        drawn(side.draw(&Text::new(*name, (28, y - 7), AXIS_FONT)));
     }
 }
 

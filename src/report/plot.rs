@@ -51,8 +51,8 @@ pub(crate) const AXIS_FONT: (&str, u32) = ("sans-serif", 15);
 /// Height of a legend row, px.
 const LEGEND_ROW: i32 = 18;
 /// Width given to each character of a legend label, px: the SVG backend has no font metrics, so
-/// labels are laid out at a generous average width of the 13 px sans-serif font.
-const CHAR_W: i32 = 7;
+/// labels are laid out at a generous average width of their sans-serif font ([`AXIS_FONT`]).
+const CHAR_W: i32 = 8;
 
 /// Where each entry of a legend `width` px wide goes (left to right, wrapped) and the legend's
 /// height.
@@ -107,11 +107,7 @@ fn with_legend(
                 )),
                 Mark::Dot => legend.draw(&Circle::new((x + 10, mid), 3, e.color.filled())),
             });
-            drawn(legend.draw(&Text::new(
-                e.name,
-                (x + 26, mid - 7),
-                ("sans-serif", 13).into_font(),
-            )));
+            drawn(legend.draw(&Text::new(e.name, (x + 26, mid - 7), AXIS_FONT.into_font())));
         }
         drawn(root.present());
     }

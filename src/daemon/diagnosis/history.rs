@@ -62,6 +62,8 @@ pub struct Record {
     /// Diagnosed from the model of the valve's first whole window (its reference), so what it
     /// finds is what changed since; false for the first diagnoses.
     pub compared: bool,
+    /// This diagnosis is the reference: the valve's first of a whole window.
+    pub reference: bool,
     /// Findings first, then traces.
     pub effects: Vec<Entry>,
     /// Each finding in the vocabulary's words, highest priority first.

@@ -273,8 +273,9 @@
   function found(r) {
     var td = el("td", "verdict");
     if (r.error) { td.textContent = "failed: " + r.error; return td; }
-    td.appendChild(el("div", "note", r.compared ? "Compared with the reference (the first diagnosis):"
-      : "The valve as first diagnosed (the reference later diagnoses are compared with):"));
+    td.appendChild(el("div", "note", r.compared ? "What changed since the reference diagnosis:"
+      : r.reference ? "The reference: the valve as first diagnosed over a whole window (later diagnoses say what changed since):"
+        : "Diagnosed afresh, before the reference (the first whole window):"));
     if (!(r.advice || []).length) { td.appendChild(el("div", null, r.verdict)); }
     (r.advice || []).forEach(function (a) {
       var line = el("div", "sev-" + a.severity);

@@ -21,7 +21,7 @@ use crate::diagnose::Diagnosis;
 use crate::recording::RecordingView;
 
 /// Least stretch of time the whole-recording chart opens on around the worst mismatch, s.
-const OPEN_ON_S: f64 = 60.0;
+const OPEN_ON_S: f64 = 20.0;
 
 /// The diagnosis report of a recording as one self-contained HTML page.
 pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
