@@ -82,7 +82,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     for f in &d.findings {
         outln!(
             "   found {}: {}\n   held-out SSE {:.2} -> {:.2} %²",
-            f.effect.name(),
+            valve_bridge::vocabulary::words(f.effect).plain,
             report::evidence(f),
             f.heldout_sse_before,
             f.heldout_sse_after
