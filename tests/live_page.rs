@@ -11,7 +11,9 @@
 //! the figure's row, which is marked past its limit), since when and the diagnosis that
 //! explains it, or an alarm shown where no figure is past its limit (the healthy valve); on
 //! the alarm's diagnosis not listed with a report that opens, or the effect it names not
-//! charted over time; and on a snake_case name or `%²` in the page's text.
+//! charted over time; on the healthy valve not diagnosed, or its diagnosis finding anything
+//! (it is the bundled model, which its diagnoses start from); and on a snake_case name or `%²`
+//! in the page's text.
 //!
 //! With `VB_SCREENSHOTS=DIR` the page's screenshot is saved as `DIR/live-page.png` (README's
 //! with `VB_SCREENSHOTS=docs`). Without Chromium or Playwright the test is a visible skip, or a

@@ -13,6 +13,9 @@
 //! history is the same on every run; at the end of a run the thread finishes the jobs still
 //! queued.
 //!
+//! A valve's windows are diagnosed from its `health_baseline_model` when it has one, else from
+//! the final model of its first whole window's diagnosis once there is one (see [`history`]).
+//!
 //! Each diagnosis is a line of `diagnosis-<valve>.jsonl` beside the logs ([`history::Record`])
 //! and, with `reports`, the full report in `diagnosis-<valve>/<t_s>/`; the gauges are
 //! `valve_bridge_effect_size{valve,effect,unit}` (each finding's and trace's size, in the unit
@@ -122,13 +125,15 @@ impl DiagnosisMetrics {
     }
 }
 
-/// One valve to diagnose: its name (label and file names), its gauges and the count of its
-/// diagnoses the live page reads.
+/// One valve to diagnose: its name (label and file names), its gauges, the count of its
+/// diagnoses the live page reads, and the model its diagnoses start from (its
+/// `health_baseline_model`; without one, the model of its first whole window's diagnosis).
 #[derive(Debug)]
 pub struct Watched {
     pub name: String,
     pub metrics: Option<DiagnosisMetrics>,
     pub count: Option<Arc<AtomicU64>>,
+    pub model: Option<ModelSpec>,
 }
 
 /// The history of the valve named `valve` in the log directory `dir`.
@@ -247,7 +252,7 @@ pub fn start(
             file,
             dir: dir.to_path_buf(),
             baseline: Baseline::default(),
-            model: None,
+            model: w.model,
             last: None,
             metrics: w.metrics,
             count: w.count,
@@ -284,7 +289,8 @@ struct History {
     file: File,
     dir: PathBuf,
     baseline: Baseline,
-    /// The baseline diagnosis's final model, which later windows start from.
+    /// The model every window's diagnosis starts from: the valve's health baseline model, or
+    /// the baseline diagnosis's final model once there is one.
     model: Option<ModelSpec>,
     last: Option<Record>,
     metrics: Option<DiagnosisMetrics>,

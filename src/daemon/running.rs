@@ -237,15 +237,20 @@ fn start_health(
     })?;
     let period_s = config.loop_.period_s();
     let mut watched = Vec::with_capacity(config.valves.len());
+    // Each valve's health baseline model: its answer is the health baseline, and the live
+    // diagnosis starts from it.
+    let models = (config.valves.iter())
+        .map(|v| {
+            v.health_baseline_model
+                .as_deref()
+                .map(ModelSpec::load)
+                .transpose()
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(BackendError::from)?;
     for (i, v) in config.valves.iter().enumerate() {
-        let baseline_model = match &v.health_baseline_model {
-            Some(file) => Some(
-                Valve::new(
-                    &ModelSpec::load(file).map_err(BackendError::from)?,
-                    period_s,
-                )
-                .map_err(BackendError::from)?,
-            ),
+        let baseline_model = match &models[i] {
+            Some(spec) => Some(Valve::new(spec, period_s).map_err(BackendError::from)?),
             None => None,
         };
         watched.push(health::Watched {
@@ -272,6 +277,7 @@ fn start_health(
                     name: v.label().to_string(),
                     metrics: m.clone(),
                     count: board.and_then(|b| b.valve(i)?.diagnoses()),
+                    model: models[i].clone(),
                 })
                 .collect();
             let (feed, handle) = diagnosis::start(d, dir, period_s, valves, diagnose)?;

@@ -8,14 +8,15 @@ wait, or shown without its figure, its limit, since when and what explains it, o
 that are not its figure's row's (a row that must be marked past its limit), an alarm badge or
 caption that disagrees with the figures, an alarm shown for the healthy valve, a snake_case name
 or `%²` in the page's text, and with --diagnosis, no diagnosis of the drifting valve listed with
-a report that opens without errors, an alarm not explained by its diagnosis, or the effects its
-diagnoses name not charted (one chart of sizes over time per unit, each with ink on it).
+a report that opens without errors, an alarm not explained by its diagnosis, the effects its
+diagnoses name not charted (one chart of sizes over time per unit, each with ink on it), or the
+healthy valve not diagnosed within the wait or its diagnosis finding anything.
 
     python3 tests/browser/check_live.py URL --valves N --alarm NAME [--healthy NAME]
         [--diagnosis] [--wait S] [--started UNIX_S --within S] [--screenshots DIR]
 
 With --screenshots, saves DIR/live-page.png: the whole page once the alarm (and the diagnosis)
-are shown.
+are shown, and every valve's diagnosis when it comes within the wait.
 """
 
 import argparse
@@ -216,6 +217,24 @@ def check_sizes(page, name, problems):
     print(f"{name}: effect sizes charted in {units}")
 
 
+def check_quiet(page, name, seconds, problems):
+    """The healthy valve `name` is diagnosed within `seconds` (the history the page draws from,
+    /api/diagnoses/NAME), and its diagnoses find nothing: it is its health baseline model."""
+    history = f"""async () => (await (await fetch('/api/diagnoses/{name}', {{ cache: 'no-store' }})).json())
+      .map(r => [r.error || null, r.effects.filter(e => e.finding).map(e => e.effect), r.verdict])"""
+    end = time.time() + seconds
+    records = page.page.evaluate(history)
+    while not records and time.time() < end:
+        page.page.wait_for_timeout(1000)
+        records = page.page.evaluate(history)
+    if not records:
+        problems.append(f"{name}: no diagnosis within {seconds} s")
+    for error, found, verdict in records:
+        if error or found:
+            problems.append(f"{name}: the healthy valve's diagnosis found {found or error}: {verdict}")
+    print(f"{name}: {len(records)} diagnoses, finding {[r[1] for r in records]}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("url")
@@ -238,9 +257,14 @@ def main():
         if args.diagnosis:
             check_diagnosis(browser, page, args.url, args.alarm, args.wait, problems)
             check_sizes(page, args.alarm, problems)
+            if args.healthy:
+                check_quiet(page, args.healthy, args.wait, problems)
         check_labels(page, problems)
         check_words(page, problems)
         if args.screenshots:
+            # Every valve with a diagnosis on the picture, when they come within the wait.
+            wait(page, "n => document.querySelectorAll('table.diagnosis-history').length >= n",
+                 args.valves, args.wait)
             Path(args.screenshots).mkdir(parents=True, exist_ok=True)
             page.page.evaluate("window.scrollTo(0, 0)")
             page.screenshot(Path(args.screenshots) / "live-page.png", full_page=True)

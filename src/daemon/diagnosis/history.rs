@@ -59,8 +59,9 @@ pub struct Record {
     pub trigger: &'static str,
     /// The conclusion in words (as `diagnose` prints it).
     pub verdict: String,
-    /// Diagnosed from the model of the valve's first whole window (its reference), so what it
-    /// finds is what changed since; false for the first diagnoses.
+    /// Diagnosed from a reference model (the valve's health baseline model, or the final model of
+    /// its first whole window's diagnosis), so what it finds is what differs from that model;
+    /// false for the first diagnoses of a valve without a health baseline model.
     pub compared: bool,
     /// This diagnosis is the reference: the valve's first of a whole window.
     pub reference: bool,

@@ -273,7 +273,7 @@
   function found(r) {
     var td = el("td", "verdict");
     if (r.error) { td.textContent = "failed: " + r.error; return td; }
-    td.appendChild(el("div", "note", r.compared ? "What changed since the reference diagnosis:"
+    td.appendChild(el("div", "note", r.compared ? "What differs from the reference model:"
       : r.reference ? "The reference: the valve as first diagnosed over a whole window (later diagnoses say what changed since):"
         : "Diagnosed afresh, before the reference (the first whole window):"));
     if (!(r.advice || []).length) { td.appendChild(el("div", null, r.verdict)); }
