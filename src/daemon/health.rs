@@ -8,9 +8,11 @@
 //! it); the identification's travel-speed
 //! estimate ([`crate::metrics::steps::travel_speed`]) the opening and closing stroke speeds; the
 //! tracking error is the RMS of O_P - V_P. A window with fewer than `min_steps` steps of a kind
-//! gives no delay and says so in its note. The baseline is the first window with enough steps,
-//! or, with `health_baseline_model`, that model's answer to each window's O_P (analysed the
-//! same way).
+//! gives no delay and says so in its note; the valve is in alarm while a figure is
+//! ([`Held`]: from a window that measures it past its limit to one that measures it within it,
+//! a window that cannot measure it changing nothing). The baseline is the first window with
+//! enough steps, or, with `health_baseline_model`, that model's answer to each window's O_P
+//! (analysed the same way).
 //!
 //! It runs on a thread of its own (`vb-health`), fed by the loggers with the rows they write:
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named

@@ -281,3 +281,63 @@ pub struct HealthLimits {
     /// Highest RMS of O_P - V_P, %.
     pub tracking_rms_pct: f64,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The five figures of a window: the reversal delay as given (None: too few steps to
+    /// measure it), against a limit of 1.0 s; the others measured within their limits.
+    fn window(reversal_delay_s: Option<f64>) -> [Judged; 5] {
+        let now = Figures {
+            same_steps: 4,
+            reversals: if reversal_delay_s.is_some() { 4 } else { 1 },
+            dead_time_s: Some(0.3),
+            reversal_delay_s,
+            opening_speed_pct_per_s: 10.0,
+            closing_speed_pct_per_s: 10.0,
+            tracking_rms_pct: 0.5,
+        };
+        let base = Figures {
+            reversal_delay_s: Some(0.4),
+            ..now
+        };
+        let lim = HealthLimits {
+            dead_time_s: Some(0.6),
+            reversal_delay_s: Some(1.0),
+            opening_speed_pct_per_s: 5.0,
+            closing_speed_pct_per_s: 5.0,
+            tracking_rms_pct: 2.0,
+        };
+        now.judged(Some(&base), Some(&lim))
+    }
+
+    #[test]
+    fn an_alarm_holds_from_past_its_limit_to_within_it_and_too_few_steps_raise_none() {
+        let mut held = [None; 5];
+        // Too few steps to measure: a state, not an alarm.
+        Held::update(&mut held, &window(None), 10.0);
+        assert_eq!(held, [None; 5]);
+        // Past its limit: raised, with its figure, its limit and since when.
+        Held::update(&mut held, &window(Some(1.3)), 20.0);
+        let raised = held[1].expect("the reversal delay in alarm");
+        assert_eq!((raised.now, raised.limit, raised.base), (1.3, 1.0, 0.4));
+        assert_eq!((raised.since_t_s, raised.measured_t_s), (20.0, 20.0));
+        assert!(held.iter().enumerate().all(|(i, h)| i == 1 || h.is_none()));
+        // Not measured: kept as last measured; measured past again: since when unchanged.
+        Held::update(&mut held, &window(None), 30.0);
+        assert_eq!(held[1], Some(raised));
+        Held::update(&mut held, &window(Some(1.2)), 40.0);
+        let renewed = held[1].expect("still in alarm");
+        assert_eq!(
+            (renewed.now, renewed.since_t_s, renewed.measured_t_s),
+            (1.2, 20.0, 40.0)
+        );
+        assert!(renewed
+            .unmeasured()
+            .contains("in alarm since 20.0 s, last 1.200 s"));
+        // Measured within its limit: cleared.
+        Held::update(&mut held, &window(Some(0.5)), 50.0);
+        assert_eq!(held, [None; 5]);
+    }
+}
