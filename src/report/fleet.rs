@@ -74,8 +74,8 @@ pub fn html(f: &Fleet) -> String {
         l.friction_band_pct,
         l.stroke_speed_pct_per_s
     );
-    h.push_str("<style>table.fleet td.what{min-width:420px;font-size:.9em}table.fleet tr.sev-high td:first-child{border-left:6px solid #c62828}</style>\
-        <table class=\"fleet\"><tr><th>rank</th><th>valve</th><th>severity</th><th>priority</th><th>what is wrong, and what to do</th><th>dead time, s</th><th>reversal delay, s</th><th>friction band, %</th><th>stroke speed at half travel opening, %/s</th><th>closing, %/s</th></tr>");
+    h.push_str("<style>table.fleet{font-size:.92em}table.fleet td.what{min-width:340px}table.fleet td:nth-child(2){white-space:nowrap}table.fleet tr.sev-high td:first-child{border-left:6px solid #c62828}</style>\
+        <table class=\"fleet\"><tr><th>rank</th><th>valve</th><th>severity</th><th>priority</th><th>what is wrong, and what to do</th><th>dead time, s</th><th>reversal delay, s</th><th>friction band, %</th><th>opening speed at half travel, %/s</th><th>closing speed, %/s</th></tr>");
     let ok = f.valves.iter().filter(|v| v.error.is_none());
     for (i, v) in ok.enumerate() {
         valve_row(&mut h, i + 1, v, f);

@@ -12,8 +12,8 @@ coloured by severity, none taller than six lines.
     python3 tests/browser/check_reports.py [--screenshots DIR] --page NAME PATH MIN_CHARTS ...
 
 NAME says which page it is (identify, diagnose, fleet, fleet-valve; any other is checked as a
-page of charts only). With --screenshots, saves DIR/report-NAME.png of each HTML page (zoomed
-into its first chart, values under the cursor).
+page of charts only). With --screenshots, saves DIR/report-NAME.png of each HTML page as it
+opens, scrolled to its first chart, values under the cursor.
 """
 
 import argparse
@@ -125,11 +125,13 @@ def check_page(browser, name, path, min_charts, shots, problems):
     for i in range(n):
         check_chart(page, i, problems, where)
     if shots and path.suffix == ".html":
+        # The page as it opens, scrolled to its first chart, values under the cursor.
+        shown = browser.open(path)
         if n > 0:
-            page.scroll_to(0)
-            page.drag_zoom(0, 0.45, 0.55)
-            page.hover(0, 0.5)
-        page.screenshot(Path(shots) / f"report-{name}.png")
+            shown.scroll_to(0)
+            shown.hover(0, 0.5)
+        shown.screenshot(Path(shots) / f"report-{name}.png")
+        problems.extend(f"{where} (opened again): {e}" for e in shown.errors)
     problems.extend(f"{where}: {e}" for e in page.errors)
     print(f"{name}: {n} charts checked, {len(page.errors)} console errors")
 
