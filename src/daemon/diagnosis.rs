@@ -14,7 +14,11 @@
 //! queued.
 //!
 //! Each diagnosis is a line of `diagnosis-<valve>.jsonl` beside the logs ([`history::Record`])
-//! and, with `reports`, the full report in `diagnosis-<valve>/<t_s>/`; the gauges are
+//! and, with `reports`, the full report in `diagnosis-<valve>/<stamp>/`, named by the window's
+//! end in UTC (`20261122T101500Z`, `-1` added when taken). The history is appended to run
+//! after run ([`files::open_history`]; loop time starts at 0 again in each run, the `utc` field
+//! does not) and survives a disk that refuses it as the log does ([`LogFile`]); no report of an
+//! earlier run is written over. The gauges are
 //! `valve_bridge_effect_size{valve,effect,unit}` (each finding's and trace's size, in the unit
 //! of its label), `valve_bridge_diagnosis_age_seconds{valve}` (loop time since the diagnosed
 //! window's end) and `valve_bridge_diagnosis_alarm{valve,effect}` (1 while the effect is in
@@ -25,21 +29,25 @@
 pub mod history;
 
 use std::collections::VecDeque;
-use std::fs::File;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
+use std::time::SystemTime;
 
 use prometheus::{Gauge, GaugeVec, Opts, Registry};
 
 use super::analysis::DiagnoseWindow;
-use super::config::DiagnosisConfig;
+use super::config::{DiagnosisConfig, OnError};
+use super::files;
+use super::log_file::{LogAlarm, LogFile, Refused};
+use super::logger::file_stamp;
+use super::page::board::ValveBoard;
 use super::DaemonError;
 use crate::model::composed::Effect;
 use crate::model::ModelSpec;
+use crate::recording::log_format::utc_stamp;
 use crate::recording::RecordingView;
 use history::{Baseline, Record};
 
@@ -54,6 +62,8 @@ pub struct DiagnosisReport {
     pub first_alarm_t_s: Option<f64>,
     /// The history file.
     pub file: PathBuf,
+    /// Lines the disk refused for a while: written late, or dropped.
+    pub refused: Refused,
 }
 
 /// The diagnosis gauges of every valve.
@@ -124,13 +134,14 @@ impl DiagnosisMetrics {
     }
 }
 
-/// One valve to diagnose: its name (label and file names), its gauges and the count of its
-/// diagnoses the live page reads.
+/// One valve to diagnose: its name (label and file names), its gauges, its place on the live
+/// page (the count of its diagnoses, where this run's history starts) and its log alarm.
 #[derive(Debug)]
 pub struct Watched {
     pub name: String,
     pub metrics: Option<DiagnosisMetrics>,
-    pub count: Option<Arc<AtomicU64>>,
+    pub(crate) board: Option<Arc<ValveBoard>>,
+    pub(crate) log_alarm: Arc<LogAlarm>,
 }
 
 /// The history of the valve named `valve` in the log directory `dir`.
@@ -143,6 +154,8 @@ pub fn history_file(dir: &Path, valve: &str) -> PathBuf {
 struct Job {
     valve: usize,
     t_s: f64,
+    /// The window's end on the wall clock (as the log's `utc`).
+    utc: SystemTime,
     trigger: &'static str,
     op: Vec<f64>,
     vp: Vec<f64>,
@@ -169,9 +182,17 @@ pub struct Feed {
 }
 
 impl Feed {
-    /// Takes valve `i`'s row at loop time `t_s` (NaN for a missing value); `alarm_raised`: the
-    /// health check raised its alarm with this row. Queues a diagnosis when one is due.
-    pub fn push(&mut self, i: usize, t_s: f64, op: f64, vp: f64, alarm_raised: bool) {
+    /// Takes valve `i`'s row at loop time `t_s` and wall-clock time `utc` (NaN for a missing
+    /// value); `alarm_raised`: the health check raised its alarm with this row. Queues a
+    /// diagnosis when one is due.
+    pub fn push(
+        &mut self,
+        i: usize,
+        (t_s, utc): (f64, SystemTime),
+        op: f64,
+        vp: f64,
+        alarm_raised: bool,
+    ) {
         let Some(r) = self.rings.get_mut(i) else {
             return;
         };
@@ -206,6 +227,7 @@ impl Feed {
         let job = Job {
             valve: i,
             t_s,
+            utc,
             trigger,
             op: op.split_off(first),
             vp: r.vp.iter().skip(first).copied().collect(),
@@ -218,10 +240,12 @@ impl Feed {
 /// The diagnosis thread, joined for each valve's report.
 pub type Thread = JoinHandle<Result<Vec<DiagnosisReport>, DaemonError>>;
 
-/// Starts the diagnosis thread for `valves` with their histories in `dir`.
+/// Starts the diagnosis thread for `valves` with their histories in `dir` (appended to; a
+/// link where a history or a valve's report directory goes is refused), for a loop of period
+/// `period_s`; `on_error`: what a write the disk refuses does.
 pub fn start(
     cfg: &DiagnosisConfig,
-    dir: &Path,
+    (dir, on_error): (&Path, OnError),
     period_s: f64,
     valves: Vec<Watched>,
     diagnose: DiagnoseWindow,
@@ -233,10 +257,11 @@ pub fn start(
     for w in valves {
         let done = Arc::new(AtomicU64::new(f64::NAN.to_bits()));
         let path = history_file(dir, &w.name);
-        let file = File::create(&path).map_err(|source| DaemonError::LogFile {
-            path: path.clone(),
-            source,
-        })?;
+        let (file, size) = files::open_history(&path, b"")?;
+        files::refuse_link(&dir.join(format!("diagnosis-{}", w.name)))?;
+        if let Some(b) = &w.board {
+            b.history_starts_at(size);
+        }
         rings.push(Ring {
             op: VecDeque::with_capacity(cap),
             vp: VecDeque::with_capacity(cap),
@@ -245,14 +270,14 @@ pub fn start(
             age: w.metrics.as_ref().and_then(|m| m.age(&w.name)),
         });
         histories.push(History {
+            log: LogFile::new(path.clone(), file, size, (on_error, w.log_alarm)),
             name: w.name,
-            file,
             dir: dir.to_path_buf(),
             baseline: Baseline::default(),
             model: None,
             last: None,
             metrics: w.metrics,
-            count: w.count,
+            board: w.board,
             diagnose,
             done_t_s: done,
             report: DiagnosisReport {
@@ -260,6 +285,7 @@ pub fn start(
                 alarms: Vec::new(),
                 first_alarm_t_s: None,
                 file: path,
+                refused: Refused::default(),
             },
         });
     }
@@ -283,14 +309,14 @@ pub fn start(
 /// One valve's history on the diagnosis thread.
 struct History {
     name: String,
-    file: File,
+    log: LogFile,
     dir: PathBuf,
     baseline: Baseline,
     /// The baseline diagnosis's final model, which later windows start from.
     model: Option<ModelSpec>,
     last: Option<Record>,
     metrics: Option<DiagnosisMetrics>,
-    count: Option<Arc<AtomicU64>>,
+    board: Option<Arc<ValveBoard>>,
     diagnose: DiagnoseWindow,
     done_t_s: Arc<AtomicU64>,
     report: DiagnosisReport,
@@ -311,7 +337,13 @@ fn work(
         let record = h.diagnose(&job, cfg, period_s);
         h.write(record)?;
     }
-    Ok(histories.into_iter().map(|h| h.report).collect())
+    (histories.into_iter())
+        .map(|mut h| {
+            let (_, refused) = h.log.close()?;
+            h.report.refused = refused;
+            Ok(h.report)
+        })
+        .collect()
 }
 
 impl History {
@@ -332,6 +364,7 @@ impl History {
         };
         let mut record = Record {
             t_s: job.t_s,
+            utc: utc_stamp(job.utc),
             window_s: job.op.len() as f64 * period_s,
             trigger: job.trigger,
             verdict: String::new(),
@@ -340,7 +373,6 @@ impl History {
             report: None,
             error: None,
         };
-        let rel = format!("diagnosis-{}/{:.0}", self.name, job.t_s);
         let title = format!("valve {}: live diagnosis at {:.0} s", self.name, job.t_s);
         let base = self.model.as_ref();
         let d = match (self.diagnose)(&rec, base, cfg.reports.then_some(title.as_str())) {
@@ -365,23 +397,35 @@ impl History {
         self.report.alarms.extend(raised);
         record.alarms = standing;
         if !d.report.is_empty() {
-            record.report = self.write_report(&rel, &d.report);
+            record.report = self.write_report(job.utc, &d.report);
         }
         record
     }
 
-    /// Writes a report's files in `rel` (`diagnosis-<valve>/<t_s>/`, as `diagnose --out` would);
-    /// the report's path relative to the history's directory (None when it could not be
-    /// written: said in the log).
-    fn write_report(&self, rel: &str, files: &[(&str, String)]) -> Option<String> {
-        let dir = self.dir.join(rel);
-        let written = std::fs::create_dir_all(&dir).and_then(|()| {
-            (files.iter()).try_for_each(|(name, text)| std::fs::write(dir.join(name), text))
-        });
+    /// Writes a report's files (as `diagnose --out` would) in a new directory
+    /// `diagnosis-<valve>/<stamp>/`, named by `utc`, the window's end; the report's path
+    /// relative to the history's directory (None when it could not be written: said in the
+    /// log).
+    fn write_report(&self, utc: SystemTime, report: &[(&str, String)]) -> Option<String> {
+        let valve = format!("diagnosis-{}", self.name);
+        let parent = self.dir.join(&valve);
+        let written = files::real_dir(&parent)
+            .map_err(|e| e.to_string())
+            .and_then(|()| files::new_dir(&parent, &file_stamp(utc)).map_err(|e| e.to_string()))
+            .and_then(|dir| {
+                for (name, text) in report {
+                    files::write_new(&dir.join(name), text.as_bytes())
+                        .map_err(|e| format!("{}: {e}", dir.join(name).display()))?;
+                }
+                Ok(dir)
+            });
         match written {
-            Ok(()) => Some(format!("{rel}/report.html")),
+            Ok(dir) => {
+                let stamp = dir.file_name().unwrap_or_default().to_string_lossy();
+                Some(format!("{valve}/{stamp}/report.html"))
+            }
             Err(e) => {
-                tracing::warn!(dir = %dir.display(), "cannot write the diagnosis report: {e}");
+                tracing::warn!(valve = %self.name, "cannot write the diagnosis report: {e}");
                 None
             }
         }
@@ -390,14 +434,14 @@ impl History {
     /// Appends `record` to the history, publishes it and marks its time as done.
     fn write(&mut self, record: Record) -> Result<(), DaemonError> {
         self.report.diagnoses += 1;
-        let path = &self.report.file;
-        let line = serde_json::to_string(&record).map_err(std::io::Error::other);
-        line.and_then(|l| writeln!(self.file, "{l}"))
-            .and_then(|()| self.file.flush())
-            .map_err(|source| DaemonError::LogWrite {
-                path: path.clone(),
-                source,
-            })?;
+        match serde_json::to_vec(&record) {
+            Ok(mut line) => {
+                line.push(b'\n');
+                self.log.line(&line)?;
+                self.log.flush()?;
+            }
+            Err(e) => tracing::warn!(valve = %self.name, "a diagnosis could not be encoded: {e}"),
+        }
         if let Some(m) = &self.metrics {
             let empty = Record {
                 effects: Vec::new(),
@@ -409,7 +453,7 @@ impl History {
         if record.error.is_none() {
             self.done_t_s.store(record.t_s.to_bits(), Ordering::Relaxed);
         }
-        if let Some(c) = &self.count {
+        if let Some(c) = self.board.as_ref().and_then(|b| b.diagnoses()) {
             c.fetch_add(1, Ordering::Relaxed);
         }
         self.last = Some(record);

@@ -12,7 +12,10 @@
 //! - `valve_bridge_reconnects_total`: Modbus valve links reopened;
 //! - `valve_bridge_late_replies_total`: Modbus replies discarded as answers to earlier requests;
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
-//! - `valve_bridge_log_rows_dropped_total`: rows dropped because the logger fell behind;
+//! - `valve_bridge_log_rows_dropped_total`: rows that never reached the log (the logger fell
+//!   behind, or the disk refused them past the hold, [`super::log_file`]);
+//!   `valve_bridge_log_rows_late_total`: lines written after the disk had refused them;
+//!   `valve_bridge_log_write_failing`: 1 while one of the valve's files cannot be written;
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
 //!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
 //!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
@@ -220,6 +223,28 @@ fn health_metrics(
         .collect()
 }
 
+/// The compensation gauges (whether it acts, and the tracking error with and without it),
+/// registered in `registry`.
+fn compensation_gauges(registry: &Registry) -> Result<(GaugeVec, GaugeVec), prometheus::Error> {
+    let active = GaugeVec::new(
+        Opts::new(
+            "valve_bridge_compensation_active",
+            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
+        ),
+        &["valve"],
+    )?;
+    let tracking = GaugeVec::new(
+        Opts::new(
+            "valve_bridge_compensation_tracking_error_ratio",
+            "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
+        ),
+        &["valve", "case"],
+    )?;
+    registry.register(Box::new(active.clone()))?;
+    registry.register(Box::new(tracking.clone()))?;
+    Ok((active, tracking))
+}
+
 /// One valve's metrics (label `valve`), updated by the loop with atomic operations only.
 #[derive(Debug, Clone)]
 pub struct ValveMetrics {
@@ -233,6 +258,8 @@ pub struct ValveMetrics {
     late_replies: IntCounter,
     watchdog_trips: IntCounter,
     dropped_log_rows: IntCounter,
+    late_log_rows: IntCounter,
+    log_failing: Gauge,
 }
 
 impl LoopMetrics {
@@ -283,26 +310,22 @@ impl LoopMetrics {
         )?;
         let dropped_log_rows = counter(
             "valve_bridge_log_rows_dropped_total",
-            "Rows the loop dropped because the logger's queue was full",
+            "Rows that never reached the log: the logger's queue was full, or the disk refused them past the hold",
+        )?;
+        let late_log_rows = counter(
+            "valve_bridge_log_rows_late_total",
+            "Lines of the valve's files written late, after the disk had refused them",
+        )?;
+        let log_failing = gauge(
+            "valve_bridge_log_write_failing",
+            "1 while a file of the valve's log cannot be written (its lines are held)",
         )?;
         let watchdog_trips = counter(
             "valve_bridge_watchdog_trips_total",
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
-        let compensation_active = gauge(
-            "valve_bridge_compensation_active",
-            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
-        )?;
-        let compensation_tracking = GaugeVec::new(
-            Opts::new(
-                "valve_bridge_compensation_tracking_error_ratio",
-                "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
-            ),
-            &["valve", "case"],
-        )?;
-        registry.register(Box::new(compensation_active.clone()))?;
-        registry.register(Box::new(compensation_tracking.clone()))?;
+        let (compensation_active, compensation_tracking) = compensation_gauges(&registry)?;
         let valves_names = valves;
         let valves = (valves.iter())
             .map(|&v| {
@@ -317,6 +340,8 @@ impl LoopMetrics {
                     late_replies: late_replies.get_metric_with_label_values(&[v])?,
                     watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
                     dropped_log_rows: dropped_log_rows.get_metric_with_label_values(&[v])?,
+                    late_log_rows: late_log_rows.get_metric_with_label_values(&[v])?,
+                    log_failing: log_failing.get_metric_with_label_values(&[v])?,
                 })
             })
             .collect::<Result<Vec<_>, prometheus::Error>>()?;
@@ -329,10 +354,11 @@ impl LoopMetrics {
             late_replies,
             watchdog_trips,
             dropped_log_rows,
+            late_log_rows,
         ] {
             registry.register(Box::new(c))?;
         }
-        for g in [op_ratio, vp_ratio] {
+        for g in [op_ratio, vp_ratio, log_failing] {
             registry.register(Box::new(g))?;
         }
         servers.register(&registry)?;
@@ -424,6 +450,17 @@ impl ValveMetrics {
     /// Counts a row the logger's queue had no room for.
     pub fn dropped_log_row(&self) {
         self.dropped_log_rows.inc();
+    }
+
+    /// Counts lines of the valve's files written late and dropped after the disk refused them.
+    pub fn log_rows_refused(&self, late: u64, dropped: u64) {
+        self.late_log_rows.inc_by(late);
+        self.dropped_log_rows.inc_by(dropped);
+    }
+
+    /// Raises (true) or clears the valve's log alarm gauge.
+    pub fn log_failing(&self, on: bool) {
+        self.log_failing.set(f64::from(u8::from(on)));
     }
 
     /// Brings the link's and the watchdog's counters up to the totals the loop's parts keep.
