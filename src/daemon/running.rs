@@ -90,7 +90,7 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         })
         .collect();
     let (health, diagnosis) = start_health(
-        &config,
+        (&config, clock),
         (&dir, &alarms),
         (metrics.as_ref(), board.as_deref()),
         &sources,
@@ -225,10 +225,10 @@ impl Drop for LoopThreads {
 
 /// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, the gauges,
 /// the live page's `board`, and the alarm bit in the status word of each valve a process
-/// controller drives (`sources`); and with `[diagnosis]`, the diagnosis thread it feeds.
-/// `alarms`: each valve's log alarm.
+/// controller drives (`sources`); and with `[diagnosis]`, the diagnosis thread it feeds, for a
+/// loop on `clock`. `alarms`: each valve's log alarm.
 fn start_health(
-    config: &Config,
+    (config, clock): (&Config, ClockKind),
     (dir, alarms): (&Path, &[Arc<LogAlarm>]),
     (metrics, board): (Option<&LoopMetrics>, Option<&Board>),
     sources: &[Source],
@@ -283,7 +283,8 @@ fn start_health(
                 })
                 .collect();
             let on_error = (dir, config.log.on_error);
-            let (feed, handle) = diagnosis::start(d, on_error, period_s, valves, diagnose)?;
+            let (feed, handle) =
+                diagnosis::start(d, on_error, (period_s, clock), valves, diagnose)?;
             (Some(feed), Some(handle))
         }
         None => (None, None),

@@ -408,6 +408,13 @@ impl ValveSummary {
             for a in &d.alarms {
                 writeln!(f, "{indent}  alarm: {a}")?;
             }
+            if d.skipped > 0 {
+                writeln!(
+                    f,
+                    "{indent}diagnosis: {} windows skipped (each came while the valve's diagnosis before it was still running)",
+                    d.skipped
+                )?;
+            }
             write_refused(f, indent, "diagnosis lines", d.refused)?;
         }
         if let Some(c) = &self.compensation {
