@@ -6,7 +6,7 @@
 //! limit), `[log] on_error` decides:
 //! - `"keep-running"` (the default): the bytes not written are kept, from the exact byte the
 //!   disk stopped at, so no line is torn or doubled; later lines are held behind them, up to
-//!   [`HOLD_BYTES`] (some 15 minutes of a valve's rows at 100 Hz), and the lines that find the
+//!   [`HOLD_BYTES`] (some 18 minutes of a valve's rows at 100 Hz), and the lines that find the
 //!   hold full are dropped. Each flush tries again; once the disk takes everything the lines
 //!   written late are counted. The valve's [`LogAlarm`] is raised meanwhile: an error in the
 //!   log (stderr), the `valve_bridge_log_write_failing` gauge and a line on the live page. At
@@ -27,8 +27,8 @@ use super::error::DaemonError;
 use super::exporter::ValveMetrics;
 use super::page::board::ValveBoard;
 
-/// Bytes of lines held while the disk refuses them, at most (8 MiB: 15 minutes of a valve's
-/// rows at 100 Hz, 90 bytes each).
+/// Bytes of lines held while the disk refuses them, at most (8 MiB: 110,000 rows of the log,
+/// some 76 bytes each, 18 minutes of a valve at 100 Hz).
 pub const HOLD_BYTES: usize = 8 << 20;
 /// Bytes gathered before they are written between two flushes.
 const BATCH_BYTES: usize = 64 << 10;
@@ -402,6 +402,60 @@ mod tests {
         );
         let (written, refused) = f.close().unwrap();
         assert_eq!((written, refused.late), (60, 60 - on_time));
+    }
+
+    #[test]
+    fn the_alarm_shows_in_the_metrics_and_on_the_live_page_while_the_disk_refuses() {
+        use crate::daemon::exporter::LoopMetrics;
+        use crate::daemon::page::board::Board;
+        let metrics = LoopMetrics::new(&["v"], false).unwrap();
+        let board = Board::new(&["v"], 100.0, (false, false), Path::new("/logs"));
+        let alarm = LogAlarm::new("v", metrics.valve(0), board.valve(0));
+        let disk = Small {
+            room: 10,
+            ..Small::default()
+        };
+        let mut f = LogFile::new("/logs/v.csv".into(), disk, 0, (OnError::KeepRunning, alarm));
+        let shown = |board: &Board| {
+            let live: serde_json::Value = serde_json::from_str(&board.live_json(None)).unwrap();
+            live["valves"][0]["log_alarm"].as_str().map(String::from)
+        };
+        let gauge = |m: &LoopMetrics| {
+            let text = m.text().unwrap();
+            let line = (text.lines())
+                .find(|l| l.starts_with("valve_bridge_log_write_failing{"))
+                .unwrap()
+                .to_string();
+            let late = (text.lines())
+                .find(|l| l.starts_with("valve_bridge_log_rows_late_total{"))
+                .unwrap()
+                .to_string();
+            (line, late)
+        };
+        for k in 0..5 {
+            f.line(&row(k)).unwrap();
+        }
+        f.flush().unwrap();
+        let why = shown(&board).unwrap();
+        assert!(
+            why.starts_with("cannot write v.csv: No space left on device"),
+            "{why}"
+        );
+        let (failing, _) = gauge(&metrics);
+        assert_eq!(failing, "valve_bridge_log_write_failing{valve=\"v\"} 1");
+        f.disk.room = usize::MAX;
+        f.flush().unwrap();
+        assert_eq!(shown(&board), None);
+        let (failing, late) = gauge(&metrics);
+        assert_eq!(failing, "valve_bridge_log_write_failing{valve=\"v\"} 0");
+        assert_eq!(
+            late,
+            format!(
+                "valve_bridge_log_rows_late_total{{valve=\"v\"}} {}",
+                f.refused.late
+            )
+        );
+        assert!(f.refused.late > 0);
     }
 
     #[test]
