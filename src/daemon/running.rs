@@ -282,9 +282,9 @@ fn start_health(
                     log_alarm: alarms[i].clone(),
                 })
                 .collect();
-            let on_error = (dir, config.log.on_error);
+            let files_in = (dir, config.log.on_error);
             let (feed, handle) =
-                diagnosis::start(d, on_error, (period_s, clock), valves, diagnose)?;
+                diagnosis::start(d, files_in, (period_s, clock), valves, diagnose)?;
             (Some(feed), Some(handle))
         }
         None => (None, None),
