@@ -26,7 +26,9 @@
 //!
 //! Files: [`running`] starts the threads ([`start`], [`Running`]), [`control`] is the loop
 //! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread; [`error`] the errors; this file holds the options and [`run`]
-//! (signals and progress display).
+//! (signals and progress display). The log directory's files are opened by `files` (never
+//! through a symbolic link, each new one with its header on the disk) and written through
+//! [`log_file`] (which outlives a full disk).
 //!
 //! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis (the
 //! daemon runs diagnosis and plotting only as the [`Analysis`] it is handed).
@@ -38,10 +40,12 @@ mod control;
 pub mod diagnosis;
 mod error;
 pub mod exporter;
+mod files;
 pub mod health;
 mod health_figures;
 pub mod hil;
 mod http;
+pub mod log_file;
 pub mod logger;
 mod net;
 mod page;

@@ -14,6 +14,7 @@ use hdrhistogram::Histogram;
 use super::compensation::CompensationReport;
 use super::diagnosis::DiagnosisReport;
 use super::health::HealthReport;
+use super::log_file::Refused;
 use super::logger::LogReport;
 use super::valve::Fault;
 use crate::human;
@@ -409,6 +410,7 @@ impl ValveSummary {
                     .map_or(String::new(), |t| format!(" (first at {t:.0} s)")),
                 h.file.display()
             )?;
+            write_refused(f, indent, "health rows", h.refused)?;
         }
         if let Some(d) = &self.diagnosis {
             writeln!(
@@ -421,10 +423,19 @@ impl ValveSummary {
             for a in &d.alarms {
                 writeln!(f, "{indent}  alarm: {a}")?;
             }
+            if d.skipped > 0 {
+                writeln!(
+                    f,
+                    "{indent}diagnosis: {} windows skipped (each came while the valve's diagnosis before it was still running)",
+                    d.skipped
+                )?;
+            }
+            write_refused(f, indent, "diagnosis lines", d.refused)?;
         }
         if let Some(c) = &self.compensation {
             write_compensation(f, indent, c)?;
         }
+        write_refused(f, indent, "log rows", self.log.refused)?;
         let files: Vec<String> = self
             .log
             .files
@@ -438,6 +449,20 @@ impl ValveSummary {
             files.join(", ")
         )
     }
+}
+
+/// The line `WHAT the disk refused: N written late, M dropped`, when it refused any.
+fn write_refused(f: &mut fmt::Formatter<'_>, indent: &str, what: &str, r: Refused) -> fmt::Result {
+    if r == Refused::default() {
+        return Ok(());
+    }
+    writeln!(
+        f,
+        "{indent}{what} the disk refused: {} written late, {} dropped (a full disk? they were held, up to {} MiB)",
+        r.late,
+        r.dropped,
+        super::log_file::HOLD_BYTES >> 20
+    )
 }
 
 /// The summary's compensation line.

@@ -227,6 +227,20 @@ pub struct LogConfig {
     /// Gzip each file once the log has rotated to the next (`NAME.csv.gz`); the file being
     /// written stays plain CSV.
     pub compress: bool,
+    /// What a write the disk refuses does to the loop.
+    pub on_error: OnError,
+}
+
+/// `[log] on_error`: what a write the disk refuses (full, quota, file-size limit) does.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OnError {
+    /// The loop runs on; the log holds its lines and writes them when the disk takes them
+    /// again (see `crate::daemon::log_file`).
+    #[default]
+    KeepRunning,
+    /// The loop stops at the first refused write, with its stop action.
+    Stop,
 }
 
 impl Default for LogConfig {
@@ -237,6 +251,7 @@ impl Default for LogConfig {
             rotate_after_s: 3600.0,
             flush_interval_ms: 1000,
             compress: true,
+            on_error: OnError::KeepRunning,
         }
     }
 }

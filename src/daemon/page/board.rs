@@ -2,7 +2,8 @@
 //! already see it, never by the loop thread. Each logger puts a point of its valve's rows into
 //! the valve's trace every 1/[`TRACE_HZ`] s (and at every change of status), the health thread
 //! each window's figures with their baseline and limits, the diagnosis thread the count of its
-//! diagnoses. The network thread reads it for `/api/live` ([`Board::live_json`]): the locks are
+//! diagnoses and where this run's lines of its history start, and a file that cannot be
+//! written its log alarm ([`crate::daemon::log_file`]). The network thread reads it for `/api/live` ([`Board::live_json`]): the locks are
 //! held for a copy, never across I/O.
 //!
 //! Not here: serving ([`crate::daemon::http`]), the page itself (`live.js`), the diagnosis
@@ -58,6 +59,11 @@ pub(crate) struct ValveBoard {
     health: Option<Mutex<Option<HealthWindow>>>,
     /// Diagnoses made (None without `[diagnosis]`).
     diagnoses: Option<Arc<AtomicU64>>,
+    /// Where this run's lines of the diagnosis history start, bytes (the history keeps the
+    /// lines of earlier runs before them, on their own loop time).
+    history_from: AtomicU64,
+    /// Why the valve's log cannot be written, while it cannot.
+    log_alarm: Mutex<Option<String>>,
 }
 
 /// Every valve's board, and where the daemon writes its files.
@@ -97,6 +103,8 @@ impl Board {
                         cap,
                         health: health.then(|| Mutex::new(None)),
                         diagnoses: diagnosis.then(|| Arc::new(AtomicU64::new(0))),
+                        history_from: AtomicU64::new(0),
+                        log_alarm: Mutex::new(None),
                     })
                 })
                 .collect(),
@@ -119,11 +127,13 @@ impl Board {
         })
     }
 
-    /// The diagnosis history of the valve named `valve`, when it has one.
-    pub(crate) fn history(&self, valve: &str) -> Option<PathBuf> {
+    /// The diagnosis history of the valve named `valve`, when it has one, and where this
+    /// run's lines start in it.
+    pub(crate) fn history(&self, valve: &str) -> Option<(PathBuf, u64)> {
         let v = self.valves.iter().find(|v| v.name == valve)?;
         v.diagnoses.as_ref()?;
-        Some(history_file(&self.dir, valve))
+        let from = v.history_from.load(Ordering::Relaxed);
+        Some((history_file(&self.dir, valve), from))
     }
 
     /// The log directory.
@@ -160,6 +170,16 @@ impl ValveBoard {
     /// The counter of diagnoses made, for the diagnosis thread (None without `[diagnosis]`).
     pub(crate) fn diagnoses(&self) -> Option<Arc<AtomicU64>> {
         self.diagnoses.clone()
+    }
+
+    /// This run's lines of the diagnosis history start at byte `from` of it.
+    pub(crate) fn history_starts_at(&self, from: u64) {
+        self.history_from.store(from, Ordering::Relaxed);
+    }
+
+    /// Raises the log alarm with why (Some) or clears it (None).
+    pub(crate) fn log_alarm(&self, why: Option<String>) {
+        *lock(&self.log_alarm) = why;
     }
 
     fn view(&self, since: Option<f64>) -> ValveJson<'_> {
@@ -200,6 +220,7 @@ impl ValveBoard {
             trace,
             health,
             diagnoses: (self.diagnoses.as_ref()).map(|d| d.load(Ordering::Relaxed)),
+            log_alarm: lock(&self.log_alarm).clone(),
         }
     }
 }
@@ -273,6 +294,8 @@ struct ValveJson<'a> {
     health: Option<HealthJson>,
     /// Diagnoses made; null without `[diagnosis]`.
     diagnoses: Option<u64>,
+    /// Why the valve's log cannot be written; null while it can.
+    log_alarm: Option<String>,
 }
 
 /// Columns of a trace: loop time (s), O_P and V_P (%, null where missing).
@@ -383,8 +406,18 @@ mod tests {
         assert_eq!(parse(&board, None)["valves"][0]["diagnoses"], 2);
         assert_eq!(
             board.history("a"),
-            Some(PathBuf::from("/logs/diagnosis-a.jsonl"))
+            Some((PathBuf::from("/logs/diagnosis-a.jsonl"), 0))
         );
+        let v = board.valve(0).unwrap();
+        v.history_starts_at(120);
+        assert_eq!(board.history("a").unwrap().1, 120);
+        assert_eq!(
+            parse(&board, None)["valves"][0]["log_alarm"],
+            serde_json::Value::Null
+        );
+        v.log_alarm(Some("cannot write vb-a.csv".into()));
+        let live = parse(&board, None);
+        assert_eq!(live["valves"][0]["log_alarm"], "cannot write vb-a.csv");
         assert!(board.history("../a").is_none() && !board.has_valve("b"));
     }
 

@@ -1,7 +1,8 @@
 // The live page of valve-bridge's daemon (src/daemon/page/): every second it asks /api/live for
 // what is new (each valve's trace after the last point it has, its status, its last health
 // window, its count of diagnoses) and draws, per valve, O_P and V_P over the last minutes with
-// uPlot, the health figures against their limits and the alarms; when a valve has a new
+// uPlot, the health figures against their limits and the alarms (health, diagnosis, a log the
+// disk refuses); when a valve has a new
 // diagnosis it reads /api/diagnoses/NAME and draws the effect sizes over time (a chart per unit,
 // each size with its 90 % interval) and the table of diagnoses, each linked to its report.
 // Times are the browser's clock: loop time plus the wall-clock time of loop time 0.
@@ -144,6 +145,7 @@
 
   function showAlarms(v) {
     var items = [];
+    if (v.logAlarm != null) { items.push("log alarm: " + v.logAlarm); }
     if (v.healthAlarm != null) { items.push("health alarm: " + v.healthAlarm); }
     var last = v.history.length ? v.history[v.history.length - 1] : null;
     (last && last.alarms || []).forEach(function (a) { items.push("diagnosis alarm: " + a); });
@@ -260,6 +262,7 @@
       var v = valve(vj.name);
       if (live.started != null) { addTrace(v, vj.trace); }
       showStatus(v, vj);
+      v.logAlarm = vj.log_alarm;
       showHealth(v, vj.health);
       if (vj.diagnoses !== v.count) {
         v.count = vj.diagnoses;
