@@ -280,9 +280,15 @@ impl LoopMetrics {
             )
             .buckets(TIMING_BUCKETS_S.to_vec()),
         )?;
-        let counter =
-            |name: &str, help: &str| IntCounterVec::new(Opts::new(name, help), &["valve"]);
-        let gauge = |name: &str, help: &str| GaugeVec::new(Opts::new(name, help), &["valve"]);
+        // Each per-valve metric is registered as it is made.
+        let counter = |name: &str, help: &str| {
+            let c = IntCounterVec::new(Opts::new(name, help), &["valve"])?;
+            registry.register(Box::new(c.clone())).map(|()| c)
+        };
+        let gauge = |name: &str, help: &str| {
+            let g = GaugeVec::new(Opts::new(name, help), &["valve"])?;
+            registry.register(Box::new(g.clone())).map(|()| g)
+        };
         let cycles = counter(
             "valve_bridge_cycles_total",
             "Cycles that ran a valve transaction",
@@ -363,22 +369,6 @@ impl LoopMetrics {
             .collect::<Result<Vec<_>, prometheus::Error>>()?;
         registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
-        for c in [
-            cycles,
-            missed,
-            reconnects,
-            late_replies,
-            noise_bytes,
-            unexpected_replies,
-            watchdog_trips,
-            dropped_log_rows,
-            late_log_rows,
-        ] {
-            registry.register(Box::new(c))?;
-        }
-        for g in [op_ratio, vp_ratio, log_failing] {
-            registry.register(Box::new(g))?;
-        }
         servers.register(&registry)?;
         let health = if health {
             health_metrics(&registry, valves_names)?
