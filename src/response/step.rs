@@ -1,0 +1,100 @@
+//! One step of a response test measured on the logged V_P (ISA-75.25.01's figures): the dead
+//! time until V_P has moved a tenth of the step (the paper's step delay, measured as `steps`
+//! measures it, [`time_to_move`]), T63 and T86 until it has covered 63.2 % and 86.5 % of its
+//! final change, the overshoot past that final value, the error left at the end of the hold and
+//! whether the valve resolved the step at all. V_P before the step is its mean over the half
+//! second before; its final value the mean over the hold's last `still_s`.
+//!
+//! Not here: finding the step in the log ([`super::align`]), the signature.
+
+use super::{Direction, Found, Resolution, StepResult};
+use crate::metrics::steps::{longest_missing, time_to_move, MAX_MISSING_ROWS};
+use crate::recording::Recording;
+
+/// Share of the step V_P must have moved for the dead time to end.
+pub const DEAD_TIME_SHARE: f64 = 0.1;
+/// Share of the final change at T63: 1 - 1/e.
+pub const T63_SHARE: f64 = 0.632_120_558_828_557_7;
+/// Share of the final change at T86: 1 - 1/e².
+pub const T86_SHARE: f64 = 0.864_664_716_763_387_3;
+/// The time before a step over which V_P is averaged for where it started, s.
+const BEFORE_S: f64 = 0.5;
+
+/// The mean of the measured values of `x` (NaN when none is).
+fn mean_measured(x: &[f64]) -> f64 {
+    let (n, sum) =
+        (x.iter().filter(|v| v.is_finite())).fold((0usize, 0.0), |(n, s), v| (n + 1, s + v));
+    if n == 0 {
+        f64::NAN
+    } else {
+        sum / n as f64
+    }
+}
+
+/// The step `found` of `rec` measured through `res`; its final V_P is the mean of the hold's
+/// last `still_rows` rows (at most half of it).
+pub(super) fn measure(
+    rec: &Recording,
+    found: &Found,
+    res: &Resolution,
+    still_rows: usize,
+) -> StepResult {
+    let (vp, op, dt) = (&rec.vp, &rec.op, rec.sample_period);
+    let (a, end) = (found.row, found.end.min(vp.len()));
+    let before = a.saturating_sub(((BEFORE_S / dt).round() as usize).max(1));
+    let tail = end - still_rows.min((end - a) / 2).max(1);
+    let (v0, v_end) = (mean_measured(&vp[before..a]), mean_measured(&vp[tail..end]));
+    let (from, to) = (op[a - 1], op[a]);
+    let direction = Direction::of(to - from);
+    let dir = direction.sign();
+    let sent = res.sent(to) - res.sent(from);
+    let measured =
+        v0.is_finite() && v_end.is_finite() && longest_missing(&vp[a..end]) <= MAX_MISSING_ROWS;
+    let mut r = StepResult {
+        t_s: rec.t[a] - rec.t[0],
+        start_pct: from,
+        opening_pct: found.step.opening_pct,
+        size_pct: found.step.size_pct,
+        sent_size_pct: sent,
+        direction,
+        reversal: found.reversal,
+        dead_time_s: None,
+        t63_s: None,
+        t86_s: None,
+        overshoot_pct: None,
+        final_error_pct: None,
+        moved_pct: None,
+        resolved: false,
+        hold_s: (end - a) as f64 * dt,
+        missing_rows: vp[before..end].iter().filter(|v| !v.is_finite()).count(),
+        measured,
+        rows: (a, end),
+        levels: (v0, v_end),
+    };
+    if !measured {
+        return r;
+    }
+    let floor = res.threshold_pct;
+    let moved = (v_end - v0) * dir;
+    let time_to = |need: f64| time_to_move(vp, a..end, (v0, dir), need, dt);
+    r.moved_pct = Some(moved);
+    r.final_error_pct = Some((res.sent(to) - v_end) * dir);
+    r.dead_time_s = time_to((DEAD_TIME_SHARE * sent.abs()).max(floor));
+    r.resolved = moved >= (0.5 * sent.abs()).max(floor);
+    // The times and the overshoot of a change the threshold cannot split into parts are noise.
+    if r.resolved && moved >= 2.0 * floor {
+        r.t63_s = time_to(T63_SHARE * moved);
+        r.t86_s = time_to(T86_SHARE * moved);
+        let highest = |rows: std::ops::Range<usize>| {
+            (vp[rows].iter().filter(|v| v.is_finite()))
+                .map(|v| (v - v0) * dir)
+                .fold(f64::NEG_INFINITY, f64::max)
+        };
+        // Past the final value by more than the threshold and than the hold's end reaches (a
+        // valve still creeping in at the end has not overshot).
+        let past = highest(a..end) - moved;
+        let over = highest(a..end) - highest(tail..end) > floor && past > floor;
+        r.overshoot_pct = Some(if over { 100.0 * past / moved } else { 0.0 });
+    }
+    r
+}
