@@ -25,6 +25,15 @@ fn pct(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.2} %"))
 }
 
+/// A register's or lattice's step, `0.1 %`, or `none`.
+fn step_of(v: f64) -> String {
+    if v > 0.0 {
+        format!("{} %", crate::human::num((v * 1e4).round() / 1e4))
+    } else {
+        "none".into()
+    }
+}
+
 /// A step in a few words: `close 1 % at 50 % (reversal)`.
 pub fn step_name(s: &StepResult) -> String {
     format!(
@@ -90,8 +99,8 @@ pub fn text(r: &ResponseTest, lines: &[Line]) -> String {
         r.planned_steps,
         if r.complete { "" } else { " (the test did not run to its end)" },
         res.noise_pct,
-        if res.lattice_pct > 0.0 { format!("{} %", res.lattice_pct) } else { "none".into() },
-        if res.setpoint_step_pct > 0.0 { format!("{} %", res.setpoint_step_pct) } else { "none".into() },
+        step_of(res.lattice_pct),
+        step_of(res.setpoint_step_pct),
         res.threshold_pct
     );
     if !r.rows_without_vp.is_empty() {
@@ -191,13 +200,13 @@ pub fn html(title: &str, rec: &Recording, r: &ResponseTest, lines: &[Line]) -> S
     let _ = write!(
         h,
         "<p>{} ({} rows at {} s). Figures measured on the logged V_P; a move counts from {:.3} % \
-         (four noise standard deviations, {:.3} %, or the position's lattice, {} %).</p>",
+         (four noise standard deviations, {:.3} %, or the position's lattice, {}).</p>",
         esc(&rec.source),
         r.rows,
         crate::human::num(rec.sample_period),
         r.resolution.threshold_pct,
         r.resolution.noise_pct,
-        r.resolution.lattice_pct
+        step_of(r.resolution.lattice_pct)
     );
     if !lines.is_empty() {
         h.push_str("<h2>Spec</h2><table>");

@@ -155,10 +155,12 @@ pub struct StepResult {
     pub resolved: bool,
     /// How long the step was held, s.
     pub hold_s: f64,
-    /// Rows without V_P from just before the step to the end of its hold.
+    /// Rows without V_P from just before the step to the end of its hold. A figure whose
+    /// crossing follows more than three of them in a row is left out: it could lie anywhere in
+    /// the gap.
     pub missing_rows: usize,
-    /// False when more than three rows in a row lack V_P: the figures could hide in the gap
-    /// and are left out.
+    /// False when V_P is missing all through the half second before the step or the end of its
+    /// hold: nothing of it can be measured.
     pub measured: bool,
     /// Row of the step, one past the end of its hold.
     #[serde(skip)]

@@ -1,7 +1,10 @@
 //! The valve signature of a response test: the slow ramp out, down past the start and back, read
 //! as ISA-75.13.01 reads a positioner's input-output curve. At each reversal of the ramp the
-//! dead band is the O_P travel from the reversal until V_P has moved, against its extreme since
-//! the reversal, by more than the threshold; hysteresis plus dead band is how far the falling
+//! dead band is the O_P travel from where the set-point the valve received first turned (the
+//! reversal itself, unless the set-point register rounds the ramp into steps) until V_P has
+//! moved from its extreme since the reversal by the threshold, less the threshold (once moving,
+//! V_P follows the ramp: O_P travelled the threshold while V_P crossed it), so neither the
+//! register nor the reading's resolution adds to it. Hysteresis plus dead band is how far the falling
 //! leg's V_P lies above the rising legs' at the same O_P (the median over bins of O_P, once V_P
 //! has left each reversal), and hysteresis is that less the dead band.
 //!
@@ -150,11 +153,15 @@ pub(super) fn measure(
             moving.push((m..b, dir));
         }
         if i > 0 {
+            // The last row before the set-point the valve received moved off the reversal's.
+            let turned = (a + 1..b)
+                .find(|&k| res.sent(op[k]) != res.sent(op[a]))
+                .map_or(a, |k| k - 1);
             reversals.push(Reversal {
                 t_s: rec.t[a] - rec.t[0],
                 at_pct: op[a],
                 direction: Direction::of(dir),
-                dead_band_pct: moved.map(|m| (op[m] - op[a]).abs()),
+                dead_band_pct: moved.map(|m| ((op[m] - op[turned]).abs() - floor).max(0.0)),
                 marks: (a, moved, extreme),
             });
         }

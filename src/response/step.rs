@@ -3,7 +3,10 @@
 //! measures it, [`time_to_move`]), T63 and T86 until it has covered 63.2 % and 86.5 % of its
 //! final change, the overshoot past that final value, the error left at the end of the hold and
 //! whether the valve resolved the step at all. V_P before the step is its mean over the half
-//! second before; its final value the mean over the hold's last `still_s`.
+//! second before; its final value the mean over the hold's last `still_s`. Rows without V_P are
+//! passed over; a time whose crossing follows more than three of them in a row is left out (the
+//! crossing could lie anywhere in the gap), and so is an overshoot with such a gap within twice
+//! T86 of the step.
 //!
 //! Not here: finding the step in the log ([`super::align`]), the signature.
 
@@ -48,8 +51,7 @@ pub(super) fn measure(
     let direction = Direction::of(to - from);
     let dir = direction.sign();
     let sent = res.sent(to) - res.sent(from);
-    let measured =
-        v0.is_finite() && v_end.is_finite() && longest_missing(&vp[a..end]) <= MAX_MISSING_ROWS;
+    let measured = v0.is_finite() && v_end.is_finite();
     let mut r = StepResult {
         t_s: rec.t[a] - rec.t[0],
         start_pct: from,
@@ -76,25 +78,40 @@ pub(super) fn measure(
     }
     let floor = res.threshold_pct;
     let moved = (v_end - v0) * dir;
-    let time_to = |need: f64| time_to_move(vp, a..end, (v0, dir), need, dt);
+    // The first row that has moved `need`, unless more than three rows without V_P came just
+    // before it: the crossing could lie anywhere in that gap.
+    let crossing = |need: f64| {
+        let j = a + (time_to_move(vp, a..end, (v0, dir), need, dt)? / dt).round() as usize;
+        let gap = vp[a..j].iter().rev().take_while(|v| !v.is_finite()).count();
+        (gap <= MAX_MISSING_ROWS).then_some(j)
+    };
+    let time = |j: Option<usize>| j.map(|j| (j - a) as f64 * dt);
     r.moved_pct = Some(moved);
     r.final_error_pct = Some((res.sent(to) - v_end) * dir);
-    r.dead_time_s = time_to((DEAD_TIME_SHARE * sent.abs()).max(floor));
+    r.dead_time_s = time(crossing((DEAD_TIME_SHARE * sent.abs()).max(floor)));
     r.resolved = moved >= (0.5 * sent.abs()).max(floor);
     // The times and the overshoot of a change the threshold cannot split into parts are noise.
-    if r.resolved && moved >= 2.0 * floor {
-        r.t63_s = time_to(T63_SHARE * moved);
-        r.t86_s = time_to(T86_SHARE * moved);
-        let highest = |rows: std::ops::Range<usize>| {
-            (vp[rows].iter().filter(|v| v.is_finite()))
-                .map(|v| (v - v0) * dir)
-                .fold(f64::NEG_INFINITY, f64::max)
-        };
-        // Past the final value by more than the threshold and than the hold's end reaches (a
-        // valve still creeping in at the end has not overshot).
-        let past = highest(a..end) - moved;
-        let over = highest(a..end) - highest(tail..end) > floor && past > floor;
-        r.overshoot_pct = Some(if over { 100.0 * past / moved } else { 0.0 });
+    if !(r.resolved && moved >= 2.0 * floor) {
+        return r;
     }
+    let t86 = crossing(T86_SHARE * moved);
+    (r.t63_s, r.t86_s) = (time(crossing(T63_SHARE * moved)), time(t86));
+    // An overshoot peaks within twice T86; a gap there could hide it.
+    let Some(window) = t86.map(|j| (2 * j - a + 1).clamp(j + 1, end)) else {
+        return r;
+    };
+    if longest_missing(&vp[a..window]) > MAX_MISSING_ROWS {
+        return r;
+    }
+    let highest = |rows: std::ops::Range<usize>| {
+        (vp[rows].iter().filter(|v| v.is_finite()))
+            .map(|v| (v - v0) * dir)
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    // Past the final value by more than the threshold and than the hold's end reaches (a valve
+    // still creeping in at the end has not overshot).
+    let past = highest(a..end) - moved;
+    let over = highest(a..end) - highest(tail..end) > floor && past > floor;
+    r.overshoot_pct = Some(if over { 100.0 * past / moved } else { 0.0 });
     r
 }
