@@ -54,8 +54,12 @@ fn worst(w: &Worst) -> String {
         0 => String::new(),
         n => format!(", {n} unanswered"),
     };
+    let hidden = match w.hidden {
+        0 => String::new(),
+        n => format!(", {n} with a figure lost in a gap"),
+    };
     format!(
-        "{}  {}  {}/{} resolved{unanswered}",
+        "{}  {}  {}/{} resolved{unanswered}{hidden}",
         secs(w.dead_time_s),
         secs(w.t86_s),
         w.resolved,
@@ -73,6 +77,13 @@ pub fn line(l: &Line, r: &ResponseTest) -> String {
     let value = match (l.worst, l.sizes_pct) {
         (Some(w), _) => format!("{w:.3}"),
         (None, Some(_)) if l.steps == 0 => "no step measured".into(),
+        (None, Some(_))
+            if l.step
+                .and_then(|i| r.steps.get(i))
+                .is_some_and(|s| s.hidden_by_gap) =>
+        {
+            "lost in a gap of rows without V_P".into()
+        }
         (None, Some(_)) => "not reached".into(),
         (None, None) => "not measured".into(),
     };

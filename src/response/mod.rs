@@ -153,6 +153,11 @@ pub struct StepResult {
     pub moved_pct: Option<f64>,
     /// Whether V_P moved at least half the step (and the threshold) within the hold.
     pub resolved: bool,
+    /// Whether V_P moved the dead time's share of the step at all within the hold.
+    pub answered: bool,
+    /// Whether a figure was left out because its crossing (or, for the overshoot, the time
+    /// within twice T86) fell in more than three rows without V_P.
+    pub hidden_by_gap: bool,
     /// How long the step was held, s.
     pub hold_s: f64,
     /// Rows without V_P from just before the step to the end of its hold. A figure whose
@@ -177,8 +182,10 @@ pub struct Worst {
     pub steps: usize,
     /// Of those, resolved.
     pub resolved: usize,
-    /// Of those, the ones V_P never answered (no dead time).
+    /// Of those, the ones V_P never answered (it never moved the dead time's share).
     pub unanswered: usize,
+    /// Of those, the ones with a figure left out for rows without V_P.
+    pub hidden: usize,
     /// The longest dead time of the answered ones, s.
     pub dead_time_s: Option<f64>,
     /// The longest T86 of the resolved ones, s.
@@ -359,7 +366,8 @@ fn summary(steps: &[StepResult], sizes: &[f64]) -> Vec<SizeSummary> {
         Worst {
             steps: of.len(),
             resolved: of.iter().filter(|r| r.resolved).count(),
-            unanswered: of.iter().filter(|r| r.dead_time_s.is_none()).count(),
+            unanswered: of.iter().filter(|r| !r.answered).count(),
+            hidden: of.iter().filter(|r| r.hidden_by_gap).count(),
             dead_time_s: max(&|r| r.dead_time_s),
             t86_s: max(&|r| r.t86_s),
         }

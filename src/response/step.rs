@@ -23,6 +23,17 @@ pub const T86_SHARE: f64 = 0.864_664_716_763_387_3;
 /// The time before a step over which V_P is averaged for where it started, s.
 const BEFORE_S: f64 = 0.5;
 
+/// Where V_P crossed a level after a step.
+#[derive(Debug, Clone, Copy)]
+enum Crossed {
+    /// At this row.
+    At(usize),
+    /// Somewhere in a gap of more than three rows without V_P.
+    Hidden,
+    /// Not within the hold.
+    Never,
+}
+
 /// The mean of the measured values of `x` (NaN when none is).
 fn mean_measured(x: &[f64]) -> f64 {
     let (n, sum) =
@@ -67,6 +78,8 @@ pub(super) fn measure(
         final_error_pct: None,
         moved_pct: None,
         resolved: false,
+        answered: false,
+        hidden_by_gap: false,
         hold_s: (end - a) as f64 * dt,
         missing_rows: vp[before..end].iter().filter(|v| !v.is_finite()).count(),
         measured,
@@ -78,29 +91,53 @@ pub(super) fn measure(
     }
     let floor = res.threshold_pct;
     let moved = (v_end - v0) * dir;
-    // The first row that has moved `need`, unless more than three rows without V_P came just
-    // before it: the crossing could lie anywhere in that gap.
-    let crossing = |need: f64| {
-        let j = a + (time_to_move(vp, a..end, (v0, dir), need, dt)? / dt).round() as usize;
-        let gap = vp[a..j].iter().rev().take_while(|v| !v.is_finite()).count();
-        (gap <= MAX_MISSING_ROWS).then_some(j)
+    // The first row that has moved `need`; hidden when more than three rows without V_P came
+    // just before it: the crossing could lie anywhere in that gap.
+    let crossing = |need: f64| match time_to_move(vp, a..end, (v0, dir), need, dt) {
+        None => Crossed::Never,
+        Some(t) => {
+            let j = a + (t / dt).round() as usize;
+            let gap = vp[a..j].iter().rev().take_while(|v| !v.is_finite()).count();
+            if gap <= MAX_MISSING_ROWS {
+                Crossed::At(j)
+            } else {
+                Crossed::Hidden
+            }
+        }
     };
-    let time = |j: Option<usize>| j.map(|j| (j - a) as f64 * dt);
+    let mut time = |c: Crossed| match c {
+        Crossed::At(j) => Some((j - a) as f64 * dt),
+        Crossed::Hidden => {
+            r.hidden_by_gap = true;
+            None
+        }
+        Crossed::Never => None,
+    };
+    let dead = crossing((DEAD_TIME_SHARE * sent.abs()).max(floor));
+    let answered = !matches!(dead, Crossed::Never);
+    let dead_time_s = time(dead);
+    r.dead_time_s = dead_time_s;
+    r.answered = answered;
     r.moved_pct = Some(moved);
     r.final_error_pct = Some((res.sent(to) - v_end) * dir);
-    r.dead_time_s = time(crossing((DEAD_TIME_SHARE * sent.abs()).max(floor)));
     r.resolved = moved >= (0.5 * sent.abs()).max(floor);
     // The times and the overshoot of a change the threshold cannot split into parts are noise.
     if !(r.resolved && moved >= 2.0 * floor) {
         return r;
     }
     let t86 = crossing(T86_SHARE * moved);
-    (r.t63_s, r.t86_s) = (time(crossing(T63_SHARE * moved)), time(t86));
+    let t86_row = match t86 {
+        Crossed::At(j) => Some(j),
+        _ => None,
+    };
+    r.t63_s = time(crossing(T63_SHARE * moved));
+    r.t86_s = time(t86);
     // An overshoot peaks within twice T86; a gap there could hide it.
-    let Some(window) = t86.map(|j| (2 * j - a + 1).clamp(j + 1, end)) else {
+    let Some(window) = t86_row.map(|j| (2 * j - a + 1).clamp(j + 1, end)) else {
         return r;
     };
     if longest_missing(&vp[a..window]) > MAX_MISSING_ROWS {
+        r.hidden_by_gap = true;
         return r;
     }
     let highest = |rows: std::ops::Range<usize>| {

@@ -320,6 +320,7 @@ fn lost_replies_are_counted_and_never_taken_for_motion() {
         for (i, (x, y)) in pairs.into_iter().enumerate() {
             if i == 0 && b.rows.0 == first.rows.0 {
                 assert_eq!(y, None, "the gap hides the dead time: {b:?}");
+                assert!(b.answered && b.hidden_by_gap, "{b:?}");
                 continue;
             }
             let d = y.unwrap() - x.unwrap();
