@@ -262,4 +262,40 @@ mod tests {
         assert!(top <= 51.0, "the ramp never passes its end: {top}");
         assert_eq!(s.op_at(100.0), None);
     }
+
+    proptest::proptest! {
+        /// Any plan the checks accept, whatever V_P the valve reports (rows lost among them),
+        /// sends only levels inside the range and ends within its longest holds and ramps.
+        #[test]
+        fn an_accepted_plan_stays_in_range_and_ends(
+            lo in 0.0f64..40.0,
+            width in 5.0f64..60.0,
+            opening in 0.0f64..1.0,
+            sizes in proptest::collection::vec(0.05f64..8.0, 1..4),
+            pattern in proptest::collection::vec(-3i32..=3, 1..5),
+            span in 0.1f64..5.0,
+            reports in proptest::collection::vec(proptest::option::of(-5.0f64..105.0), 50..200),
+        ) {
+            let hi = (lo + width).min(100.0);
+            let o = lo + opening * (hi - lo);
+            let text = format!(
+                "openings_pct = [{o}]\nsizes_pct = {sizes:?}\npattern = {pattern:?}\n\
+                 [hold]\nmin_s = 0.2\nmax_s = 0.5\nstill_s = 0.1\nstill_pct = 0.05\n\
+                 [signature]\nopening_pct = {o}\nspan_pct = {span}\nrate_pct_per_s = 5.0\n"
+            );
+            let Ok(p) = Plan::from_toml(&text, Path::new("p.toml"), (lo, hi)) else {
+                return Ok(());
+            };
+            let mut s = Schedule::new(&p, DT);
+            let longest = p.moves().len() as f64 * 0.5 + 4.0 * span / 5.0 + 1.0;
+            let mut k = 0;
+            while let Some(op) = s.op_at(k as f64 * DT) {
+                let level = crate::recording::log_format::round_pct(op);
+                proptest::prop_assert!((lo..=hi).contains(&level), "{op} outside {lo}..{hi}");
+                s.feedback(&row(k as f64 * DT, reports[k % reports.len()]));
+                k += 1;
+                proptest::prop_assert!((k as f64 * DT) < longest, "no end after {k} slots");
+            }
+        }
+    }
 }
