@@ -20,9 +20,12 @@ fn secs(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.3} s"))
 }
 
-/// `0.62 %`, or `-`.
+/// `0.62 %`, or `-` (never `-0.00 %`).
 fn pct(v: Option<f64>) -> String {
-    v.map_or("-".into(), |v| format!("{v:.2} %"))
+    // Rounded first, and plus 0 (a negative zero prints as `-0`).
+    v.map_or("-".into(), |v| {
+        format!("{:.2} %", (v * 100.0).round() / 100.0 + 0.0)
+    })
 }
 
 /// A register's or lattice's step, `0.1 %`, or `none`.

@@ -119,7 +119,8 @@ pub(super) fn measure(
     r.dead_time_s = dead_time_s;
     r.answered = answered;
     r.moved_pct = Some(moved);
-    r.final_error_pct = Some((res.sent(to) - v_end) * dir);
+    // Plus 0: a valve exactly on target has no error, not -0.
+    r.final_error_pct = Some((res.sent(to) - v_end) * dir + 0.0);
     r.resolved = moved >= (0.5 * sent.abs()).max(floor);
     // The times and the overshoot of a change the threshold cannot split into parts are noise.
     if !(r.resolved && moved >= 2.0 * floor) {
