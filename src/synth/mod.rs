@@ -1,8 +1,9 @@
 //! Synthetic recordings: any model file driven by the paper's random steps, small steps,
 //! ramps, a mix of those, or a closed level-control loop, with seeded measurement noise. For
 //! demos, tests and benchmarks that need a recording whose physics is known (an effect hidden
-//! on purpose, or none at all); [`physical`] builds physical valves with one named effect ([`record`] takes
-//! any [`Actuator`]).
+//! on purpose, or none at all); [`physical`] builds physical valves with one named effect, and
+//! [`digital`] simulates a digital positioner apart from the project's models, recorded
+//! through the same excitations ([`record`] takes any [`Actuator`]).
 //!
 //! The closed loop is an outlet valve holding a tank level under a PI controller ([`level`]),
 //! so O_P moves gently and reverses often, the way a valve sees normal operation. The
@@ -11,6 +12,7 @@
 //! so no noise is added to it here. [`logged`] turns a recording into what the daemon's log
 //! would hold of it (per mille, lost replies). Nothing here reads or writes files.
 
+pub mod digital;
 pub mod excite;
 pub mod level;
 pub mod logged;
@@ -32,6 +34,8 @@ pub enum SynthError {
     Model(#[from] ModelError),
     #[error(transparent)]
     Recording(#[from] RecordingError),
+    #[error(transparent)]
+    Digital(#[from] digital::DigitalError),
     #[error("noise of {0} %: must be a finite standard deviation >= 0")]
     Noise(f64),
     #[error("noise of {0} % on a physical valve: its sensor makes its own noise ([physical] sensor_noise_pct); pass 0")]
@@ -74,7 +78,8 @@ impl Excitation {
 }
 
 /// A valve a recording can be made of: put at rest, then stepped one sample at a time.
-/// [`Valve`] is one (any model file).
+/// [`Valve`] is one (any model file); [`digital`]'s positioner is another, written apart from
+/// the models.
 pub trait Actuator {
     /// At rest at V_P `vp_pct` with O_P `op_pct` (the excitation's first value).
     fn reset(&mut self, op_pct: f64, vp_pct: f64);
