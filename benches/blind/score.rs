@@ -2,20 +2,29 @@
 //! finding, precision and recall over all findings (a finding of a planned effect too faint to
 //! label counts neither way), the false-finding rate on healthy valves (nothing planned),
 //! the held-out gain, the smallest size found reliably per excitation, the time per case, the
-//! curve of healthy valves with a finding against recall over the materiality threshold, and
-//! the overall figures against their targets. Only arithmetic and printing; no diagnosis.
+//! curve of healthy valves with a finding against recall over the materiality threshold, how
+//! often the interval of a finding's size holds the physical truth, and the overall figures
+//! against their targets; each over the valves it is given (the bench hands it each family
+//! apart). Only arithmetic and printing; no diagnosis.
 
-use valve_bridge::diagnose::Effect;
+use valve_bridge::diagnose::{Effect, Size};
+
+use crate::cases::Truth;
 
 /// What one case was and what diagnosis said about it.
 #[derive(Debug, Clone)]
 pub(crate) struct Outcome {
+    pub family: &'static str,
     pub excitation: &'static str,
     pub labels: Vec<Effect>,
     /// Each planned effect with the size it was drawn at.
     pub sizes: Vec<(Effect, f64)>,
+    /// The physical size of each label.
+    pub truth: Vec<Truth>,
     /// The effects found, in the order diagnosis found them.
     pub findings: Vec<Effect>,
+    /// The size of each finding, with its interval.
+    pub sized: Vec<(Effect, Size)>,
     pub baseline_heldout_sse: f64,
     pub final_heldout_sse: f64,
     pub seconds: f64,
@@ -62,6 +71,8 @@ pub(crate) const GAIN_TARGET: f64 = 0.50;
 pub(crate) const SECONDS_TARGET: f64 = 15.0;
 /// Share of cases a size bin must find to count as found reliably.
 pub(crate) const RELIABLE: f64 = 0.80;
+/// Share of findings whose 90 % interval must hold the physical truth, per effect.
+pub(crate) const COVERAGE_TARGET: f64 = 0.80;
 
 fn short(e: Option<Effect>) -> &'static str {
     match e {
@@ -314,6 +325,60 @@ pub(crate) fn print_curve(all: &[Outcome], excitations: &[&str], share: f64) {
             100.0 * s,
             pct(a, h),
             pct(hits, l)
+        );
+    }
+}
+
+/// Per effect: of the labelled valves with a finding of it sized in the unit of its truth,
+/// how often the finding's 90 % interval holds the truth, and the median of reported over
+/// true; findings sized in another unit (a friction band quoted as a crossing time) are
+/// counted apart.
+pub(crate) fn print_coverage(all: &[Outcome]) {
+    println!(
+        "\nSizes against the physical truth (findings of a labelled effect; target: the interval holds it in >= {:.0} %):",
+        100.0 * COVERAGE_TARGET
+    );
+    println!(
+        "{:<22}{:<25}{:>9}{:>7}{:>7}{:>8}{:>10}{:>15}",
+        "effect", "size", "labelled", "found", "sized", "holds", "coverage", "reported/true"
+    );
+    for e in Effect::ALL {
+        let truths: Vec<(&Outcome, &Truth)> = (all.iter())
+            .flat_map(|o| {
+                o.truth
+                    .iter()
+                    .filter(move |t| t.effect == e)
+                    .map(move |t| (o, t))
+            })
+            .collect();
+        let Some((_, first)) = truths.first() else {
+            continue;
+        };
+        let found: Vec<(&Size, f64)> = (truths.iter())
+            .filter_map(|(o, t)| {
+                let size = o.sized.iter().find(|(f, _)| *f == e).map(|(_, s)| s)?;
+                Some((size, t.value))
+            })
+            .collect();
+        let same: Vec<&(&Size, f64)> = found.iter().filter(|(s, _)| s.name == first.name).collect();
+        let holds = (same.iter())
+            .filter(|(s, truth)| s.low <= *truth && *truth <= s.high)
+            .count();
+        let ratio = median(same.iter().map(|(s, truth)| s.value / truth).collect());
+        println!(
+            "{:<22}{:<25}{:>9}{:>7}{:>7}{:>8}{:>10}{:>15}",
+            e.name(),
+            first.name,
+            truths.len(),
+            found.len(),
+            same.len(),
+            holds,
+            pct(holds, same.len()),
+            if ratio.is_finite() {
+                format!("{ratio:.2}")
+            } else {
+                "-".into()
+            }
         );
     }
 }
