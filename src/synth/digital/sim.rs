@@ -208,7 +208,7 @@ impl Actuator for DigitalValve {
         self.pressure = (ATMOSPHERE_BAR + p.spring_start_bar + self.span_bar * self.x / 100.0)
             .clamp(ATMOSPHERE_BAR, self.supply_abs);
         let held = (p.input_delay_s / self.dt).ceil() as usize + 2;
-        self.ops = std::iter::repeat(op_pct).take(held).collect();
+        self.ops = std::iter::repeat_n(op_pct, held).collect();
         self.pulses.clear();
         (self.sample, self.next_read, self.last_error) = (0, 0.0, 0.0);
         self.feedback_rng = ChaCha8Rng::seed_from_u64(p.noise_seed);
