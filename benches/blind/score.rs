@@ -329,10 +329,53 @@ pub(crate) fn print_curve(all: &[Outcome], excitations: &[&str], share: f64) {
     }
 }
 
-/// Per effect: of the labelled valves with a finding of it sized in the unit of its truth,
-/// how often the finding's 90 % interval holds the truth, and the median of reported over
-/// true; findings sized in another unit (a friction band quoted as a crossing time) are
-/// counted apart.
+/// How the sizes of one effect's findings compare with the physical truth of its labels.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Coverage {
+    /// The truth's size (`dead_time_s`, ...).
+    pub name: &'static str,
+    /// Labelled valves, those with a finding of the effect, and those whose finding is sized
+    /// in the truth's unit (a friction band may be quoted as a crossing time).
+    pub labelled: usize,
+    pub found: usize,
+    pub sized: usize,
+    /// Of the sized ones, how many 90 % intervals hold the truth.
+    pub holds: usize,
+    /// The median of reported over true (NaN when none is sized).
+    pub ratio: f64,
+}
+
+/// The [`Coverage`] of `effect` over `all`, or `None` when no valve is labelled with it.
+pub(crate) fn coverage(all: &[Outcome], effect: Effect) -> Option<Coverage> {
+    let truths: Vec<(&Outcome, &Truth)> = (all.iter())
+        .flat_map(|o| {
+            (o.truth.iter())
+                .filter(move |t| t.effect == effect)
+                .map(move |t| (o, t))
+        })
+        .collect();
+    let name = truths.first()?.1.name;
+    let found: Vec<(&Size, &Truth)> = (truths.iter())
+        .filter_map(|(o, t)| {
+            let size = o.sized.iter().find(|(f, _)| *f == effect)?;
+            Some((&size.1, *t))
+        })
+        .collect();
+    let same: Vec<&(&Size, &Truth)> = found.iter().filter(|(s, t)| s.name == t.name).collect();
+    let holds = (same.iter())
+        .filter(|(s, t)| s.low <= t.value && t.value <= s.high)
+        .count();
+    Some(Coverage {
+        name,
+        labelled: truths.len(),
+        found: found.len(),
+        sized: same.len(),
+        holds,
+        ratio: median(same.iter().map(|(s, t)| s.value / t.value).collect()),
+    })
+}
+
+/// Per effect, the [`Coverage`] of its findings' intervals over the truth.
 pub(crate) fn print_coverage(all: &[Outcome]) {
     println!(
         "\nSizes against the physical truth (findings of a labelled effect; target: the interval holds it in >= {:.0} %):",
@@ -343,39 +386,20 @@ pub(crate) fn print_coverage(all: &[Outcome]) {
         "effect", "size", "labelled", "found", "sized", "holds", "coverage", "reported/true"
     );
     for e in Effect::ALL {
-        let truths: Vec<(&Outcome, &Truth)> = (all.iter())
-            .flat_map(|o| {
-                o.truth
-                    .iter()
-                    .filter(move |t| t.effect == e)
-                    .map(move |t| (o, t))
-            })
-            .collect();
-        let Some((_, first)) = truths.first() else {
+        let Some(c) = coverage(all, e) else {
             continue;
         };
-        let found: Vec<(&Size, f64)> = (truths.iter())
-            .filter_map(|(o, t)| {
-                let size = o.sized.iter().find(|(f, _)| *f == e).map(|(_, s)| s)?;
-                Some((size, t.value))
-            })
-            .collect();
-        let same: Vec<&(&Size, f64)> = found.iter().filter(|(s, _)| s.name == first.name).collect();
-        let holds = (same.iter())
-            .filter(|(s, truth)| s.low <= *truth && *truth <= s.high)
-            .count();
-        let ratio = median(same.iter().map(|(s, truth)| s.value / truth).collect());
         println!(
             "{:<22}{:<25}{:>9}{:>7}{:>7}{:>8}{:>10}{:>15}",
             e.name(),
-            first.name,
-            truths.len(),
-            found.len(),
-            same.len(),
-            holds,
-            pct(holds, same.len()),
-            if ratio.is_finite() {
-                format!("{ratio:.2}")
+            c.name,
+            c.labelled,
+            c.found,
+            c.sized,
+            c.holds,
+            pct(c.holds, c.sized),
+            if c.ratio.is_finite() {
+                format!("{:.2}", c.ratio)
             } else {
                 "-".into()
             }
