@@ -16,7 +16,7 @@
 //! | `asymmetry` | one orifice smaller | faster / slower speed at half travel >= `ASYMMETRY_RATIO`, exercised on the slow side as above | that ratio |
 //! | `min_speed` | minimum pulse raised | the error below which it takes over, `min_pulse / (duty_per_pct * sample)`, >= `MIN_SPEED_BAND_PCT`, and the noise-free reading with it stands 3 noise sigmas (>= 0.1 %) from the same valve's without it for 3 s, while the valve moves 1.5 times faster than the floor for 3 s | the floor (one minimum pulse a sample at half travel), %/s |
 //! | `deadband` | tolerance band | band width (twice the tolerance) >= `DEADBAND_PCT` | the width, % |
-//! | `saturation` | stem stop below 100 % or above 0 % | O_P passes it by >= 1 % for >= 10 s | the stop, % |
+//! | `saturation` | stem stop below 100 % or above 0 % | O_P passes it by >= 1 % for >= 10 s | the stop as V_P reads it (through the linkage's play and lever), % |
 //! | `quantization` | the feedback ADC's lattice | lattice >= `QUANTIZATION_PCT` and >= the noise | the lattice, % |
 //! | `calibration` | lever error of the linkage | `|(a - 1) x + b| >= CALIBRATION_PCT` at the 5th or 95th percentile of O_P | that error, % |
 //!
@@ -355,9 +355,16 @@ pub(crate) fn labels(
         width,
     );
     let (low, high) = (p.stop_low_pct, p.stop_high_pct);
-    let stop = if 100.0 - high >= low { high } else { low };
+    // As V_P reads the stem there: the arm trails it by half the play on the way in.
+    let half = p.play_pct / 2.0;
+    let stop = if 100.0 - high >= low {
+        high - half
+    } else {
+        low + half
+    };
     let asked = measures::saturation_asked(low, high, &rec.op);
-    add(asked, Effect::Saturation, "stop_pct", stop);
+    let read = p.gain * stop + p.offset_pct;
+    add(asked, Effect::Saturation, "stop_pct", read);
     let q = p.lattice_pct;
     let coarse = q >= QUANTIZATION_PCT.max(p.noise_pct);
     add(coarse, Effect::Quantization, "lattice_pct", q);

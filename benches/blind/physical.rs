@@ -7,8 +7,8 @@
 //! reversal, %), the stroke speed at half travel (the flow limits over the chamber's volume
 //! there, their geometric mean, %/s), the ratio of the faster flow limit to the slower, the
 //! minimum flow at half travel (%/s), the median slip measured (%), the deadband (%), the
-//! chamber's slowdown fully open (1 + g), the stop (%), the lattice (%) and the reading's error
-//! where O_P operates the valve (%). Nothing here runs diagnosis.
+//! chamber's slowdown fully open (1 + g), the stop as the sensor reads it (%), the lattice (%)
+//! and the reading's error where O_P operates the valve (%). Nothing here runs diagnosis.
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -230,7 +230,8 @@ pub(crate) fn labels(
     let (low, high) = (spec.travel.min_pct, spec.travel.max_pct);
     let stop = if 100.0 - high >= low { high } else { low };
     let asked = measures::saturation_asked(low, high, &rec.op);
-    add(asked, Effect::Saturation, "stop_pct", stop);
+    let read = p.sensor_gain * stop + p.sensor_offset_pct;
+    add(asked, Effect::Saturation, "stop_pct", read);
     let q = p.sensor_resolution_pct;
     add(
         q >= QUANTIZATION_PCT.max(p.sensor_noise_pct),
