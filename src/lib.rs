@@ -16,6 +16,8 @@
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`fleet`]: many recordings diagnosed in parallel, summed up and ranked for maintenance.
+//! - [`response`]: a response test's log read for what the valve did (dead time, T63, T86,
+//!   overshoot, resolution, dead band); the daemon's [`daemon::response`] runs the test.
 //! - [`report`]: self-contained HTML reports with SVG charts.
 //! - [`vocabulary`]: each effect diagnosis names in plain words (what it does to the valve with
 //!   its size, to control, and what to do), with its severity and priority: one table for the
@@ -25,7 +27,7 @@
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 //!
-//! `fit`, `diagnose`, `fleet` and `report` are the `analysis` feature (on by default); without
+//! `fit`, `diagnose`, `fleet`, `response` and `report` are the `analysis` feature (on by default); without
 //! it the library is the daemon's runtime alone, and the daemon refuses `[diagnosis]`
 //! ([`daemon::DaemonError::NoDiagnosis`]).
 
@@ -46,6 +48,8 @@ pub mod priority;
 pub mod recording;
 #[cfg(feature = "analysis")]
 pub mod report;
+#[cfg(feature = "analysis")]
+pub mod response;
 pub mod signal;
 pub mod synth;
 pub mod toml_file;

@@ -75,6 +75,7 @@ fn exported() -> BTreeSet<String> {
     };
     let record = Record {
         t_s: 3600.0,
+        utc: "2026-11-23T19:27:09.045Z".into(),
         window_s: 1200.0,
         trigger: "every_s",
         verdict: String::new(),

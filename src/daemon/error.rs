@@ -66,6 +66,12 @@ pub enum DaemonError {
         #[source]
         source: std::io::Error,
     },
+    /// A symbolic link where the daemon would open a file or directory of its log directory.
+    #[error("`{path}` is a symbolic link: the daemon does not follow links in its log directory (remove it; to log elsewhere, set --log-dir or [log] dir)")]
+    LogLink { path: PathBuf },
+    /// A history the daemon appends to starts with another header than the one it writes.
+    #[error("`{path}` starts with another header than this version writes: move it aside (the daemon then starts a new one)")]
+    LogHeader { path: PathBuf },
     /// `[diagnosis]` asked of a daemon started without a diagnosis to run.
     #[error("[diagnosis]: this program runs the loop without diagnosis; remove [diagnosis] from the config or run it with a `valve-bridge run` built with the `analysis` feature (the default)")]
     NoDiagnosis,

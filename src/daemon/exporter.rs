@@ -14,7 +14,10 @@
 //! - `valve_bridge_line_noise_bytes_total`, `valve_bridge_unexpected_replies_total`: Modbus RTU
 //!   bytes that formed no frame, and frames no request waited for (a noisy or slow line);
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
-//! - `valve_bridge_log_rows_dropped_total`: rows dropped because the logger fell behind;
+//! - `valve_bridge_log_rows_dropped_total`: rows that never reached the log (the logger fell
+//!   behind, or the disk refused them past the hold, [`super::log_file`]);
+//!   `valve_bridge_log_rows_late_total`: lines written after the disk had refused them;
+//!   `valve_bridge_log_write_failing`: 1 while one of the valve's files cannot be written;
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
 //!   `..._reversal_delay_seconds` (NaN when the window had too few steps),
 //!   `..._opening_speed_ratio_per_second`, `..._closing_speed_ratio_per_second`,
@@ -224,6 +227,28 @@ fn health_metrics(
         .collect()
 }
 
+/// The compensation gauges (whether it acts, and the tracking error with and without it),
+/// registered in `registry`.
+fn compensation_gauges(registry: &Registry) -> Result<(GaugeVec, GaugeVec), prometheus::Error> {
+    let active = GaugeVec::new(
+        Opts::new(
+            "valve_bridge_compensation_active",
+            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
+        ),
+        &["valve"],
+    )?;
+    let tracking = GaugeVec::new(
+        Opts::new(
+            "valve_bridge_compensation_tracking_error_ratio",
+            "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
+        ),
+        &["valve", "case"],
+    )?;
+    registry.register(Box::new(active.clone()))?;
+    registry.register(Box::new(tracking.clone()))?;
+    Ok((active, tracking))
+}
+
 /// One valve's metrics (label `valve`), updated by the loop with atomic operations only.
 #[derive(Debug, Clone)]
 pub struct ValveMetrics {
@@ -239,6 +264,8 @@ pub struct ValveMetrics {
     unexpected_replies: IntCounter,
     watchdog_trips: IntCounter,
     dropped_log_rows: IntCounter,
+    late_log_rows: IntCounter,
+    log_failing: Gauge,
 }
 
 impl LoopMetrics {
@@ -253,9 +280,15 @@ impl LoopMetrics {
             )
             .buckets(TIMING_BUCKETS_S.to_vec()),
         )?;
-        let counter =
-            |name: &str, help: &str| IntCounterVec::new(Opts::new(name, help), &["valve"]);
-        let gauge = |name: &str, help: &str| GaugeVec::new(Opts::new(name, help), &["valve"]);
+        // Each per-valve metric is registered as it is made.
+        let counter = |name: &str, help: &str| {
+            let c = IntCounterVec::new(Opts::new(name, help), &["valve"])?;
+            registry.register(Box::new(c.clone())).map(|()| c)
+        };
+        let gauge = |name: &str, help: &str| {
+            let g = GaugeVec::new(Opts::new(name, help), &["valve"])?;
+            registry.register(Box::new(g.clone())).map(|()| g)
+        };
         let cycles = counter(
             "valve_bridge_cycles_total",
             "Cycles that ran a valve transaction",
@@ -297,14 +330,22 @@ impl LoopMetrics {
         )?;
         let dropped_log_rows = counter(
             "valve_bridge_log_rows_dropped_total",
-            "Rows the loop dropped because the logger's queue was full",
+            "Rows that never reached the log: the logger's queue was full, or the disk refused them past the hold",
+        )?;
+        let late_log_rows = counter(
+            "valve_bridge_log_rows_late_total",
+            "Lines of the valve's files written late, after the disk had refused them",
+        )?;
+        let log_failing = gauge(
+            "valve_bridge_log_write_failing",
+            "1 while a file of the valve's log cannot be written (its lines are held)",
         )?;
         let watchdog_trips = counter(
             "valve_bridge_watchdog_trips_total",
             "Times the process controller's watchdog fired (modbus-server source)",
         )?;
         let servers = ServerMetrics::new()?;
-        let (compensation_active, compensation_tracking) = compensation_metrics(&registry)?;
+        let (compensation_active, compensation_tracking) = compensation_gauges(&registry)?;
         let valves_names = valves;
         let valves = (valves.iter())
             .map(|&v| {
@@ -321,26 +362,13 @@ impl LoopMetrics {
                     unexpected_replies: unexpected_replies.get_metric_with_label_values(&[v])?,
                     watchdog_trips: watchdog_trips.get_metric_with_label_values(&[v])?,
                     dropped_log_rows: dropped_log_rows.get_metric_with_label_values(&[v])?,
+                    late_log_rows: late_log_rows.get_metric_with_label_values(&[v])?,
+                    log_failing: log_failing.get_metric_with_label_values(&[v])?,
                 })
             })
             .collect::<Result<Vec<_>, prometheus::Error>>()?;
         registry.register(Box::new(timing_s.clone()))?;
         registry.register(Box::new(by_kind))?;
-        for c in [
-            cycles,
-            missed,
-            reconnects,
-            late_replies,
-            noise_bytes,
-            unexpected_replies,
-            watchdog_trips,
-            dropped_log_rows,
-        ] {
-            registry.register(Box::new(c))?;
-        }
-        for g in [op_ratio, vp_ratio] {
-            registry.register(Box::new(g))?;
-        }
         servers.register(&registry)?;
         let health = if health {
             health_metrics(&registry, valves_names)?
@@ -432,6 +460,17 @@ impl ValveMetrics {
         self.dropped_log_rows.inc();
     }
 
+    /// Counts lines of the valve's files written late and dropped after the disk refused them.
+    pub fn log_rows_refused(&self, late: u64, dropped: u64) {
+        self.late_log_rows.inc_by(late);
+        self.dropped_log_rows.inc_by(dropped);
+    }
+
+    /// Raises (true) or clears the valve's log alarm gauge.
+    pub fn log_failing(&self, on: bool) {
+        self.log_failing.set(f64::from(u8::from(on)));
+    }
+
     /// Brings the link's and the watchdog's counters up to the totals the loop's parts keep.
     pub fn totals(&self, link: LinkStats, watchdog_trips: u64) {
         for (c, total) in [
@@ -444,28 +483,6 @@ impl ValveMetrics {
             c.inc_by(total.saturating_sub(c.get()));
         }
     }
-}
-
-/// The compensation gauges, registered in `registry`: whether it is on, and its tracking
-/// errors.
-fn compensation_metrics(registry: &Registry) -> Result<(GaugeVec, GaugeVec), prometheus::Error> {
-    let active = GaugeVec::new(
-        Opts::new(
-            "valve_bridge_compensation_active",
-            "1 while compensation shapes the valve's set-point, 0 once its guard switched it off",
-        ),
-        &["valve"],
-    )?;
-    let tracking = GaugeVec::new(
-        Opts::new(
-            "valve_bridge_compensation_tracking_error_ratio",
-            "RMS of O_P - V_P over the last guard window: measured with compensation, and the model's without it",
-        ),
-        &["valve", "case"],
-    )?;
-    registry.register(Box::new(active.clone()))?;
-    registry.register(Box::new(tracking.clone()))?;
-    Ok((active, tracking))
 }
 
 impl ServerMetrics {

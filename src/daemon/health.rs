@@ -18,25 +18,28 @@
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
 //! valve) beside the log and to the Prometheus gauges, and at the end of the run `health.svg`
 //! plots each figure against its baseline and limit, drawn from the CSV by
-//! the [`PlotHealth`] the daemon was handed; an alarm is a warning in the log, the
+//! the [`PlotHealth`] the daemon was handed (the windows of this run). The CSV is a history: a
+//! restart appends its windows after those of the runs before ([`files::open_history`]), and a
+//! disk that refuses them is survived as the log's is ([`LogFile`]); an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
 //! bit [`HEALTH_ALARM_BIT`] of its status word; each window is also on the live page
 //! ([`super::page`]). With `[diagnosis]`, the thread also feeds the
 //! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
 
 use std::collections::VecDeque;
-use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::analysis::PlotHealth;
-use super::config::HealthConfig;
+use super::config::{HealthConfig, OnError};
 use super::diagnosis::Feed;
 use super::error::DaemonError;
 use super::exporter::HealthMetrics;
+use super::files;
 pub use super::health_figures::{Figures, HealthLimits, Held, Judged};
+use super::log_file::{csv_line, LogAlarm, LogFile, Refused};
 use super::page::board::{HealthWindow, ValveBoard};
 use crate::modbus::map::HEALTH_ALARM_BIT;
 use crate::modbus::server::RegisterBank;
@@ -54,6 +57,8 @@ pub struct HealthReport {
     pub first_alarm_t_s: Option<f64>,
     /// The health CSV.
     pub file: PathBuf,
+    /// Rows the disk refused for a while: written late, or dropped.
+    pub refused: Refused,
 }
 
 /// Where a valve's baseline comes from.
@@ -76,7 +81,9 @@ struct Monitor {
     /// one is.
     held: [Option<Held>; 5],
     report: HealthReport,
-    csv: csv::Writer<File>,
+    log: LogFile,
+    /// The row being written, as CSV.
+    line: Vec<u8>,
     metrics: Option<HealthMetrics>,
     /// The process controller's register bank of the valve, for the alarm bit.
     status: Option<Arc<RegisterBank>>,
@@ -123,6 +130,8 @@ pub struct Watched {
     /// Draws `health*.svg` from the CSV at the end (none: no plot).
     pub plot: Option<PlotHealth>,
     pub(crate) board: Option<Arc<ValveBoard>>,
+    /// The valve's log alarm, raised while its CSV cannot be written.
+    pub(crate) log_alarm: Arc<LogAlarm>,
 }
 
 /// The running health thread: where the loggers send rows (with the valve's index), and the
@@ -133,27 +142,24 @@ pub struct Health {
     pub handle: JoinHandle<Result<Vec<HealthReport>, DaemonError>>,
 }
 
-/// Creates each valve's health CSV in `dir` and starts the health thread for a loop of period
-/// `period_s`; it ends when every sender of rows is dropped.
+/// Opens each valve's health CSV in `dir` (appending to one there) and starts the health
+/// thread for a loop of period `period_s`; it ends when every sender of rows is dropped.
+/// `on_error`: what a write the disk refuses does.
 pub fn start(
     cfg: &HealthConfig,
-    dir: &Path,
+    (dir, on_error): (&Path, OnError),
     period_s: f64,
     valves: Vec<Watched>,
     diagnosis: Option<Feed>,
 ) -> Result<Health, DaemonError> {
     let cap = ((cfg.window_s / period_s).round() as usize).max(1);
+    let mut header = Vec::new();
+    csv_line(HEADER, &mut header);
     let mut monitors = Vec::with_capacity(valves.len());
     for w in valves {
         let path = dir.join(&w.file_name);
-        let file = File::create(&path).map_err(|source| DaemonError::LogFile {
-            path: path.clone(),
-            source,
-        })?;
-        let mut csv = csv::Writer::from_writer(file);
-        csv.write_record(HEADER)
-            .and_then(|()| csv.flush().map_err(csv::Error::from))
-            .map_err(|e| write_error(&path, e))?;
+        let (file, size) = files::open_history(&path, &header)?;
+        let log = LogFile::new(path.clone(), file, size, (on_error, w.log_alarm));
         monitors.push(Monitor {
             name: w.name,
             op: VecDeque::with_capacity(cap),
@@ -169,8 +175,10 @@ pub fn start(
                 alarms: 0,
                 first_alarm_t_s: None,
                 file: path,
+                refused: Refused::default(),
             },
-            csv,
+            log,
+            line: Vec::with_capacity(512),
             metrics: w.metrics,
             status: w.status,
             plot: w.plot,
@@ -188,13 +196,6 @@ pub fn start(
             source,
         })?;
     Ok(Health { tx, handle })
-}
-
-fn write_error(path: &Path, e: csv::Error) -> DaemonError {
-    DaemonError::LogWrite {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e),
-    }
 }
 
 /// The health thread: keeps each valve's window and estimates on time.
@@ -225,17 +226,14 @@ fn watch(
             let (op, vp) = (m.op.back(), m.vp.back());
             d.push(
                 i,
-                row.t_s,
+                (row.t_s, row.utc),
                 *op.unwrap_or(&f64::NAN),
                 *vp.unwrap_or(&f64::NAN),
                 raised,
             );
         }
     }
-    for m in &monitors {
-        m.plot()?;
-    }
-    Ok(monitors.into_iter().map(|m| m.report).collect())
+    monitors.into_iter().map(Monitor::finish).collect()
 }
 
 /// `x` with every NaN replaced by the last number before it (the first number for leading
@@ -333,21 +331,26 @@ impl Monitor {
         self.held.iter().any(Option::is_some)
     }
 
-    /// `health*.svg` beside the CSV, drawn from it (nothing when no window was estimated).
-    fn plot(&self) -> Result<(), DaemonError> {
+    /// Closes the CSV and draws `health*.svg` beside it, from it (nothing when no window was
+    /// estimated; a plot that cannot be drawn or written is said in the log, the run is not
+    /// failed for it); the report.
+    fn finish(mut self) -> Result<HealthReport, DaemonError> {
+        let (_, refused) = self.log.close()?;
+        self.report.refused = refused;
         let file = &self.report.file;
         let Some(plot) = self.plot else {
-            return Ok(());
+            return Ok(self.report);
         };
-        let svg = plot(&self.name, file).map_err(|e| DaemonError::LogWrite {
-            path: file.clone(),
-            source: std::io::Error::other(e),
-        })?;
-        if svg.is_empty() {
-            return Ok(());
+        let svg = file.with_extension("svg");
+        let drawn = plot(&self.name, file).map_err(|e| format!("cannot draw it: {e}"));
+        let written = drawn.and_then(|text| match text.is_empty() {
+            true => Ok(()),
+            false => files::write_over(&svg, text.as_bytes()).map_err(|e| e.to_string()),
+        });
+        if let Err(e) = written {
+            tracing::warn!(valve = %self.name, plot = %svg.display(), "no health plot: {e}");
         }
-        let path = file.with_extension("svg");
-        std::fs::write(&path, svg).map_err(|source| DaemonError::LogWrite { path, source })
+        Ok(self.report)
     }
 
     /// One row of the health CSV, flushed, and the window on the live page.
@@ -392,11 +395,10 @@ impl Monitor {
                 note: note.to_string(),
             });
         }
-        let path = &self.report.file;
-        self.csv
-            .write_record(&row)
-            .and_then(|()| self.csv.flush().map_err(csv::Error::from))
-            .map_err(|e| write_error(path, e))
+        self.line.clear();
+        csv_line(&row, &mut self.line);
+        self.log.line(&self.line)?;
+        self.log.flush()
     }
 }
 

@@ -8,8 +8,9 @@
 //!   valve's trace after loop time `T`; `GET /api/diagnoses/NAME`: a valve's diagnosis history
 //!   (the last lines of its file);
 //! - `GET /reports/diagnosis-NAME/T/FILE`: the files of a diagnosis report beside the logs, for
-//!   a valve of the config, a whole number of seconds and a file a report has, so that nothing
-//!   else on the disk can be read.
+//!   a valve of the config, a report's name (`20261122T101500Z`, `-N` when taken; whole seconds
+//!   of loop time for the reports of earlier versions) and a file a report has, never through a
+//!   symbolic link, so that nothing else on the disk can be read.
 //!
 //! `GET /favicon.ico` gets 204 (no icon), other paths 404, other methods 405, a request that is
 //! not HTTP 400 (hyper's). A connection that sends no request head within the idle timeout
@@ -19,7 +20,7 @@
 //! Not here: the metrics ([`super::exporter`]), what the page shows ([`super::page`]).
 
 use std::convert::Infallible;
-use std::path::PathBuf;
+use std::io::Read;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -33,6 +34,7 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use tokio::net::TcpListener;
 
 use super::exporter::LoopMetrics;
+use super::files;
 use super::page::{self, board::Board};
 use crate::net::{self, Health, Limits, Standing};
 
@@ -122,10 +124,10 @@ impl Site {
 
     /// A valve's diagnosis history, read off the network thread.
     async fn diagnoses(&self, valve: &str) -> Reply {
-        let Some(path) = self.board.history(valve) else {
+        let Some((path, from)) = self.board.history(valve) else {
             return not_found();
         };
-        let read = tokio::task::spawn_blocking(move || page::history_tail(&path)).await;
+        let read = tokio::task::spawn_blocking(move || page::history_tail(&path, from)).await;
         match read.map_err(std::io::Error::other).and_then(|r| r) {
             Ok(json) => fresh(reply(StatusCode::OK, JSON, json)),
             Err(e) => reply(
@@ -138,26 +140,35 @@ impl Site {
 
     /// A file of a diagnosis report (see [`report_file`]).
     async fn report(&self, rel: &str) -> Reply {
-        let Some((path, content_type)) = report_file(&self.board, rel) else {
+        let Some((parts, content_type)) = report_file(&self.board, rel) else {
             return not_found();
         };
-        match tokio::fs::read(&path).await {
-            Ok(body) => reply(StatusCode::OK, content_type, body),
-            Err(_) => not_found(),
+        let dir = self.board.dir().to_path_buf();
+        let read = tokio::task::spawn_blocking(move || {
+            let parts: Vec<&str> = parts.iter().map(String::as_str).collect();
+            let mut body = Vec::new();
+            files::open_read(&dir, &parts)?.read_to_end(&mut body)?;
+            Ok::<_, std::io::Error>(body)
+        });
+        match read.await {
+            Ok(Ok(body)) => reply(StatusCode::OK, content_type, body),
+            _ => not_found(),
         }
     }
 }
 
-/// The file `rel` (`diagnosis-NAME/T/FILE`) of the log directory and its content type: only
-/// for a valve of the board, a whole number of seconds and a file a report has.
-fn report_file(board: &Board, rel: &str) -> Option<(PathBuf, &'static str)> {
+/// The file `rel` (`diagnosis-NAME/T/FILE`) of the log directory, as the names of its three
+/// parts, and its content type: only for a valve of the board, a report's name and a file a
+/// report has.
+fn report_file(board: &Board, rel: &str) -> Option<([String; 3], &'static str)> {
     let mut parts = rel.split('/');
     let (dir, t, file) = (parts.next()?, parts.next()?, parts.next()?);
     let valve = dir.strip_prefix("diagnosis-")?;
-    let whole = (1..=12).contains(&t.len()) && t.bytes().all(|b| b.is_ascii_digit());
+    let named = (1..=24).contains(&t.len())
+        && (t.bytes()).all(|b| b.is_ascii_digit() || matches!(b, b'T' | b'Z' | b'-'));
     let &(_, content_type) = REPORT_FILES.iter().find(|(name, _)| *name == file)?;
-    (parts.next().is_none() && whole && board.has_valve(valve))
-        .then(|| (board.dir().join(dir).join(t).join(file), content_type))
+    (parts.next().is_none() && named && board.has_valve(valve))
+        .then(|| ([dir, t, file].map(String::from), content_type))
 }
 
 /// The loop time of `?since=T`, when given as a number.
@@ -353,6 +364,25 @@ mod tests {
             "/reports/diagnosis-a/6.0/report.html",
             "/reports/diagnosis-a/60/report.html/x",
             "/reports/diagnosis-a/61/report.html",
+            "/reports/diagnosis-a/20261122T101500Z/report.html",
+        ] {
+            assert_eq!(get(&addr, path).await.0, "HTTP/1.1 404 Not Found", "{path}");
+        }
+        // A report named by its wall-clock time; none through a link planted in the directory.
+        let named = dir.path().join("diagnosis-a/20261122T101500Z-1");
+        std::fs::create_dir(&named).unwrap();
+        std::fs::write(named.join("model.toml"), "model").unwrap();
+        let (status, _, body) =
+            get(&addr, "/reports/diagnosis-a/20261122T101500Z-1/model.toml").await;
+        assert_eq!(
+            (status.as_str(), body.as_str()),
+            ("HTTP/1.1 200 OK", "model")
+        );
+        std::os::unix::fs::symlink(&report, dir.path().join("diagnosis-a/70")).unwrap();
+        std::os::unix::fs::symlink(report.join("report.html"), named.join("report.html")).unwrap();
+        for path in [
+            "/reports/diagnosis-a/70/report.html",
+            "/reports/diagnosis-a/20261122T101500Z-1/report.html",
         ] {
             assert_eq!(get(&addr, path).await.0, "HTTP/1.1 404 Not Found", "{path}");
         }

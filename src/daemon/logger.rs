@@ -1,14 +1,21 @@
 //! The sample log: CSV files in the recording format, written by their own thread.
 //!
 //! The loop sends each [`Sample`] down a bounded channel ([`QUEUE_ROWS`]) and never waits on
-//! the disk. The logger thread writes the rows through a buffered CSV writer, flushes (and
-//! syncs) at least every `flush_interval_ms`, and rotates to a new file by size or by covered
-//! loop time. Each file starts with the header and is named by the time of its first row,
-//! `vb-YYYYMMDDTHHMMSSZ.csv` (UTC; `-1`, `-2`, ... added if that name is taken; `vb-NAME-...`
-//! for a named valve). Each valve has its own logger. A crash loses at most the last flush
+//! the disk. The logger thread writes the rows ([`LogFile`]), flushes (and syncs) at least
+//! every `flush_interval_ms`, and rotates to a new file by size or by covered loop time. Each
+//! file is named by the time of its first row, `vb-YYYYMMDDTHHMMSSZ.csv` (UTC; `-1`, `-2`, ...
+//! added if that name is taken; `vb-NAME-...` for a named valve), and appears under that name
+//! with its header already on the disk ([`files::create_with_header`], through
+//! `vb-[NAME-]new.part`): a crash or a kill at any moment, a rotation included, leaves no file
+//! without its header. Each valve has its own logger. A crash loses at most the last flush
 //! interval, and a file cut mid-line still loads with the recording reader. With `[log]
 //! compress` (the default) a file is gzipped on a thread of its own once the log has moved on to
 //! the next ([`crate::recording::gzip`]: `NAME.csv.gz`, read as it is by every reader).
+//!
+//! A disk that refuses rows (full) keeps the loop running with `[log] on_error =
+//! "keep-running"`: the rows are held and written later ([`super::log_file`]), and the log
+//! rotates only once the current file has taken its rows. With `"stop"`, a refused write stops
+//! the loop.
 //!
 //! The row, its columns and their precision are the log format
 //! ([`crate::recording::log_format`]); this module writes them.
@@ -18,8 +25,7 @@
 //!
 //! This module does not decide what is logged; the loop does.
 
-use std::fs::File;
-use std::io::{self, Write};
+use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
@@ -29,8 +35,10 @@ use std::time::{Duration, Instant, SystemTime};
 
 use time::OffsetDateTime;
 
-use super::config::LogConfig;
+use super::config::{LogConfig, OnError};
 use super::error::DaemonError;
+use super::files;
+use super::log_file::{csv_line, LogAlarm, LogFile, Refused};
 use super::page::board::TraceFeed;
 use crate::recording::gzip;
 use crate::recording::log_format::{Sample, HEADER};
@@ -42,6 +50,8 @@ pub struct LogReport {
     pub files: Vec<PathBuf>,
     /// Rows written (all files).
     pub rows: u64,
+    /// Rows the disk refused for a while: written late, or dropped.
+    pub refused: Refused,
 }
 
 /// Where a logger passes on the rows it wrote: the health thread, with the valve's index.
@@ -61,133 +71,115 @@ pub struct Logger {
     pub handle: JoinHandle<Result<LogReport, DaemonError>>,
 }
 
-/// A file writer that counts the bytes it passes on (for rotation by size).
-struct Counting {
-    file: File,
-    bytes: u64,
+/// Where a valve's files go and what they are named.
+struct Naming {
+    dir: PathBuf,
+    /// `vb-`, or `vb-NAME-` for a named valve.
+    prefix: String,
+    started_wall: SystemTime,
+    /// What a refused write does, and the valve's log alarm.
+    on_error: (OnError, Arc<LogAlarm>),
 }
 
-impl Write for Counting {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        let n = self.file.write(buf)?;
-        self.bytes += n as u64;
-        Ok(n)
-    }
-
-    fn flush(&mut self) -> io::Result<()> {
-        self.file.flush()
+impl Naming {
+    /// A new file, its header on the disk, for a first row at loop time `t_s`.
+    fn open(&self, t_s: f64) -> Result<OpenFile, DaemonError> {
+        let wall = self.started_wall + Duration::from_secs_f64(t_s.max(0.0));
+        let stamp = file_stamp(wall);
+        let prefix = &self.prefix;
+        let names = (0..).map(|n| match n {
+            0 => format!("{prefix}{stamp}.csv"),
+            n => format!("{prefix}{stamp}-{n}.csv"),
+        });
+        let mut header = Vec::new();
+        csv_line(HEADER, &mut header);
+        let temp = format!("{prefix}new.part");
+        let (path, file) = files::create_with_header(&self.dir, &temp, names, &header)?;
+        tracing::info!(file = %path.display(), "logging to");
+        let size = header.len() as u64;
+        Ok(OpenFile {
+            log: LogFile::new(path, file, size, self.on_error.clone()),
+            first_t_s: t_s,
+        })
     }
 }
 
 /// One open log file.
 struct OpenFile {
-    path: PathBuf,
-    csv: csv::Writer<Counting>,
+    log: LogFile,
     first_t_s: f64,
 }
 
 /// Writes rows into rotating files in one directory.
 struct Files {
-    dir: PathBuf,
-    /// `vb-`, or `vb-NAME-` for a named valve.
-    prefix: String,
-    started_wall: SystemTime,
+    naming: Naming,
     max_bytes: u64,
     max_span_s: f64,
-    current: Option<OpenFile>,
+    current: OpenFile,
+    /// A new file could not be made: the next try waits for the next flush.
+    rotation_failed: bool,
     report: LogReport,
     /// Compress each file once it is closed for a newer one (`[log] compress`).
     compress: bool,
     /// Compressions under way: the file's index in `report.files` and its thread.
     compressing: Vec<(usize, JoinHandle<io::Result<PathBuf>>)>,
+    /// The row being written, as CSV.
+    line: Vec<u8>,
 }
 
 impl Files {
-    /// Opens a new file for a first row at loop time `t_s`.
-    fn open(&mut self, t_s: f64) -> Result<(), DaemonError> {
-        let wall = self.started_wall + Duration::from_secs_f64(t_s.max(0.0));
-        let stamp = file_stamp(wall);
-        let mut n = 0;
-        loop {
-            let name = if n == 0 {
-                format!("{}{stamp}.csv", self.prefix)
-            } else {
-                format!("{}{stamp}-{n}.csv", self.prefix)
-            };
-            let path = self.dir.join(name);
-            match File::options().write(true).create_new(true).open(&path) {
-                Ok(file) => {
-                    let mut csv = csv::WriterBuilder::new()
-                        .has_headers(false)
-                        .buffer_capacity(64 * 1024)
-                        .from_writer(Counting { file, bytes: 0 });
-                    csv.write_record(HEADER)
-                        .map_err(|e| write_error(&path, e))?;
-                    tracing::info!(file = %path.display(), "logging to");
-                    self.report.files.push(path.clone());
-                    self.current = Some(OpenFile {
-                        path,
-                        csv,
-                        first_t_s: t_s,
-                    });
-                    return Ok(());
-                }
-                Err(e) if e.kind() == io::ErrorKind::AlreadyExists && n < 1000 => n += 1,
-                Err(source) => return Err(DaemonError::LogFile { path, source }),
-            }
-        }
-    }
-
     /// Writes one row, rotating first if the current file is full (never for the stop action's
-    /// row: a file holding only that row would be no recording).
+    /// row: a file holding only that row would be no recording; nor while the disk refuses the
+    /// current file's rows, which stay in it).
     fn write(&mut self, s: &Sample) -> Result<(), DaemonError> {
-        let full = match &self.current {
-            None => true,
-            Some(_) if s.status.is_stop_action() => false,
-            Some(f) => {
-                f.csv.get_ref().bytes >= self.max_bytes || s.t_s - f.first_t_s >= self.max_span_s
+        let f = &self.current;
+        let full = !s.status.is_stop_action()
+            && (f.log.size() >= self.max_bytes || s.t_s - f.first_t_s >= self.max_span_s);
+        if full && !f.log.failing() && !self.rotation_failed {
+            self.rotate(s.t_s)?;
+        }
+        self.line.clear();
+        csv_line(s.cells(), &mut self.line);
+        self.current.log.line(&self.line)?;
+        Ok(())
+    }
+
+    /// Moves on to a new file for a first row at `t_s`, then closes the current one. A new file
+    /// that cannot be made keeps the current one (with `on_error = "keep-running"`).
+    fn rotate(&mut self, t_s: f64) -> Result<(), DaemonError> {
+        let next = match self.naming.open(t_s) {
+            Ok(next) => next,
+            Err(e) if self.naming.on_error.0 == OnError::KeepRunning => {
+                tracing::error!(
+                    "{e}; the log goes on in {} and tries again at the next flush",
+                    self.current.log.path().display()
+                );
+                self.rotation_failed = true;
+                return Ok(());
             }
+            Err(e) => return Err(e),
         };
-        if full {
-            let closed = self.current.as_ref().map(|f| f.path.clone());
-            self.close()?;
-            if let Some(path) = closed {
-                self.compress_later(path);
-            }
-            self.open(s.t_s)?;
-        }
-        if let Some(f) = &mut self.current {
-            f.csv
-                .write_record(s.cells())
-                .map_err(|e| write_error(&f.path, e))?;
-            self.report.rows += 1;
-        }
+        let closed = std::mem::replace(&mut self.current, next);
+        let path = closed.log.path().to_path_buf();
+        self.close(closed)?;
+        self.compress_later(path);
+        self.report
+            .files
+            .push(self.current.log.path().to_path_buf());
         Ok(())
     }
 
-    /// Pushes buffered rows to the disk.
+    /// Pushes buffered rows to the disk; the next row may try a rotation again.
     fn flush(&mut self) -> Result<(), DaemonError> {
-        if let Some(f) = &mut self.current {
-            let io = |source| DaemonError::LogWrite {
-                path: f.path.clone(),
-                source,
-            };
-            f.csv.flush().map_err(io)?;
-            f.csv
-                .get_ref()
-                .file
-                .sync_data()
-                .map_err(|source| DaemonError::LogWrite {
-                    path: f.path.clone(),
-                    source,
-                })?;
-        }
-        Ok(())
+        self.rotation_failed = false;
+        self.current.log.flush()
     }
 
-    fn close(&mut self) -> Result<(), DaemonError> {
-        self.flush()?;
-        self.current = None;
+    /// Closes `file`, counting its rows.
+    fn close(&mut self, file: OpenFile) -> Result<(), DaemonError> {
+        let (rows, refused) = file.log.close()?;
+        self.report.rows += rows;
+        self.report.refused += refused;
         Ok(())
     }
 
@@ -207,8 +199,12 @@ impl Files {
         }
     }
 
-    /// Waits for the compressions under way and names the files as they now are.
-    fn finish_compressing(&mut self) {
+    /// Closes the current file, waits for the compressions under way and names the files as
+    /// they now are.
+    fn finish(mut self) -> Result<LogReport, DaemonError> {
+        let (rows, refused) = self.current.log.close()?;
+        self.report.rows += rows;
+        self.report.refused += refused;
         for (index, handle) in self.compressing.drain(..) {
             let plain = &mut self.report.files[index];
             match handle.join() {
@@ -223,18 +219,12 @@ impl Files {
                 ),
             }
         }
-    }
-}
-
-fn write_error(path: &Path, e: csv::Error) -> DaemonError {
-    DaemonError::LogWrite {
-        path: path.to_path_buf(),
-        source: io::Error::other(e),
+        Ok(self.report)
     }
 }
 
 /// `20261122T101500Z` for a wall time (UTC).
-fn file_stamp(t: SystemTime) -> String {
+pub(crate) fn file_stamp(t: SystemTime) -> String {
     let format = time::macros::format_description!("[year][month][day]T[hour][minute][second]Z");
     OffsetDateTime::from(t)
         .format(&format)
@@ -244,33 +234,43 @@ fn file_stamp(t: SystemTime) -> String {
 impl Logger {
     /// Creates the directory and the first file, then starts the logger thread. The files of a
     /// valve named `name` are `vb-NAME-YYYYMMDDTHHMMSSZ.csv`, those of an unnamed one
-    /// `vb-YYYYMMDDTHHMMSSZ.csv`.
+    /// `vb-YYYYMMDDTHHMMSSZ.csv`; `alarm` is the valve's log alarm.
     ///
-    /// On a write error the thread logs it, sets `stop` (the loop then ends cleanly) and keeps
-    /// draining the channel so the loop never blocks; the error is returned by the join.
+    /// On a write error with `on_error = "stop"` the thread logs it, sets `stop` (the loop then
+    /// ends cleanly) and keeps draining the channel so the loop never blocks; the error is
+    /// returned by the join.
     pub(crate) fn start(
         cfg: &LogConfig,
-        dir: &Path,
-        name: Option<&str>,
+        (dir, name): (&Path, Option<&str>),
         (forward, trace): (Option<Forward>, Option<TraceFeed>),
+        alarm: Arc<LogAlarm>,
         stop: Arc<AtomicBool>,
     ) -> Result<Logger, DaemonError> {
         std::fs::create_dir_all(dir).map_err(|source| DaemonError::LogDir {
             dir: dir.to_path_buf(),
             source,
         })?;
-        let mut files = Files {
+        let naming = Naming {
             dir: dir.to_path_buf(),
             prefix: name.map_or("vb-".into(), |n| format!("vb-{n}-")),
             started_wall: SystemTime::now(),
+            on_error: (cfg.on_error, alarm),
+        };
+        let current = naming.open(0.0)?;
+        let files = Files {
             max_bytes: (cfg.rotate_size_mb * 1e6) as u64,
             max_span_s: cfg.rotate_after_s,
-            current: None,
-            report: LogReport::default(),
+            rotation_failed: false,
+            report: LogReport {
+                files: vec![current.log.path().to_path_buf()],
+                ..LogReport::default()
+            },
+            current,
+            naming,
             compress: cfg.compress,
             compressing: Vec::new(),
+            line: Vec::with_capacity(256),
         };
-        files.open(0.0)?;
         let flush_every = Duration::from_millis(cfg.flush_interval_ms);
         let (tx, rx) = mpsc::sync_channel(QUEUE_ROWS);
         let handle = std::thread::Builder::new()
@@ -310,9 +310,7 @@ fn write_all(
                         t.row(sample);
                     }
                 }
-                if done {
-                    files.close()?;
-                } else if Instant::now() >= next_flush {
+                if !done && Instant::now() >= next_flush {
                     files.flush()?;
                     next_flush = Instant::now() + flush_every;
                 }
@@ -325,10 +323,10 @@ fn write_all(
             }
         }
         if done {
-            files.finish_compressing();
+            let report = files.finish();
             return match failed {
                 Some(e) => Err(e),
-                None => Ok(files.report),
+                None => report,
             };
         }
     }
@@ -355,6 +353,49 @@ mod tests {
         }
     }
 
+    /// A logger of the valve `name` into `dir`.
+    fn start(cfg: &LogConfig, dir: &Path, name: Option<&str>) -> Logger {
+        let alarm = LogAlarm::new(name.unwrap_or("valve"), None, None);
+        let stop = Arc::new(AtomicBool::new(false));
+        Logger::start(cfg, (dir, name), (None, None), alarm, stop).unwrap()
+    }
+
+    #[test]
+    fn a_file_made_at_a_rotation_holds_its_header_before_any_row_is_flushed() {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = LogConfig {
+            rotate_after_s: 1.0,
+            compress: false,
+            ..LogConfig::default()
+        };
+        let logger = start(&cfg, dir.path(), None);
+        // A second of rows, and the first of the next file: no flush for a second.
+        for k in 0..=100u32 {
+            let vp = Some(f64::from(k) / 10.0);
+            let row = sample(f64::from(k) / 100.0, Status::Ok, vp);
+            logger.tx.send(row).unwrap();
+        }
+        let started = Instant::now();
+        let second = loop {
+            let mut names: Vec<PathBuf> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+                .collect();
+            names.sort();
+            if names.len() == 2 {
+                break names[1].clone();
+            }
+            assert!(started.elapsed() < Duration::from_millis(500), "{names:?}");
+            std::thread::yield_now();
+        };
+        let text = std::fs::read_to_string(&second).unwrap();
+        assert_eq!(text, format!("{}\n", HEADER.join(",")));
+        drop(logger.tx);
+        let report = logger.handle.join().unwrap().unwrap();
+        assert_eq!((report.rows, report.files.len()), (101, 2));
+    }
+
     #[test]
     fn rows_rotate_by_span_and_keep_empty_vp() {
         let dir = tempfile::tempdir().unwrap();
@@ -364,15 +405,9 @@ mod tests {
             rotate_after_s: 1.0,
             flush_interval_ms: 10,
             compress: false,
+            on_error: OnError::KeepRunning,
         };
-        let logger = Logger::start(
-            &cfg,
-            dir.path(),
-            None,
-            (None, None),
-            Arc::new(AtomicBool::new(false)),
-        )
-        .unwrap();
+        let logger = start(&cfg, dir.path(), None);
         for k in 0..250u32 {
             let status = if k == 7 { Status::Timeout } else { Status::Ok };
             let vp = (status == Status::Ok).then_some(f64::from(k) / 10.0);
@@ -420,8 +455,7 @@ mod tests {
             rotate_after_s: 1.0,
             ..LogConfig::default()
         };
-        let stop = Arc::new(AtomicBool::new(false));
-        let logger = Logger::start(&cfg, dir.path(), Some("level"), (None, None), stop).unwrap();
+        let logger = start(&cfg, dir.path(), Some("level"));
         for k in 0..250u32 {
             let vp = Some(f64::from(k) / 10.0);
             let row = sample(f64::from(k) / 100.0, Status::Ok, vp);
@@ -460,14 +494,7 @@ mod tests {
             flush_interval_ms: 50,
             ..LogConfig::default()
         };
-        let logger = Logger::start(
-            &cfg,
-            dir.path(),
-            None,
-            (None, None),
-            Arc::new(AtomicBool::new(false)),
-        )
-        .unwrap();
+        let logger = start(&cfg, dir.path(), None);
         logger.tx.send(sample(0.0, Status::Ok, Some(1.0))).unwrap();
         std::thread::sleep(Duration::from_millis(300));
         let path = std::fs::read_dir(dir.path())

@@ -19,7 +19,9 @@ use super::control::{self, Lane, Loop, LoopEnd};
 use super::diagnosis::{self, DiagnosisMetrics};
 use super::error::DaemonError;
 use super::exporter::LoopMetrics;
+use super::files;
 use super::health::{self, HealthReport};
+use super::log_file::LogAlarm;
 use super::logger::{LogReport, Logger};
 use super::net::{Listeners, Net};
 use super::page::board::Board;
@@ -49,6 +51,7 @@ pub struct Running {
 
 /// Starts the loop and logger threads; the loop runs until stopped, the duration or a source ends.
 pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
+    files::ignore_file_size_signal();
     let clock = checked_clock(&config, &opts)?;
     let diagnose = checked_diagnosis(&config, &opts)?;
     let rate_hz = config.loop_.rate_hz;
@@ -80,9 +83,15 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
     }
     let stop = Arc::new(AtomicBool::new(false));
     let live = Arc::new(Live::default());
+    let alarms: Vec<Arc<LogAlarm>> = (config.valves.iter().enumerate())
+        .map(|(i, v)| {
+            let m = metrics.as_ref().and_then(|m| m.valve(i));
+            LogAlarm::new(v.label(), m, board.as_ref().and_then(|b| b.valve(i)))
+        })
+        .collect();
     let (health, diagnosis) = start_health(
-        &config,
-        &dir,
+        (&config, clock),
+        (&dir, &alarms),
         (metrics.as_ref(), board.as_deref()),
         &sources,
         (diagnose, opts.analysis.plot_health),
@@ -94,9 +103,9 @@ pub fn start(config: Config, opts: RunOptions) -> Result<Running, DaemonError> {
         let trace = board.as_ref().and_then(|b| b.feed(i, rate_hz));
         let logger = Logger::start(
             &config.log,
-            &dir,
-            valve.name.as_deref(),
+            (&dir, valve.name.as_deref()),
             (forward, trace),
+            alarms[i].clone(),
             stop.clone(),
         )?;
         tracing::info!(
@@ -220,10 +229,11 @@ impl Drop for LoopThreads {
 
 /// Starts the health thread when `[health]` asks for it: a CSV per valve in `dir`, the gauges,
 /// the live page's `board`, and the alarm bit in the status word of each valve a process
-/// controller drives (`sources`); and with `[diagnosis]`, the diagnosis thread it feeds.
+/// controller drives (`sources`); and with `[diagnosis]`, the diagnosis thread it feeds, for a
+/// loop on `clock`. `alarms`: each valve's log alarm.
 fn start_health(
-    config: &Config,
-    dir: &Path,
+    (config, clock): (&Config, ClockKind),
+    (dir, alarms): (&Path, &[Arc<LogAlarm>]),
     (metrics, board): (Option<&LoopMetrics>, Option<&Board>),
     sources: &[Source],
     (diagnose, plot): (Option<Diagnose<'_>>, Option<PlotHealth>),
@@ -264,6 +274,7 @@ fn start_health(
             status: sources.get(i).and_then(Source::served_bank).cloned(),
             plot,
             board: board.and_then(|b| b.valve(i)),
+            log_alarm: alarms[i].clone(),
         });
     }
     let (feed, diagnosis) = match diagnose {
@@ -276,16 +287,19 @@ fn start_health(
                 .map(|(i, v)| diagnosis::Watched {
                     name: v.label().to_string(),
                     metrics: m.clone(),
-                    count: board.and_then(|b| b.valve(i)?.diagnoses()),
+                    board: board.and_then(|b| b.valve(i)),
+                    log_alarm: alarms[i].clone(),
                     model: models[i].clone(),
                 })
                 .collect();
-            let (feed, handle) = diagnosis::start(d, dir, period_s, valves, diagnose)?;
+            let files_in = (dir, config.log.on_error);
+            let (feed, handle) =
+                diagnosis::start(d, files_in, (period_s, clock), valves, diagnose)?;
             (Some(feed), Some(handle))
         }
         None => (None, None),
     };
-    let health = health::start(cfg, dir, period_s, watched, feed)?;
+    let health = health::start(cfg, (dir, config.log.on_error), period_s, watched, feed)?;
     Ok((Some(health), diagnosis))
 }
 

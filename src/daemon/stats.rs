@@ -14,6 +14,7 @@ use hdrhistogram::Histogram;
 use super::compensation::CompensationReport;
 use super::diagnosis::DiagnosisReport;
 use super::health::HealthReport;
+use super::log_file::Refused;
 use super::logger::LogReport;
 use super::valve::Fault;
 use crate::human;
@@ -125,6 +126,8 @@ pub struct Live {
     op_bits: AtomicU64,
     vp_bits: AtomicU64,
     p99_ns: AtomicU64,
+    /// A response test's moves done (high 32 bits) and in all (low 32 bits); 0 for others.
+    moves: AtomicU64,
 }
 
 /// A snapshot of [`Live`].
@@ -138,6 +141,8 @@ pub struct LiveView {
     pub vp_pct: f64,
     /// Timing error p99 so far, µs.
     pub p99_us: f64,
+    /// A response test's moves done and in all (`None` for other sources).
+    pub moves: Option<(u32, u32)>,
 }
 
 impl Live {
@@ -151,6 +156,12 @@ impl Live {
             sample.vp_pct.unwrap_or(f64::NAN).to_bits(),
             Ordering::Relaxed,
         );
+    }
+
+    /// Publishes a response test's moves done and in all.
+    pub fn publish_progress(&self, (done, all): (usize, usize)) {
+        let packed = (done.min(u32::MAX as usize) as u64) << 32 | all.min(u32::MAX as usize) as u64;
+        self.moves.store(packed, Ordering::Relaxed);
     }
 
     /// Publishes the timing p99.
@@ -175,6 +186,10 @@ impl Live {
                 f64::from_bits(self.vp_bits.load(Ordering::Relaxed))
             },
             p99_us: self.p99_ns.load(Ordering::Relaxed) as f64 / 1e3,
+            moves: match self.moves.load(Ordering::Relaxed) {
+                0 => None,
+                m => Some(((m >> 32) as u32, m as u32)),
+            },
         }
     }
 }
@@ -409,6 +424,7 @@ impl ValveSummary {
                     .map_or(String::new(), |t| format!(" (first at {t:.0} s)")),
                 h.file.display()
             )?;
+            write_refused(f, indent, "health rows", h.refused)?;
         }
         if let Some(d) = &self.diagnosis {
             writeln!(
@@ -421,10 +437,19 @@ impl ValveSummary {
             for a in &d.alarms {
                 writeln!(f, "{indent}  alarm: {a}")?;
             }
+            if d.skipped > 0 {
+                writeln!(
+                    f,
+                    "{indent}diagnosis: {} windows skipped (each came while the valve's diagnosis before it was still running)",
+                    d.skipped
+                )?;
+            }
+            write_refused(f, indent, "diagnosis lines", d.refused)?;
         }
         if let Some(c) = &self.compensation {
             write_compensation(f, indent, c)?;
         }
+        write_refused(f, indent, "log rows", self.log.refused)?;
         let files: Vec<String> = self
             .log
             .files
@@ -438,6 +463,20 @@ impl ValveSummary {
             files.join(", ")
         )
     }
+}
+
+/// The line `WHAT the disk refused: N written late, M dropped`, when it refused any.
+fn write_refused(f: &mut fmt::Formatter<'_>, indent: &str, what: &str, r: Refused) -> fmt::Result {
+    if r == Refused::default() {
+        return Ok(());
+    }
+    writeln!(
+        f,
+        "{indent}{what} the disk refused: {} written late, {} dropped (a full disk? they were held, up to {} MiB)",
+        r.late,
+        r.dropped,
+        super::log_file::HOLD_BYTES >> 20
+    )
 }
 
 /// The summary's compensation line.

@@ -207,7 +207,7 @@ pub fn fixed(v: f64, decimals: usize) -> String {
 }
 
 /// `2026-11-23T19:27:09.045Z` (UTC, ms).
-fn utc_stamp(t: SystemTime) -> String {
+pub fn utc_stamp(t: SystemTime) -> String {
     let format = time::macros::format_description!(
         "[year]-[month]-[day]T[hour]:[minute]:[second].[subsecond digits:3]Z"
     );

@@ -2,6 +2,8 @@
 //! per figure in its own unit (dead time and reversal delay in s, stroke speeds in %/s, tracking
 //! error in %), each with its baseline and its alarm limit as lines, the windows in alarm as
 //! shaded spans, against loop time; the legend beside each panel, outside its plotting area.
+//! A CSV that several runs appended to is drawn for its last run: its rows from the last where
+//! loop time goes back (each run starts it at 0).
 //!
 //! Not here: estimating the figures or writing the CSV ([`crate::daemon::health`]).
 
@@ -69,6 +71,7 @@ struct Table {
 }
 
 impl Table {
+    /// The rows of the last run in the CSV at `path`.
     fn read(path: &Path) -> Result<Table, csv::Error> {
         let mut r = csv::Reader::from_path(path)?;
         let header: Vec<String> = r.headers()?.iter().map(String::from).collect();
@@ -78,6 +81,12 @@ impl Table {
             let rec = rec?;
             for (c, cell) in columns.iter_mut().zip(rec.iter()) {
                 c.1.push(cell.parse().unwrap_or(f64::NAN));
+            }
+        }
+        if let Some((_, t)) = columns.iter().find(|c| c.0 == "t_s") {
+            let run = (1..t.len()).rfind(|&k| t[k] <= t[k - 1]).unwrap_or(0);
+            for c in &mut columns {
+                c.1.drain(..run.min(c.1.len()));
             }
         }
         let col = |name: &str| {
@@ -241,5 +250,20 @@ mod tests {
         for text in ["dead time (s)", "alarm limit", "in alarm", "tracking error"] {
             assert!(svg.contains(text), "{text}");
         }
+    }
+
+    #[test]
+    fn a_csv_of_several_runs_is_drawn_for_the_last() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("health.csv");
+        let mut text = String::from("t_s,dead_time_s,alarm\n");
+        for t in [600, 660, 720, 600, 660, 600, 660, 720, 780] {
+            text += &format!("{t},0.4,0\n");
+        }
+        std::fs::write(&path, text).unwrap();
+        let table = Table::read(&path).unwrap();
+        let t: Vec<f64> = table.t_h.iter().map(|h| (h * 3600.0).round()).collect();
+        assert_eq!(t, [600.0, 660.0, 720.0, 780.0]);
+        assert_eq!(table.column("dead_time_s").len(), 4);
     }
 }

@@ -134,6 +134,15 @@ fn errors_name_file_line_key_and_what_is_allowed() {
         e.starts_with("c.toml:2: safety.on_stop: on_stop = \"go-to\" needs go_to_pct"),
         "{e}"
     );
+    let e = err("[log]\ndir = \"x\"\non_error = \"ignore\"\n");
+    assert!(
+        e.starts_with(
+            "c.toml:3: log.on_error: unknown variant `ignore`, expected `keep-running` or `stop`"
+        ),
+        "{e}"
+    );
+    let c = Config::from_toml("[log]\non_error = \"stop\"\n", Path::new("c.toml")).unwrap();
+    assert_eq!(c.log.on_error, OnError::Stop);
     let e = err("[source]\nkind = \"noise\"\n");
     assert!(
         e.contains("source.kind: unknown variant `noise`, expected one of"),

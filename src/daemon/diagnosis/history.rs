@@ -51,8 +51,11 @@ impl Entry {
 /// One diagnosis, as a line of the history.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Record {
-    /// Loop time at the end of the diagnosed window, s.
+    /// Loop time at the end of the diagnosed window, s (from 0 at each run's start: a history
+    /// appended to by several runs goes back to 0 where a run starts).
     pub t_s: f64,
+    /// The window's end as UTC wall-clock time, ms (as the log's `utc` column).
+    pub utc: String,
     /// The window's length, s.
     pub window_s: f64,
     /// What asked for it: `every_s` or `health alarm`.

@@ -2,7 +2,8 @@
 //! already see it, never by the loop thread. Each logger puts a point of its valve's rows into
 //! the valve's trace every 1/[`TRACE_HZ`] s (and at every change of status), the health thread
 //! each window's figures with their baseline and limits, the diagnosis thread the count of its
-//! diagnoses. The network thread reads it for `/api/live` ([`Board::live_json`]): the locks are
+//! diagnoses and where this run's lines of its history start, and a file that cannot be
+//! written its log alarm ([`crate::daemon::log_file`]). The network thread reads it for `/api/live` ([`Board::live_json`]): the locks are
 //! held for a copy, never across I/O.
 //!
 //! Not here: serving ([`crate::daemon::http`]), the page itself (`live.js`), the diagnosis
@@ -16,7 +17,7 @@ use std::time::UNIX_EPOCH;
 
 use serde::Serialize;
 
-use crate::daemon::diagnosis::history_file;
+use crate::daemon::files::history_file;
 use crate::daemon::health_figures::{Figures, HealthLimits, Held, Judged};
 use crate::recording::log_format::{Sample, Status};
 
@@ -62,6 +63,11 @@ pub(crate) struct ValveBoard {
     diagnoses: Option<Arc<AtomicU64>>,
     /// Loop time of the first health window and of the first diagnosis, s.
     first_t_s: (Option<f64>, Option<f64>),
+    /// Where this run's lines of the diagnosis history start, bytes (the history keeps the
+    /// lines of earlier runs before them, on their own loop time).
+    history_from: AtomicU64,
+    /// Why the valve's log cannot be written, while it cannot.
+    log_alarm: Mutex<Option<String>>,
 }
 
 /// Every valve's board, and where the daemon writes its files.
@@ -103,6 +109,8 @@ impl Board {
                         health: runs.0.map(|_| Mutex::new(None)),
                         diagnoses: runs.1.map(|_| Arc::new(AtomicU64::new(0))),
                         first_t_s: runs,
+                        history_from: AtomicU64::new(0),
+                        log_alarm: Mutex::new(None),
                     })
                 })
                 .collect(),
@@ -125,11 +133,13 @@ impl Board {
         })
     }
 
-    /// The diagnosis history of the valve named `valve`, when it has one.
-    pub(crate) fn history(&self, valve: &str) -> Option<PathBuf> {
+    /// The diagnosis history of the valve named `valve`, when it has one, and where this
+    /// run's lines start in it.
+    pub(crate) fn history(&self, valve: &str) -> Option<(PathBuf, u64)> {
         let v = self.valves.iter().find(|v| v.name == valve)?;
         v.diagnoses.as_ref()?;
-        Some(history_file(&self.dir, valve))
+        let from = v.history_from.load(Ordering::Relaxed);
+        Some((history_file(&self.dir, valve), from))
     }
 
     /// The log directory.
@@ -166,6 +176,16 @@ impl ValveBoard {
     /// The counter of diagnoses made, for the diagnosis thread (None without `[diagnosis]`).
     pub(crate) fn diagnoses(&self) -> Option<Arc<AtomicU64>> {
         self.diagnoses.clone()
+    }
+
+    /// This run's lines of the diagnosis history start at byte `from` of it.
+    pub(crate) fn history_starts_at(&self, from: u64) {
+        self.history_from.store(from, Ordering::Relaxed);
+    }
+
+    /// Raises the log alarm with why (Some) or clears it (None).
+    pub(crate) fn log_alarm(&self, why: Option<String>) {
+        *lock(&self.log_alarm) = why;
     }
 
     fn view(&self, since: Option<f64>) -> ValveJson<'_> {
@@ -214,6 +234,7 @@ impl ValveBoard {
             health,
             diagnoses: (self.diagnoses.as_ref()).map(|d| d.load(Ordering::Relaxed)),
             first_diagnosis_t_s: self.first_t_s.1,
+            log_alarm: lock(&self.log_alarm).clone(),
         }
     }
 }
@@ -289,6 +310,8 @@ struct ValveJson<'a> {
     diagnoses: Option<u64>,
     /// Loop time of the first diagnosis, s (null without `[diagnosis]`).
     first_diagnosis_t_s: Option<f64>,
+    /// Why the valve's log cannot be written; null while it can.
+    log_alarm: Option<String>,
 }
 
 /// Columns of a trace: loop time (s), O_P and V_P (%, null where missing).
@@ -408,8 +431,18 @@ mod tests {
         assert_eq!(parse(&board, None)["valves"][0]["diagnoses"], 2);
         assert_eq!(
             board.history("a"),
-            Some(PathBuf::from("/logs/diagnosis-a.jsonl"))
+            Some((PathBuf::from("/logs/diagnosis-a.jsonl"), 0))
         );
+        let v = board.valve(0).unwrap();
+        v.history_starts_at(120);
+        assert_eq!(board.history("a").unwrap().1, 120);
+        assert_eq!(
+            parse(&board, None)["valves"][0]["log_alarm"],
+            serde_json::Value::Null
+        );
+        v.log_alarm(Some("cannot write vb-a.csv".into()));
+        let live = parse(&board, None);
+        assert_eq!(live["valves"][0]["log_alarm"], "cannot write vb-a.csv");
         assert!(board.history("../a").is_none() && !board.has_valve("b"));
     }
 

@@ -1,11 +1,11 @@
 // The live page of valve-bridge's daemon (src/daemon/page/): every second it asks /api/live for
 // what is new (each valve's trace after the last point it has, its status, its last health
 // window, its count of diagnoses) and draws, per valve, O_P and V_P over the last minutes with
-// uPlot, the health figures against their limits and the alarms (each with its figure, its
-// limit, since when and the diagnosis that explains it); when a valve has a new diagnosis it
-// reads /api/diagnoses/NAME and draws the effect sizes over time (a chart per unit, each size
-// with its 90 % interval) and the table of diagnoses in the vocabulary's words, each linked to
-// its report.
+// uPlot, the health figures against their limits and the alarms (each health alarm with its
+// figure, its limit, since when and the diagnosis that explains it; diagnosis alarms; a log the
+// disk refuses); when a valve has a new diagnosis it reads /api/diagnoses/NAME and draws the
+// effect sizes over time (a chart per unit, each size with its 90 % interval) and the table of
+// diagnoses in the vocabulary's words, each linked to its report.
 // Times are the browser's clock: loop time plus the wall-clock time of loop time 0.
 // window.vbCharts holds every chart (each valve's trace first, in the order of the valves);
 // window.vbLive counts the answers drawn (updates) and the polls that failed (failures).
@@ -194,6 +194,7 @@
 
   function showAlarms(v) {
     var items = [];
+    if (v.logAlarm != null) { items.push(el("li", "log", "log alarm: " + v.logAlarm)); }
     (v.healthAlarms || []).forEach(function (a) {
       var li = el("li", "health", healthAlarm(v, a));
       li.dataset.figure = a.name;
@@ -334,6 +335,7 @@
       var v = valve(vj.name);
       if (live.started != null) { addTrace(v, vj.trace); }
       showStatus(v, vj);
+      v.logAlarm = vj.log_alarm;
       showHealth(v, vj.health);
       v.firstDiagnosis = vj.first_diagnosis_t_s;
       if (vj.diagnoses !== v.count) {

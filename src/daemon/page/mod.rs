@@ -12,7 +12,6 @@
 
 pub(crate) mod board;
 
-use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
@@ -34,17 +33,23 @@ pub(crate) fn html() -> String {
         .replace("/*live.js*/", LIVE_JS)
 }
 
-/// The diagnoses of the history file `path` (JSON lines) as a JSON array: the whole lines of
-/// its last [`HISTORY_TAIL`] bytes, but a line still being written or not JSON.
-pub(crate) fn history_tail(path: &Path) -> std::io::Result<String> {
-    let mut file = File::open(path)?;
-    let start = file.metadata()?.len().saturating_sub(HISTORY_TAIL);
+/// The diagnoses of the history file `path` (JSON lines) from byte `from` (where this run's
+/// start) as a JSON array: the whole lines of its last [`HISTORY_TAIL`] bytes, but a line still
+/// being written or not JSON. A link there is not followed.
+pub(crate) fn history_tail(path: &Path, from: u64) -> std::io::Result<String> {
+    let (dir, name) = (path.parent(), path.file_name().and_then(|n| n.to_str()));
+    let (Some(dir), Some(name)) = (dir, name) else {
+        return Err(std::io::ErrorKind::InvalidInput.into());
+    };
+    let mut file = crate::daemon::files::open_read(dir, &[name])?;
+    let start = (file.metadata()?.len().saturating_sub(HISTORY_TAIL)).max(from);
     file.seek(SeekFrom::Start(start))?;
     let mut bytes = Vec::new();
     file.take(HISTORY_TAIL).read_to_end(&mut bytes)?;
     let text = String::from_utf8_lossy(&bytes);
-    // The line the tail starts in is cut; each line is a JSON object, passed on as it is.
-    let skip = usize::from(start > 0);
+    // The line a tail shorter than this run's lines starts in is cut; each line is a JSON
+    // object, passed on as it is.
+    let skip = usize::from(start > from);
     let records: Vec<&str> = (text.split_inclusive('\n').skip(skip))
         .filter(|line| line.ends_with('\n'))
         .map(str::trim_end)
@@ -82,13 +87,21 @@ mod tests {
         let path = dir.path().join("diagnosis-a.jsonl");
         let line = |k: usize| format!("{{\"t_s\":{k},\"verdict\":\"{}\"}}\n", "x".repeat(1000));
         let text: String = (0..2000).map(line).collect();
+        let earlier: u64 = (0..1990).map(|k| line(k).len() as u64).sum();
         std::fs::write(&path, text + "not json\n").unwrap();
-        let v: Vec<serde_json::Value> =
-            serde_json::from_str(&history_tail(&path).unwrap()).unwrap();
+        let tail = |from| history_tail(&path, from).unwrap();
+        let v: Vec<serde_json::Value> = serde_json::from_str(&tail(0)).unwrap();
         let n = v.len();
         assert!((1000..1050).contains(&n), "{n}");
         assert_eq!(v[n - 1]["t_s"], 1999);
         assert_eq!(v[0]["t_s"].as_u64(), Some(2000 - n as u64));
-        assert!(history_tail(&dir.path().join("none.jsonl")).is_err());
+        // This run's lines only: those from its start on.
+        let v: Vec<serde_json::Value> = serde_json::from_str(&tail(earlier)).unwrap();
+        let t: Vec<u64> = v.iter().map(|r| r["t_s"].as_u64().unwrap()).collect();
+        assert_eq!(t, (1990..2000).collect::<Vec<_>>());
+        assert!(history_tail(&dir.path().join("none.jsonl"), 0).is_err());
+        let link = dir.path().join("diagnosis-b.jsonl");
+        std::os::unix::fs::symlink(&path, &link).unwrap();
+        assert!(history_tail(&link, 0).is_err());
     }
 }
