@@ -594,3 +594,51 @@ fn blocks_and_rules() {
         How::NotRun(_)
     ));
 }
+
+/// Every file of the checkout that README.md or a page of docs/ names in backticks
+/// (`src/...`, `tests/...`, `config/...`, `benches/...`, `docs/...`, `sim-device/...`,
+/// `python/...`, `contrib/...`; a pattern such as `config/sim-device-NAME.toml` aside) exists:
+/// a moved file leaves no stale path behind.
+#[test]
+fn files_the_documents_name_exist() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut pages = vec![root.join("README.md")];
+    for entry in std::fs::read_dir(root.join("docs")).expect("docs/ lists") {
+        let path = entry.expect("docs/ entry").path();
+        if path.extension().is_some_and(|e| e == "md") {
+            pages.push(path);
+        }
+    }
+    let tops = [
+        "src/",
+        "tests/",
+        "config/",
+        "benches/",
+        "docs/",
+        "sim-device/",
+        "python/",
+        "contrib/",
+    ];
+    let mut missing = Vec::new();
+    for page in &pages {
+        let text = std::fs::read_to_string(page).expect("page reads");
+        // The spans between backticks, on every line.
+        for (n, line) in text.lines().enumerate() {
+            for quoted in line.split('`').skip(1).step_by(2) {
+                let path = quoted.split([' ', ':', '#']).next().unwrap_or("");
+                let named = tops.iter().any(|t| path.starts_with(t))
+                    && !path.contains(['*', '<', '>', '{', '$'])
+                    && !path.contains("NAME")
+                    && path.len() > 4;
+                if named && !root.join(path).exists() {
+                    missing.push(format!("{}:{}: `{path}`", page.display(), n + 1));
+                }
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "files named but not in the checkout:\n{}",
+        missing.join("\n")
+    );
+}
