@@ -14,7 +14,7 @@ use super::chart::Dataset;
 use super::identify::fmt_param;
 use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 pub use super::verdict::verdict;
-use super::verdict::{figures, measure, trace};
+use super::verdict::{figures, measure, num, trace};
 use super::{esc, page, row};
 use crate::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
 use crate::diagnose::locate::{Context, Window};
@@ -329,6 +329,29 @@ pub fn note(n: &Note) -> String {
             effect.name(),
             size.words()
         ),
+        Note::SlowStrokes {
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        } => {
+            let each = |what: &str, v: Option<f64>| v.map(|v| format!("{} %/s {what}", num(v)));
+            let speeds: Vec<String> = [
+                each("opening", opening_pct_per_s),
+                each("closing", closing_pct_per_s),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            format!(
+                "the valve strokes slowly: at most {} on steps of up to {} %, where a valve in good order \
+                 strokes at {} %/s or faster; check the supply pressure, the pilot or booster and the air \
+                 path (tubing, filters, exhaust), and the actuator size",
+                speeds.join(" and "),
+                num(largest_step_pct),
+                num(worth_pct_per_s)
+            )
+        }
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
             experiment(Effect::Backlash, None)
