@@ -198,8 +198,13 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     for t in traces.iter_mut() {
         t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
     }
-    let (findings, shrunk) = worth_maintenance(findings, &final_spec, data.tuning.materiality);
+    let (mut findings, shrunk) = worth_maintenance(findings, &final_spec, data.tuning.materiality);
     traces.extend(shrunk);
+    for s in
+        (findings.iter_mut().map(|f| &mut f.size)).chain(traces.iter_mut().map(|t| &mut t.size))
+    {
+        *s = size::with_model_spread(*s);
+    }
     let final_spec = if findings.is_empty() {
         baseline.spec.clone()
     } else {
