@@ -1,8 +1,10 @@
 //! Generates the deterministic figures README quotes (`valve_bridge::report::readme`): diagnoses
-//! the nine shared recordings, identifies the paper-like one and runs the standard response test
-//! on the emulated valve, then prints README's generated blocks, or with `--write` puts them into
-//! README.md. Tests compare README with the same rows (`tests/diagnose_cases.rs`,
-//! `tests/identify_cli.rs`, `tests/response_test.rs`), so a stale figure fails CI.
+//! the nine shared recordings (their table, and their fleet ranking as `valve-bridge fleet`
+//! makes it), identifies the paper-like one, runs the standard response test on the emulated
+//! valve and writes the vocabulary's table, then prints README's generated blocks, or with
+//! `--write` puts them into README.md. Tests compare README with the same rows
+//! (`tests/diagnose_cases.rs`, `tests/fleet_cli.rs`, `tests/identify_cli.rs`,
+//! `tests/response_test.rs`, the vocabulary in the library's tests), so a stale figure fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
 //! optimised in debug builds too, and the tests that check README are debug builds).
@@ -15,6 +17,7 @@ use anyhow::Context;
 use valve_bridge::daemon::response::Test;
 use valve_bridge::daemon::{Config, RunOptions};
 use valve_bridge::fit::{self, Options};
+use valve_bridge::fleet::{Fleet, Job, ValveSummary};
 use valve_bridge::model::ModelKind;
 use valve_bridge::recording::{self, ReadOptions};
 use valve_bridge::report::{diagnose, readme};
@@ -25,6 +28,7 @@ fn main() -> anyhow::Result<()> {
     let cases = root.join("tests/data/cases");
     let bar = indicatif::ProgressBar::new(readme::CASES.len() as u64 + 1);
     let mut rows = vec![readme::DIAGNOSE_HEADER.to_string()];
+    let mut valves: Vec<ValveSummary> = Vec::new();
     for case in readme::CASES {
         bar.set_message(case);
         let rec = recording::read(&cases.join(format!("{case}.csv")), &ReadOptions::default())?;
@@ -36,8 +40,16 @@ fn main() -> anyhow::Result<()> {
                 .with_context(|| format!("reading {}", truth_path.display()))?,
         )?;
         rows.push(readme::diagnose_row(case, &truth, &diagnose::json(&d)));
+        let job = Job {
+            valve: case.to_string(),
+            path: cases.join(format!("{case}.csv")),
+            tag: None,
+            columns: None,
+        };
+        valves.push(ValveSummary::of(&job, &rec, &d));
         bar.inc(1);
     }
+    let ranking = readme::fleet_table(&serde_json::to_value(Fleet::ranked(valves))?);
     let rec = recording::read(
         &cases.join(format!("{}.csv", readme::TABLE1_CASE)),
         &ReadOptions::default(),
@@ -54,7 +66,9 @@ fn main() -> anyhow::Result<()> {
     bar.finish_and_clear();
     let blocks = [
         (readme::DIAGNOSE_CASES, rows.join("\n")),
+        (readme::FLEET_CASES, ranking),
         (readme::IDENTIFY_TABLE1, table1),
+        (readme::VOCABULARY, readme::vocabulary_table()),
         (readme::RESPONSE_EMULATED, response),
     ];
     if write {

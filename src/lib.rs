@@ -19,6 +19,9 @@
 //! - [`response`]: a response test's log read for what the valve did (dead time, T63, T86,
 //!   overshoot, resolution, dead band); the daemon's [`daemon::response`] runs the test.
 //! - [`report`]: self-contained HTML reports with SVG charts.
+//! - [`vocabulary`]: each effect diagnosis names in plain words (what it does to the valve with
+//!   its size, to control, and what to do), with its severity and priority: one table for the
+//!   reports, the CLI, the fleet and the daemon's live page.
 //! - [`signal`]: time-only O_P generators (random steps, steps, ramp, sine, PRBS, replay, constant).
 //! - [`synth`]: synthetic recordings (random steps, small steps, ramps, a mix, or a closed level
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
@@ -50,6 +53,7 @@ pub mod response;
 pub mod signal;
 pub mod synth;
 pub mod toml_file;
+pub mod vocabulary;
 
 #[cfg(test)]
 pub(crate) mod testkit;

@@ -1,10 +1,12 @@
 //! The report pages in a real browser: identify's and diagnose's `report.html` (of a 30 s
-//! recording), fleet's `index.html` with one of its valves' pages, and a response test's
-//! `report.html` (eight steps and a signature on the emulated valve), written by the binary and
-//! opened in headless Chromium by `tests/browser/check_reports.py` (Playwright for Python driving
-//! Debian's Chromium). Fails on a console error, a chart that drew nothing, or a drag that does
-//! not zoom (Shift+wheel that does not pan, a double-click that does not reset) a chart's time
-//! range.
+//! recording), fleet's `index.html` with one of its valves' pages, a daemon's health plot and a
+//! response test's `report.html` (eight steps and a signature on the emulated valve), written by
+//! the binary and opened in headless Chromium by `tests/browser/check_reports.py` (Playwright
+//! for Python driving Debian's Chromium). Fails on a console error, a chart that drew nothing, a
+//! drag that does not zoom (Shift+wheel that does not pan, a double-click that does not reset) a
+//! chart's time range, chart text under 11 px or overlapping, and a page that does not say at
+//! first sight what it must (identify's best model, diagnose's mismatch, the fleet's rule and
+//! severities; see the script).
 //!
 //! With `VB_SCREENSHOTS=DIR` the pages' screenshots are saved as `DIR/report-{identify,
 //! diagnose,fleet,fleet-valve,response}.png` (README's with `VB_SCREENSHOTS=docs`), identify's and
@@ -63,6 +65,14 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
     std::fs::copy(&recording, d("valves/fv-101.csv")).unwrap();
     cut("pub_asym_rs.csv", 60, &dir.path().join("valves/fv-102.csv"));
     run(&["fleet", &d("valves"), "--out", &d("fleet")]);
+    // A health plot: 15 minutes of the wearing valve, two windows.
+    let worn = format!("{ROOT}/config/worn-valve.toml");
+    let duration = ["--as-fast-as-possible", "--duration", "900"];
+    run(&[
+        &["run", "--config", &worn, "--log-dir", &d("worn")][..],
+        &duration[..],
+    ]
+    .concat());
     std::fs::write(
         d("plan.toml"),
         "openings_pct = [50.0]\nsizes_pct = [1.0, 5.0]\npattern = [1, 1, -1, -1]\n\
@@ -98,6 +108,7 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
         ("diagnose", d("diagnose/report.html"), "2"),
         ("fleet", d("fleet/index.html"), "0"),
         ("fleet-valve", d("fleet/valves/fv-102/report.html"), "2"),
+        ("health", d("worn/health-worn.svg"), "0"),
         // Eight steps and the signature.
         ("response", d("response/report.html"), "9"),
     ] {
@@ -109,7 +120,7 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
         out.status.success(),
         "the pages failed in Chromium:\n{text}"
     );
-    for name in ["identify", "diagnose", "fleet", "response"] {
+    for name in ["identify", "diagnose", "fleet", "health", "response"] {
         assert!(
             text.contains(&format!("{name}: ")),
             "{name} was not checked:\n{text}"

@@ -5,8 +5,9 @@
 //!   `health-worn.csv`;
 //! - `config/friction-drift.toml`, a valve whose friction band widens by 3 % per hour beside a
 //!   healthy one, over 3 hours: raises the alarm on the reversal delay within the window after
-//!   it has grown past the 0.3 s limit, and its live diagnosis alarms with the effect's name
-//!   (`backlash`) before the 3-hour mark, as README quotes it; the healthy valve raises neither;
+//!   it has grown past the 0.3 s limit, and its live diagnosis alarms with the effect's plain
+//!   name (`lost motion (backlash)`) before the 3-hour mark, as README quotes it; the healthy
+//!   valve raises neither;
 //! - `config/two-valves.toml`, two healthy valves, runs 3 simulated hours (180 windows each)
 //!   without an alarm; README shows the 24-hour run;
 //! - `config/healthy-valve.toml`, a healthy valve with live diagnosis, runs 24 simulated hours:
@@ -162,7 +163,7 @@ fn a_widening_friction_band_raises_the_alarm_and_the_healthy_valve_none() {
         .filter_map(|l| l.trim().strip_prefix("alarm: "))
         .collect();
     let first = alarms.first().expect("a diagnosis alarm");
-    assert!(first.starts_with("backlash: "), "{packing}");
+    assert!(first.starts_with("lost motion (backlash): "), "{packing}");
     let since = first.rsplit_once("since ").unwrap().1;
     let (h, m) = since.trim_end_matches(" h").split_once(':').unwrap();
     assert!(

@@ -1,7 +1,10 @@
 //! `valve-bridge fleet` as a real binary: a directory of recordings (one valve each, one file
 //! that is not a recording) and a wide export with a column-mapping file are diagnosed, ranked,
 //! and written as a page, CSV and JSON summaries and one report per valve; the per-valve
-//! diagnosis is the one `valve-bridge diagnose --json` gives.
+//! diagnosis is the one `valve-bridge diagnose --json` gives. The shared recordings rank by
+//! consequence for the process as README's generated table says, the valves whose findings
+//! make a loop cycle (stick-slip, the large friction bands) first, each finding in the
+//! vocabulary's words.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -29,6 +32,74 @@ fn run(args: &[&str]) -> Output {
 
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn the_shared_recordings_rank_by_consequence_as_readme_says() {
+    let out = tempfile::tempdir().unwrap();
+    let cases = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cases");
+    run(&[
+        "fleet",
+        cases.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    let summary = json(&out.path().join("summary.json"));
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let table = valve_bridge::report::readme::fleet_table(&summary);
+    if let Err(e) = valve_bridge::report::readme::check_block(
+        &readme,
+        valve_bridge::report::readme::FLEET_CASES,
+        &table,
+    ) {
+        panic!("{e}");
+    }
+    let valves = summary["valves"].as_array().unwrap();
+    let top: Vec<&str> = valves[..3]
+        .iter()
+        .map(|v| v["valve"].as_str().unwrap())
+        .collect();
+    for hunting in [
+        "pub_stiction_normal_op",
+        "pub_backlash_rs",
+        "pub_sdd_paper_rs",
+    ] {
+        assert!(
+            top.contains(&hunting),
+            "{hunting} not in the top three: {table}"
+        );
+    }
+    // Each valve's priority is the sum of its findings', in the vocabulary's words and units.
+    for v in valves {
+        let advice = v["advice"].as_array().unwrap();
+        let sum: f64 = advice.iter().map(|a| a["priority"].as_f64().unwrap()).sum();
+        assert!((v["priority"].as_f64().unwrap() - sum).abs() < 1e-9, "{v}");
+        assert_eq!(advice.len(), v["findings"].as_array().unwrap().len(), "{v}");
+        for a in advice {
+            let text = format!(
+                "{} {} {} {}",
+                a["name"], a["does"], a["control"], a["action"]
+            );
+            assert!(!text.contains('_') && !text.contains("%²"), "{text}");
+            assert!(
+                [" % (", " s (", " %/s (", " times ("]
+                    .iter()
+                    .any(|u| a["does"].as_str().unwrap().contains(u)),
+                "{a}"
+            );
+        }
+    }
+    let verdicts: Vec<&str> = valves
+        .iter()
+        .map(|v| v["verdict"].as_str().unwrap())
+        .collect();
+    assert!(
+        verdicts
+            .iter()
+            .all(|t| !t.contains("%²") && !t.contains("_")),
+        "{verdicts:?}"
+    );
 }
 
 #[test]
@@ -303,5 +374,12 @@ fn one_valve_shows_the_same_figures_in_every_output() {
         page.contains(&format!("friction band {band:.2} %,")),
         "the figures line"
     );
-    assert!(d["verdict"].as_str().unwrap().contains(text));
+    // The verdict says it in the vocabulary's words, with the same figures.
+    let verdict = d["verdict"].as_str().unwrap();
+    let loses = format!(
+        "lost motion (backlash) loses {} of travel on every reversal",
+        text.trim_start_matches("friction band ")
+    );
+    assert!(verdict.contains(&loses), "{verdict}");
+    assert!(row["verdict"].as_str() == Some(verdict), "{row}");
 }

@@ -79,18 +79,21 @@ fn exported() -> BTreeSet<String> {
         window_s: 1200.0,
         trigger: "every_s",
         verdict: String::new(),
-        effects: vec![Entry {
-            effect: Effect::Backlash,
-            finding: true,
-            size: band,
-        }],
-        alarms: vec!["backlash: new, friction band 1.30 % (1.10-1.50) since 1:00 h".into()],
+        compared: true,
+        reference: false,
+        effects: vec![Entry::new(Effect::Backlash, true, band)],
+        advice: Vec::new(),
+        alarms: vec![
+            "lost motion (backlash): new, friction band 1.30 % (1.10-1.50) since 1:00 h".into(),
+        ],
+        alarm_effects: vec![Effect::Backlash],
         report: None,
         error: None,
     };
     let none = Record {
         effects: Vec::new(),
         alarms: Vec::new(),
+        alarm_effects: Vec::new(),
         ..record.clone()
     };
     d.publish("a", &record, &none);

@@ -1,13 +1,19 @@
-//! The daemon's live page in a real browser: `valve-bridge run` on two emulated valves in real
-//! time (a worn one whose dead time grows by 0.2 s every second up to 2 s, a healthy one; both
-//! against the bundled pin-cart II model as their health baseline, 24 s windows every second,
-//! so the worn valve's alarm comes with one of the first windows and is diagnosed at once,
-//! naming the dead time), with `[metrics]` on a free loopback port.
+//! The daemon's live page in a real browser: `valve-bridge run` with the shipped
+//! `config/live-page.toml` in real time (two emulated valves on small random steps, a worn one
+//! whose dead time is 1.5 s longer than the model's and a healthy one, both against the bundled
+//! pin-cart II model as their health baseline, 30 s health windows every 2 s, 45 s diagnosis
+//! windows), its `[metrics]` moved to a free loopback port.
 //! `tests/browser/check_live.py` (Playwright for Python driving Debian's Chromium, like the
-//! reports' test) loads `/` and fails on a console error, a trace chart that drew nothing or did
-//! not move on between two screenshots, the worn valve's alarm not shown (or one shown for the
-//! healthy valve), the alarm's diagnosis not listed with a report that opens, or the effect it
-//! names not charted over time.
+//! reports' test) loads `/` and fails on a console error; on a valve without a health window
+//! or the page without a diagnosis a minute after the daemon started; on a trace chart that
+//! drew nothing or did not move on between two screenshots; on time labels that overlap; on the
+//! worn valve's alarm not shown, or shown without its figure, its limit (the same numbers as
+//! the figure's row, which is marked past its limit), since when and the diagnosis that
+//! explains it, or an alarm shown where no figure is past its limit (the healthy valve); on
+//! the alarm's diagnosis not listed with a report that opens, or the effect it names not
+//! charted over time; on the healthy valve not diagnosed, or its diagnosis finding anything
+//! (it is the bundled model, which its diagnoses start from); and on a snake_case name or `%²`
+//! in the page's text.
 //!
 //! With `VB_SCREENSHOTS=DIR` the page's screenshot is saved as `DIR/live-page.png` (README's
 //! with `VB_SCREENSHOTS=docs`). Without Chromium or Playwright the test is a visible skip, or a
@@ -16,6 +22,7 @@
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 mod common;
 
@@ -24,28 +31,15 @@ use common::tools;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
-/// Two valves on small random steps, a worn one and a healthy one, checked against the model.
+/// The shipped live-page config, its page on a free port.
 fn config() -> String {
-    let model = format!("{ROOT}/config/models/pincart2.toml");
-    let valve = |name: &str, seed: u32, drift: &str| {
-        format!(
-            "[[valve]]\nname = \"{name}\"\nkind = \"emulated\"\n\
-             health_baseline_model = \"{model}\"\n\
-             [valve.emulated]\nmodel = \"pincart2\"\nnoise_std_pct = 0.05\n\
-             noise_seed = {seed}\n{drift}\
-             [valve.source]\nkind = \"random-steps\"\n\
-             [valve.source.random-steps]\nseed = {seed}\nmin_pct = 40.0\nmax_pct = 60.0\n\
-             hold_min_s = 1.5\nhold_max_s = 3.0\n"
-        )
-    };
-    valve(
-        "worn",
-        6,
-        "dead_time_drift_s_per_h = 720.0\ndead_time_drift_max_s = 2.0\n",
-    ) + &valve("healthy", 4, "")
-        + "[health]\nwindow_s = 24.0\nevery_s = 1.0\nmin_steps = 2\n\
-           [diagnosis]\nwindow_s = 60.0\nevery_s = 60.0\n\
-           [metrics]\nlisten = \"127.0.0.1:0\"\n"
+    let text = std::fs::read_to_string(format!("{ROOT}/config/live-page.toml")).unwrap();
+    let listen = "listen = \"127.0.0.1:9100\"";
+    assert!(
+        text.contains(listen),
+        "config/live-page.toml: no `{listen}`"
+    );
+    text.replace(listen, "listen = \"127.0.0.1:0\"")
 }
 
 /// The daemon, stopped with SIGTERM when dropped (the test failing or not).
@@ -82,7 +76,10 @@ fn the_live_page_updates_and_shows_the_drift_alarm_in_chromium() {
     let cfg = dir.path().join("live.toml");
     std::fs::write(&cfg, config()).unwrap();
     let log = std::fs::File::create(dir.path().join("daemon.log")).unwrap();
+    let started = SystemTime::now().duration_since(UNIX_EPOCH).unwrap();
     let child = Command::new(BIN)
+        // The config names the bundled model from the checkout.
+        .current_dir(ROOT)
         .args(["run", "--config"])
         .arg(&cfg)
         .arg("--log-dir")
@@ -107,6 +104,12 @@ fn the_live_page_updates_and_shows_the_drift_alarm_in_chromium() {
         .arg(format!("http://{addr}/"))
         .args(["--valves", "2", "--alarm", "worn", "--healthy", "healthy"])
         .args(["--diagnosis", "--wait", "90"])
+        .args([
+            "--started",
+            &started.as_secs_f64().to_string(),
+            "--within",
+            "60",
+        ])
         .env("VB_CHROMIUM", tools::chromium())
         // Nothing written beside the scripts: the test writes only in its own directory.
         .env("PYTHONDONTWRITEBYTECODE", "1");

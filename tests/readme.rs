@@ -524,6 +524,43 @@ fn readme_command_blocks_run_as_written() {
 }
 
 #[test]
+fn set_up_builds_what_was_tested_and_says_each_step_once() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    // `cargo install` without `--locked` resolves every dependency anew, past the lock file
+    // the tests ran with, and fails offline.
+    for (n, line) in readme.lines().enumerate() {
+        for (at, _) in line.match_indices("cargo install") {
+            let command = line[at..].split(['`', '&', ';', '(']).next().unwrap_or("");
+            assert!(
+                command.contains("--locked"),
+                "README.md:{}: `{command}` without --locked",
+                n + 1
+            );
+        }
+    }
+    // The Python package is installed one way, in one place.
+    let installs: Vec<&str> = ["maturin develop", "maturin build", "pip install dist"]
+        .into_iter()
+        .filter(|how| readme.contains(how))
+        .collect();
+    let places: usize = installs.iter().map(|how| readme.matches(how).count()).sum();
+    assert_eq!(
+        (installs.as_slice(), places),
+        (&["maturin develop"][..], 1),
+        "README installs the Python package in more than one way or place"
+    );
+    // What README's commands leave in the checkout is ignored by git.
+    let ignore = std::fs::read_to_string(root.join(".gitignore")).unwrap();
+    for written in ["/.venv/", "/demo-concealed.csv"] {
+        assert!(
+            ignore.lines().any(|l| l.trim() == written),
+            ".gitignore does not ignore {written}"
+        );
+    }
+}
+
+#[test]
 fn blocks_and_rules() {
     let text = "intro\n\n    valve-bridge run --config x.toml   # prints `modbus-server: 1.2.3.4:5`\n    mbpoll -a 1 \\\n        -r 2 host   # read\n\n```toml\nkey = 1\n```\n\n```sh\ncargo run --release -p sim-device -- --pty   # prints `pty: /dev/pts/N`\nsudo systemctl enable x\n```\n\n    O_P ──▶ V_P\n";
     let b = blocks(text);

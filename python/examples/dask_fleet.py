@@ -48,7 +48,8 @@ def main(argv):
         f"in {seconds:.1f} s ({n * 60 / seconds:.1f} recordings per minute)"
     )
     for rank, v in enumerate(summary["valves"], 1):
-        print(f"{rank:>4}  {v['valve']:<28} {v['attention']:>6.2f}  {', '.join(v['findings']) or 'none'}")
+        found = ", ".join(a["name"] for a in v["advice"]) or "none"
+        print(f"{rank:>4}  {v['valve']:<28} {v['severity'] or 'none':>8} {v['priority']:>6.1f}  {found}")
 
 
 if __name__ == "__main__":

@@ -74,6 +74,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     outln!("2. A fitted FOPDT looks fine by eye (whole recording):")?;
     outln!("   {}", metrics::table1_header())?;
     outln!("   {}", metrics::table1_row("FOPDT", &base))?;
+    out!("{}", metrics::table1_notes([&base]))?;
     outln!("3. valve-bridge diagnose {}:", args.out.display())?;
     if d.findings.is_empty() {
         outln!("   found nothing: {}", report::verdict(&d))?;
@@ -81,7 +82,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     for f in &d.findings {
         outln!(
             "   found {}: {}\n   held-out SSE {:.2} -> {:.2} %²",
-            f.effect.name(),
+            valve_bridge::vocabulary::words(f.effect).plain,
             report::evidence(f),
             f.heldout_sse_before,
             f.heldout_sse_after

@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use valve_bridge::fleet::{self, ValveMap};
+use valve_bridge::vocabulary::Severity;
 
 use super::input::RecordingArgs;
 
@@ -50,10 +51,11 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         jobs.len() as f64 * 60.0 / seconds.max(1e-9)
     )?;
     outln!(
-        "{:>4}  {:<28} {:>9}  {:>6} {:>8} {:>8} {:>8} {:>8}  findings",
+        "{:>4}  {:<28} {:>8} {:>8}  {:>6} {:>8} {:>8} {:>8} {:>8}  findings",
         "rank",
         "valve",
-        "attention",
+        "severity",
+        "priority",
         "T_d s",
         "rev. s",
         "band %",
@@ -67,19 +69,21 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
             continue;
         }
         outln!(
-            "{:>4}  {:<28} {:>9.2}  {:>6} {:>8} {:>8} {:>8} {:>8}  {}",
+            "{:>4}  {:<28} {:>8} {:>8.1}  {:>6} {:>8} {:>8} {:>8} {:>8}  {}",
             i + 1,
             v.valve,
-            v.attention,
+            v.severity.map_or("none", Severity::name),
+            v.priority,
             num(v.dead_time_s, 2),
             num(v.reversal_delay_s, 2),
             num(v.friction_band_pct, 2),
             num(v.stroke_speed_open_pct_per_s, 1),
             num(v.stroke_speed_close_pct_per_s, 1),
-            if v.findings.is_empty() {
+            if v.advice.is_empty() {
                 "none".to_string()
             } else {
-                v.findings.join(", ")
+                let names: Vec<&str> = v.advice.iter().map(|a| a.name.as_str()).collect();
+                names.join(", ")
             }
         )?;
     }

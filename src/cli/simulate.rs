@@ -56,6 +56,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
     if has_vp && s.n > 0 {
         outln!("{}", metrics::table1_header())?;
         outln!("{}", metrics::table1_row(spec.model.display_name(), &s))?;
+        out!("{}", metrics::table1_notes([&s]))?;
     } else {
         outln!("no measured V_P in {}: nothing to score", rec.source)?;
     }

@@ -17,6 +17,9 @@
 //! in the order they were made, each from its own copy of the rows; at the end of a run the
 //! thread finishes the jobs still queued.
 //!
+//! A valve's windows are diagnosed from its `health_baseline_model` when it has one, else from
+//! the final model of its first whole window's diagnosis once there is one (see [`history`]).
+//!
 //! Each diagnosis is a line of `diagnosis-<valve>.jsonl` beside the logs ([`history::Record`])
 //! and, with `reports`, the full report in `diagnosis-<valve>/<stamp>/`, named by the window's
 //! end in UTC (`20261122T101500Z`, `-1` added when taken). The history is appended to run
@@ -53,6 +56,7 @@ use crate::model::composed::Effect;
 use crate::model::ModelSpec;
 use crate::recording::log_format::utc_stamp;
 use crate::recording::RecordingView;
+use crate::vocabulary;
 use history::{Baseline, Record};
 
 /// What the live diagnosis of one valve did, for the summary.
@@ -127,11 +131,8 @@ impl DiagnosisMetrics {
             }
         }
         for e in Effect::ALL {
-            let on = r
-                .alarms
-                .iter()
-                .any(|a| a.starts_with(&format!("{}:", e.name())));
-            let was = (before.alarms.iter()).any(|a| a.starts_with(&format!("{}:", e.name())));
+            let on = r.alarm_effects.contains(&e);
+            let was = before.alarm_effects.contains(&e);
             if on || was {
                 if let Ok(g) = self.alarm.get_metric_with_label_values(&[valve, e.name()]) {
                     g.set(f64::from(u8::from(on)));
@@ -142,13 +143,16 @@ impl DiagnosisMetrics {
 }
 
 /// One valve to diagnose: its name (label and file names), its gauges, its place on the live
-/// page (the count of its diagnoses, where this run's history starts) and its log alarm.
+/// page (the count of its diagnoses, where this run's history starts), its log alarm, and the
+/// model its diagnoses start from (its `health_baseline_model`; without one, the model of its
+/// first whole window's diagnosis).
 #[derive(Debug)]
 pub struct Watched {
     pub name: String,
     pub metrics: Option<DiagnosisMetrics>,
     pub(crate) board: Option<Arc<ValveBoard>>,
     pub(crate) log_alarm: Arc<LogAlarm>,
+    pub model: Option<ModelSpec>,
 }
 
 /// A window to diagnose.
@@ -319,7 +323,7 @@ pub fn start(
             name: w.name,
             dir: dir.to_path_buf(),
             baseline: Baseline::default(),
-            model: None,
+            model: w.model,
             last: None,
             metrics: w.metrics,
             board: w.board,
@@ -361,7 +365,8 @@ struct History {
     log: LogFile,
     dir: PathBuf,
     baseline: Baseline,
-    /// The baseline diagnosis's final model, which later windows start from.
+    /// The model every window's diagnosis starts from: the valve's health baseline model, or
+    /// the baseline diagnosis's final model once there is one.
     model: Option<ModelSpec>,
     last: Option<Record>,
     metrics: Option<DiagnosisMetrics>,
@@ -423,8 +428,12 @@ impl History {
             window_s: job.op.len() as f64 * period_s,
             trigger: job.trigger,
             verdict: String::new(),
+            compared: self.model.is_some(),
+            reference: false,
             effects: Vec::new(),
+            advice: Vec::new(),
             alarms: Vec::new(),
+            alarm_effects: Vec::new(),
             report: None,
             error: None,
         };
@@ -440,17 +449,21 @@ impl History {
         };
         record.verdict = d.verdict;
         record.effects = d.effects;
+        let findings = record.effects.iter().filter(|e| e.finding);
+        record.advice = vocabulary::advice(findings.map(|e| (e.effect, &e.size)));
         let whole = job.trigger == "every_s";
+        let had = self.baseline.is_set();
         let (standing, raised) = self.baseline.compare(job.t_s, whole, &record.effects);
+        record.reference = !had && self.baseline.is_set();
         if self.model.is_none() && self.baseline.is_set() {
             self.model = Some(d.model);
         }
-        for a in &raised {
+        for (_, a) in &raised {
             tracing::warn!(valve = %self.name, t_s = job.t_s, "diagnosis alarm: {a}");
             self.report.first_alarm_t_s.get_or_insert(job.t_s);
         }
-        self.report.alarms.extend(raised);
-        record.alarms = standing;
+        self.report.alarms.extend(raised.into_iter().map(|a| a.1));
+        (record.alarm_effects, record.alarms) = standing.into_iter().unzip();
         if !d.report.is_empty() {
             record.report = self.write_report(job.utc, &d.report);
         }
@@ -501,6 +514,7 @@ impl History {
             let empty = Record {
                 effects: Vec::new(),
                 alarms: Vec::new(),
+                alarm_effects: Vec::new(),
                 ..record.clone()
             };
             m.publish(&self.name, &record, self.last.as_ref().unwrap_or(&empty));
@@ -551,6 +565,7 @@ mod tests {
             metrics: None,
             board: None,
             log_alarm: LogAlarm::new("a", None, None),
+            model: None,
         }];
         let on_error = (dir.path(), OnError::KeepRunning);
         let (mut feed, thread) = start(&cfg, on_error, (0.1, clock), valves, held).unwrap();

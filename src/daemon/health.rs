@@ -8,9 +8,11 @@
 //! it); the identification's travel-speed
 //! estimate ([`crate::metrics::steps::travel_speed`]) the opening and closing stroke speeds; the
 //! tracking error is the RMS of O_P - V_P. A window with fewer than `min_steps` steps of a kind
-//! gives no delay and says so in its note. The baseline is the first window with enough steps,
-//! or, with `health_baseline_model`, that model's answer to each window's O_P (analysed the
-//! same way).
+//! gives no delay and says so in its note; the valve is in alarm while a figure is
+//! ([`Held`]: from a window that measures it past its limit to one that measures it within it,
+//! a window that cannot measure it changing nothing). The baseline is the first window with
+//! enough steps, or, with `health_baseline_model`, that model's answer to each window's O_P
+//! (analysed the same way).
 //!
 //! It runs on a thread of its own (`vb-health`), fed by the loggers with the rows they write:
 //! never on the loop thread. Each window goes to `health.csv` (`health-NAME.csv` for a named
@@ -36,7 +38,7 @@ use super::diagnosis::Feed;
 use super::error::DaemonError;
 use super::exporter::HealthMetrics;
 use super::files;
-pub use super::health_figures::{Figures, HealthLimits, Judged};
+pub use super::health_figures::{Figures, HealthLimits, Held, Judged};
 use super::log_file::{csv_line, LogAlarm, LogFile, Refused};
 use super::page::board::{HealthWindow, ValveBoard};
 use crate::modbus::map::HEALTH_ALARM_BIT;
@@ -75,7 +77,9 @@ struct Monitor {
     vp: VecDeque<f64>,
     next_at_s: f64,
     baseline: Baseline,
-    alarm: bool,
+    /// Each figure in alarm (in the order of the CSV's figures); the valve is in alarm while
+    /// one is.
+    held: [Option<Held>; 5],
     report: HealthReport,
     log: LogFile,
     /// The row being written, as CSV.
@@ -165,7 +169,7 @@ pub fn start(
                 Some(v) => Baseline::Model(Box::new(v)),
                 None => Baseline::First(None),
             },
-            alarm: false,
+            held: [None; 5],
             report: HealthReport {
                 windows: 0,
                 alarms: 0,
@@ -283,6 +287,7 @@ impl Monitor {
                 *b
             }
         };
+        let was = self.alarm();
         let mut notes = Vec::new();
         if !fig.complete() {
             notes.push(format!(
@@ -290,32 +295,40 @@ impl Monitor {
                 fig.same_steps, fig.reversals, cfg.min_steps
             ));
         }
+        let limits = base.map(|b| (b, Figures::limits(&b, cfg)));
         let drifts = base.map(|b| fig.drifts(&b, cfg)).unwrap_or_default();
-        // A window that cannot measure the delays keeps the alarm unless it sees a drift itself.
-        let alarm = !drifts.is_empty() || (self.alarm && !fig.complete());
-        let raised = alarm && !self.alarm;
+        if let Some((b, l)) = &limits {
+            Held::update(&mut self.held, &fig.judged(Some(b), Some(l)), t_s);
+        }
+        let alarm = self.alarm();
+        let raised = alarm && !was;
         if raised {
             self.report.alarms += 1;
             self.report.first_alarm_t_s.get_or_insert(t_s);
             tracing::warn!(valve = %self.name, t_s, "health alarm: {}", drifts.join("; "));
-        } else if !alarm && self.alarm {
+        } else if !alarm && was {
             tracing::info!(valve = %self.name, t_s, "health back within its limits");
         }
-        self.alarm = alarm;
         if let Some(bank) = &self.status {
             let bit = 1 << HEALTH_ALARM_BIT;
             bank.report(None, bit, if alarm { bit } else { 0 });
         }
         notes.extend(drifts);
+        let unmeasured = (self.held.iter().flatten()).filter(|h| h.measured_t_s < t_s);
+        notes.extend(unmeasured.map(Held::unmeasured));
         if base.is_none() {
             notes.push("no baseline yet".into());
         }
-        let limits = base.map(|b| (b, Figures::limits(&b, cfg)));
         if let Some(m) = &self.metrics {
             m.publish(&fig, limits.as_ref().map(|l| &l.1), alarm);
         }
         self.write(t_s, Some(&fig), limits.as_ref(), &notes.join("; "))
             .map(|()| raised)
+    }
+
+    /// True while a figure is in alarm.
+    fn alarm(&self) -> bool {
+        self.held.iter().any(Option::is_some)
     }
 
     /// Closes the CSV and draws `health*.svg` beside it, from it (nothing when no window was
@@ -358,7 +371,7 @@ impl Monitor {
             opt(fig.map(|f| f.opening_speed_pct_per_s)),
             opt(fig.map(|f| f.closing_speed_pct_per_s)),
             opt(fig.map(|f| f.tracking_rms_pct)),
-            u8::from(self.alarm).to_string(),
+            u8::from(self.alarm()).to_string(),
             opt(base.and_then(|b| b.0.dead_time_s)),
             opt(base.and_then(|b| b.1.dead_time_s)),
             opt(base.and_then(|b| b.0.reversal_delay_s)),
@@ -377,7 +390,8 @@ impl Monitor {
                 figures: fig.copied(),
                 base: base.map(|b| b.0),
                 limits: base.map(|b| b.1),
-                alarm: self.alarm,
+                alarm: self.alarm(),
+                held: self.held.iter().flatten().copied().collect(),
                 note: note.to_string(),
             });
         }

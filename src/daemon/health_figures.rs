@@ -1,6 +1,10 @@
-//! The figures of one health window (dead time, reversal delay, stroke speeds, tracking error)
-//! and their limits against a baseline: what the health thread estimates and compares, and what
-//! the exporter and the live page publish.
+//! The figures of one health window (dead time, reversal delay, stroke speeds, tracking error),
+//! their limits against a baseline, and which of them are in alarm ([`Held`]): what the health
+//! thread estimates and compares, and what the exporter and the live page publish.
+//!
+//! A figure is in alarm from the first window that measures it past its limit until a window
+//! measures it within it; a window with too few steps to measure a delay leaves that delay's
+//! state as it was (not measuring is a state, never a reason for an alarm).
 //!
 //! Not here: the windows, the baseline's choice, the alarm and its outputs ([`super::health`]).
 
@@ -205,6 +209,64 @@ pub struct Judged {
     pub past: bool,
 }
 
+/// A figure in alarm: what it was when last measured against its limit, and since when.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Held {
+    /// `dead time`, `opening speed`, ...
+    pub name: &'static str,
+    pub unit: &'static str,
+    /// The figure when last measured, its limit and its baseline then.
+    pub now: f64,
+    pub limit: f64,
+    pub base: f64,
+    /// The limit is the highest value allowed, not the lowest.
+    pub highest: bool,
+    /// Loop time of the window that first measured it past its limit in this alarm, s.
+    pub since_t_s: f64,
+    /// Loop time of the last window that measured it, s.
+    pub measured_t_s: f64,
+}
+
+impl Held {
+    /// Each figure's alarm after the window ending at `t_s` judged `judged` (in the order of
+    /// [`FIGURES`]): raised or renewed where measured past its limit, cleared where measured
+    /// within it, kept where not measured.
+    pub fn update(held: &mut [Option<Held>; 5], judged: &[Judged; 5], t_s: f64) {
+        for (h, j) in held.iter_mut().zip(judged) {
+            let (Some(now), Some(limit)) = (j.now, j.limit) else {
+                continue;
+            };
+            *h = j.past.then(|| Held {
+                name: j.name,
+                unit: j.unit,
+                now,
+                limit,
+                base: j.base.unwrap_or(f64::NAN),
+                highest: j.highest,
+                since_t_s: h.map_or(t_s, |h| h.since_t_s),
+                measured_t_s: t_s,
+            });
+        }
+    }
+
+    /// The alarm of a figure this window could not measure: `reversal delay not measured in
+    /// this window (too few steps): in alarm since 1020.0 s, last 1.290 s against its limit
+    /// 1.260 s at 1080.0 s`.
+    pub fn unmeasured(&self) -> String {
+        let d = if self.unit == "s" { 3 } else { 2 };
+        format!(
+            "{} not measured in this window (too few steps): in alarm since {:.1} s, last {:.d$} {u} \
+             against its limit {:.d$} {u} at {:.1} s",
+            self.name,
+            self.since_t_s,
+            self.now,
+            self.limit,
+            self.measured_t_s,
+            u = self.unit
+        )
+    }
+}
+
 /// The limit of each figure against a baseline (a delay's: none while the baseline has none);
 /// past one, the alarm is raised.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -218,4 +280,64 @@ pub struct HealthLimits {
     pub closing_speed_pct_per_s: f64,
     /// Highest RMS of O_P - V_P, %.
     pub tracking_rms_pct: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The five figures of a window: the reversal delay as given (None: too few steps to
+    /// measure it), against a limit of 1.0 s; the others measured within their limits.
+    fn window(reversal_delay_s: Option<f64>) -> [Judged; 5] {
+        let now = Figures {
+            same_steps: 4,
+            reversals: if reversal_delay_s.is_some() { 4 } else { 1 },
+            dead_time_s: Some(0.3),
+            reversal_delay_s,
+            opening_speed_pct_per_s: 10.0,
+            closing_speed_pct_per_s: 10.0,
+            tracking_rms_pct: 0.5,
+        };
+        let base = Figures {
+            reversal_delay_s: Some(0.4),
+            ..now
+        };
+        let lim = HealthLimits {
+            dead_time_s: Some(0.6),
+            reversal_delay_s: Some(1.0),
+            opening_speed_pct_per_s: 5.0,
+            closing_speed_pct_per_s: 5.0,
+            tracking_rms_pct: 2.0,
+        };
+        now.judged(Some(&base), Some(&lim))
+    }
+
+    #[test]
+    fn an_alarm_holds_from_past_its_limit_to_within_it_and_too_few_steps_raise_none() {
+        let mut held = [None; 5];
+        // Too few steps to measure: a state, not an alarm.
+        Held::update(&mut held, &window(None), 10.0);
+        assert_eq!(held, [None; 5]);
+        // Past its limit: raised, with its figure, its limit and since when.
+        Held::update(&mut held, &window(Some(1.3)), 20.0);
+        let raised = held[1].expect("the reversal delay in alarm");
+        assert_eq!((raised.now, raised.limit, raised.base), (1.3, 1.0, 0.4));
+        assert_eq!((raised.since_t_s, raised.measured_t_s), (20.0, 20.0));
+        assert!(held.iter().enumerate().all(|(i, h)| i == 1 || h.is_none()));
+        // Not measured: kept as last measured; measured past again: since when unchanged.
+        Held::update(&mut held, &window(None), 30.0);
+        assert_eq!(held[1], Some(raised));
+        Held::update(&mut held, &window(Some(1.2)), 40.0);
+        let renewed = held[1].expect("still in alarm");
+        assert_eq!(
+            (renewed.now, renewed.since_t_s, renewed.measured_t_s),
+            (1.2, 20.0, 40.0)
+        );
+        assert!(renewed
+            .unmeasured()
+            .contains("in alarm since 20.0 s, last 1.200 s"));
+        // Measured within its limit: cleared.
+        Held::update(&mut held, &window(Some(0.5)), 50.0);
+        assert_eq!(held, [None; 5]);
+    }
 }

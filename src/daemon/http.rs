@@ -249,7 +249,7 @@ mod tests {
         let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap().to_string();
         let metrics = LoopMetrics::new(&["a"], true).unwrap();
-        let board = Arc::new(Board::new(&["a"], 100.0, (true, true), dir));
+        let board = Arc::new(Board::new(&["a"], 100.0, (Some(600.0), Some(1200.0)), dir));
         let health = Arc::new(Health::default());
         let servers = vec![("metrics", Arc::clone(&health))];
         let limits = Limits {

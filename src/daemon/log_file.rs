@@ -409,7 +409,7 @@ mod tests {
         use crate::daemon::exporter::LoopMetrics;
         use crate::daemon::page::board::Board;
         let metrics = LoopMetrics::new(&["v"], false).unwrap();
-        let board = Board::new(&["v"], 100.0, (false, false), Path::new("/logs"));
+        let board = Board::new(&["v"], 100.0, (None, None), Path::new("/logs"));
         let alarm = LogAlarm::new("v", metrics.valve(0), board.valve(0));
         let disk = Small {
             room: 10,

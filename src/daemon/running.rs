@@ -181,7 +181,11 @@ fn bind(config: &Config, sources: &[Source], dir: &Path) -> Result<Bound, Daemon
         .as_ref()
         .map(|_| LoopMetrics::new(&names, config.health.is_some()))
         .transpose()?;
-    let runs = (config.health.is_some(), config.diagnosis.is_some());
+    // The loop time of the first health window and of the first diagnosis, for the page.
+    let runs = (
+        config.health.as_ref().map(|h| h.window_s),
+        config.diagnosis.as_ref().map(|d| d.window_s),
+    );
     let board = (config.metrics.as_ref())
         .map(|_| Arc::new(Board::new(&names, config.loop_.rate_hz, runs, dir)));
     let listeners = Listeners::bind(config, sources, (metrics.as_ref(), board.as_ref()))?;
@@ -243,15 +247,20 @@ fn start_health(
     })?;
     let period_s = config.loop_.period_s();
     let mut watched = Vec::with_capacity(config.valves.len());
+    // Each valve's health baseline model: its answer is the health baseline, and the live
+    // diagnosis starts from it.
+    let models = (config.valves.iter())
+        .map(|v| {
+            v.health_baseline_model
+                .as_deref()
+                .map(ModelSpec::load)
+                .transpose()
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(BackendError::from)?;
     for (i, v) in config.valves.iter().enumerate() {
-        let baseline_model = match &v.health_baseline_model {
-            Some(file) => Some(
-                Valve::new(
-                    &ModelSpec::load(file).map_err(BackendError::from)?,
-                    period_s,
-                )
-                .map_err(BackendError::from)?,
-            ),
+        let baseline_model = match &models[i] {
+            Some(spec) => Some(Valve::new(spec, period_s).map_err(BackendError::from)?),
             None => None,
         };
         watched.push(health::Watched {
@@ -280,6 +289,7 @@ fn start_health(
                     metrics: m.clone(),
                     board: board.and_then(|b| b.valve(i)),
                     log_alarm: alarms[i].clone(),
+                    model: models[i].clone(),
                 })
                 .collect();
             let files_in = (dir, config.log.on_error);

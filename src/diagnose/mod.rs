@@ -421,5 +421,13 @@ mod tests {
         let (open, close) = slow.expect("the valve is called slow");
         assert!((20.0..=26.0).contains(&open), "{open}");
         assert!((20.0..=26.0).contains(&close), "{close}");
+        // The planner hears it first, though nothing was missing from the model.
+        let words = crate::report::verdict::verdict(&d);
+        assert!(
+            words.starts_with("The valve strokes slowly: at most ")
+                && words.contains(" %/s opening and ")
+                && words.contains("Nothing else worth maintenance: "),
+            "{words}"
+        );
     }
 }

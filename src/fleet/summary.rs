@@ -36,6 +36,9 @@ impl ValveSummary {
             heldout_sse_before: None,
             heldout_sse_after: None,
             attention: 0.0,
+            advice: Vec::new(),
+            priority: 0.0,
+            severity: None,
             report: None,
         }
     }
@@ -68,9 +71,11 @@ impl ValveSummary {
             verdict: Some(crate::report::diagnose::verdict(d)),
             heldout_sse_before: finite(d.baseline.heldout_sse),
             heldout_sse_after: finite(d.final_model.heldout_sse),
+            advice: crate::report::diagnose::advice(d),
             ..ValveSummary::failed(job, String::new())
         };
         s.attention = s.attention_under(&Limits::default());
+        (s.priority, s.severity) = crate::vocabulary::valve_priority(&s.advice);
         s
     }
 }
@@ -131,9 +136,52 @@ mod tests {
             lines[1]
         );
         assert!(
-            lines[4].ends_with("x.csv:1: no column `op_pct`,"),
+            lines[4].contains(",x.csv:1: no column `op_pct`,"),
             "{}",
             lines[4]
         );
+    }
+
+    #[test]
+    fn consequence_for_the_process_ranks_before_attention() {
+        use crate::model::composed::{Effect, Size};
+        use crate::vocabulary::{advice, Severity};
+        let size = |name, unit, worth| Size {
+            name,
+            unit,
+            value: 1.0,
+            low: 0.9,
+            high: 1.1,
+            worth,
+            worth_low: worth,
+        };
+        // Stick-slip just worth maintenance outranks a slow stroke and a dead time five and
+        // three times past it, though the slow valve has more findings and figures beyond a
+        // healthy valve's.
+        let mut sticky = valve("sticky", 1, 0.1);
+        sticky.advice = advice([(Effect::Stiction, &size("slip_pct", "%", 1.0))]);
+        let mut slow = valve("slow", 2, 0.9);
+        let (speed, dead) = (
+            size("stroke_speed_pct_per_s", "%/s", 5.0),
+            size("dead_time_s", "s", 3.0),
+        );
+        slow.advice = advice([(Effect::SlewRate, &speed), (Effect::DeadTime, &dead)]);
+        assert!(
+            slow.attention_under(&Limits::default()) > sticky.attention_under(&Limits::default())
+        );
+        let f = Fleet::ranked(vec![slow, sticky]);
+        let order: Vec<(&str, f64, Option<Severity>)> = (f.valves.iter())
+            .map(|v| (v.valve.as_str(), v.priority, v.severity))
+            .collect();
+        assert_eq!(
+            order,
+            [
+                ("sticky", 10.0, Some(Severity::High)),
+                ("slow", 8.0, Some(Severity::Medium))
+            ]
+        );
+        let csv = f.csv();
+        let first = csv.lines().nth(1).unwrap_or_default();
+        assert!(first.contains(",10.000,high,\"High: stick-slip (stiction) sticks, then jumps by 1.00 % (0.90-1.10) at a time"), "{first}");
     }
 }

@@ -36,7 +36,8 @@ pub struct Scores {
     /// the scored samples of the stretches long enough to filter; equal to `mae` when
     /// `filtered` is false.
     pub mae_filtered: f64,
-    /// 1 − SSE / SST, SST taken around the mean of the measured samples scored.
+    /// 1 − SSE / SST, SST taken around the mean of the measured samples scored; NaN when their
+    /// spread is below [`R2_MIN_SPREAD_PCT`] (nothing moved for a model to explain).
     pub r2: f64,
     /// Σ (measured − simulated)², in the data's units squared (%²).
     pub sse: f64,
@@ -48,7 +49,16 @@ pub struct Scores {
     /// Nyquist frequency (data at 2.5 Hz or slower) or every stretch of measured samples is too
     /// short (≤ 18 samples).
     pub filtered: bool,
+    /// Standard deviation of the measured samples scored, in the data's units (%).
+    #[serde(default)]
+    pub spread_pct: f64,
 }
+
+/// Least spread (standard deviation) of the measured V_P over the scored samples for which R²
+/// is given, %: one step of a per-mille position register. Below it nothing moved that a model
+/// could explain, and 1 − SSE / SST divides by the rounding of the reading (a valve at rest for
+/// 20 s gave R² = −7 × 10²⁵ %).
+pub const R2_MIN_SPREAD_PCT: f64 = 0.1;
 
 /// Table 1 metrics over all samples. `sample_period` (s) sets the filter's sample rate.
 ///
@@ -99,6 +109,8 @@ fn score(
     let sum = |f: &dyn Fn(usize) -> f64| kept().map(f).sum::<f64>();
     let mean = sum(&|i| measured[i]) / n as f64;
     let sse = sum(&|i| (measured[i] - simulated[i]).powi(2));
+    let sst = sum(&|i| (measured[i] - mean).powi(2));
+    let spread_pct = (sst / n as f64).sqrt();
     let smoothed = || kept().filter(|&i| smooth[i].is_finite());
     let n_smooth = smoothed().count();
     Scores {
@@ -111,11 +123,16 @@ fn score(
         } else {
             sum(&|i| (measured[i] - simulated[i]).abs()) / n as f64
         },
-        r2: 1.0 - sse / sum(&|i| (measured[i] - mean).powi(2)),
+        r2: if spread_pct >= R2_MIN_SPREAD_PCT {
+            1.0 - sse / sst
+        } else {
+            f64::NAN
+        },
         sse,
         rel_sse: sse / sum(&|i| (measured[i] - op[i]).powi(2)),
         n,
         filtered: n_smooth > 0,
+        spread_pct,
     }
 }
 
@@ -193,6 +210,43 @@ pub fn table1_header() -> String {
 pub fn table1_row(model: &str, s: &Scores) -> String {
     let [mae, filtered, r2, sse, rel, n] = table1_cells(s);
     format!("{model:<20} {mae:>8} {filtered:>12} {r2:>8} {sse:>12} {rel:>9} {n:>8}")
+}
+
+/// Why a figure of `s` that [`table1_cells`] gives as `n/a` cannot be given, one sentence per
+/// figure (none when every figure is there).
+pub fn not_given(s: &Scores) -> Vec<String> {
+    let mut why = Vec::new();
+    if s.n == 0 {
+        return vec!["no samples were scored".into()];
+    }
+    if !s.r2.is_finite() {
+        why.push(format!(
+            "R² n/a: the measured V_P spreads by {:.4} % (standard deviation) over the {} samples \
+             scored, less than {R2_MIN_SPREAD_PCT} % (one step of a per-mille reading): nothing \
+             moved for a model to explain",
+            s.spread_pct, s.n
+        ));
+    }
+    if !s.rel_sse.is_finite() {
+        why.push(
+            "Rel. SSE n/a: V_P equals O_P on every sample scored, so the modelless prediction \
+             it is relative to has no error"
+                .into(),
+        );
+    }
+    why
+}
+
+/// Why the `n/a` figures of the Table 1 `rows` are not given ([`not_given`]), each reason once,
+/// as lines to print under the table.
+pub fn table1_notes<'a>(rows: impl IntoIterator<Item = &'a Scores>) -> String {
+    let mut all: Vec<String> = Vec::new();
+    for why in rows.into_iter().flat_map(not_given) {
+        if !all.contains(&why) {
+            all.push(why);
+        }
+    }
+    all.iter().map(|w| format!("  ({w})\n")).collect()
 }
 
 /// The figures of a Table 1 row as [`table1_row`] prints them: MAE, MAE filtered, R², SSE,
@@ -296,6 +350,26 @@ mod tests {
     }
 
     #[test]
+    fn a_valve_at_rest_gets_no_r2_and_says_why() {
+        // Still to the last bit but for rounding: R² would be a ratio of rounding errors.
+        let measured = vec![52.0 + 1e-13, 52.0, 52.0 - 1e-13, 52.0];
+        let simulated = vec![51.5; 4];
+        let s = scores(&measured, &simulated, &measured, 0.01);
+        assert!(s.r2.is_nan() && s.spread_pct < 1e-12, "{s:?}");
+        assert_eq!(table1_cells(&s)[2], "n/a");
+        let why = not_given(&s);
+        assert!(
+            why[0].starts_with("R² n/a: the measured V_P spreads by 0.0000 %"),
+            "{why:?}"
+        );
+        assert!(why[1].starts_with("Rel. SSE n/a"), "{why:?}");
+        // Moving by a step or more, it has one.
+        let moving = [52.0, 52.3, 52.0, 52.3];
+        let s = scores(&moving, &simulated, &simulated, 0.01);
+        assert!(s.r2.is_finite() && not_given(&s).is_empty(), "{s:?}");
+    }
+
+    #[test]
     fn filtered_mae_uses_the_filter_over_all_data_then_the_mask() {
         // 100 Hz: a 0.2 Hz sine plus 25 Hz noise; the model predicts the sine exactly.
         let clean: Vec<f64> = (0..3000)
@@ -337,6 +411,7 @@ mod tests {
             rel_sse: 0.298,
             n: 41300,
             filtered: true,
+            spread_pct: 20.0,
         };
         let row = table1_row("Pin-cart II", &s);
         assert_eq!(

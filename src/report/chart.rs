@@ -35,6 +35,17 @@ struct Columns<'a> {
     colors: Vec<String>,
 }
 
+/// How a chart opens: which series are drawn at first (the others are one click on their
+/// legend entry away) and the stretch of time it opens zoomed on (a double-click shows all
+/// of it).
+#[derive(Debug, Default, Clone)]
+pub struct View {
+    /// Indices of the series drawn at first (all when None).
+    pub shown: Option<Vec<usize>>,
+    /// Loop times the chart opens zoomed on.
+    pub zoom: Option<(f64, f64)>,
+}
+
 /// Series over one time axis, written once into a page and drawn by its charts.
 #[derive(Debug)]
 pub struct Dataset<'a> {
@@ -140,14 +151,32 @@ impl<'a> Dataset<'a> {
         self.html() + &self.chart(title, y_label, x_label, self.range.clone())
     }
 
+    /// The dataset ([`Self::html`]) and its chart over all of its samples, opening as `view`
+    /// says.
+    pub fn html_and_view(&self, title: &str, y_label: &str, x_label: &str, view: &View) -> String {
+        let labels = (title, y_label, x_label);
+        self.html() + &self.chart_in(labels, self.range.clone(), view)
+    }
+
     /// A chart of the dataset over the samples `range` (all of it, or a window inside it):
     /// interactive where scripts run, the static SVG of [`plot::lines`] where they do not.
     pub fn chart(&self, title: &str, y_label: &str, x_label: &str, range: Range<usize>) -> String {
+        self.chart_in((title, y_label, x_label), range, &View::default())
+    }
+
+    /// [`Self::chart`] labelled `(title, y_label, x_label)`, opening as `view` says (the static
+    /// SVG shows every series over all of `range`).
+    fn chart_in(
+        &self,
+        (title, y_label, x_label): (&str, &str, &str),
+        range: Range<usize>,
+        view: &View,
+    ) -> String {
         let svg = plot::lines(title, y_label, x_label, self.t, self.series, range.clone());
         if svg.is_empty() {
             return svg;
         }
-        let window = if range == self.range {
+        let mut window = if range == self.range {
             String::new()
         } else {
             format!(
@@ -156,6 +185,13 @@ impl<'a> Dataset<'a> {
                 self.t[range.end - 1]
             )
         };
+        if let Some(shown) = &view.shown {
+            let list: Vec<String> = shown.iter().map(usize::to_string).collect();
+            let _ = write!(window, " data-shown=\"{}\"", list.join(","));
+        }
+        if let Some((a, b)) = view.zoom {
+            let _ = write!(window, " data-zoom0=\"{a}\" data-zoom1=\"{b}\"");
+        }
         format!(
             "<div class=\"vb-chart\" data-set=\"{}\" data-title=\"{}\" data-x=\"{}\" data-y=\"{}\"{window}>\
              <noscript>{svg}</noscript></div>",
@@ -243,6 +279,12 @@ mod tests {
         assert!(whole.contains("<noscript><svg") && whole.contains("all &quot;of&quot; it"));
         let zoom = d.chart("zoom", "%", "time (s)", 100..200);
         assert!(zoom.contains("data-x0=\"1\" data-x1=\"1.99\""), "{zoom}");
+        let view = View {
+            shown: Some(vec![0]),
+            zoom: Some((2.5, 4.0)),
+        };
+        let opened = d.html_and_view("v", "%", "time (s)", &view);
+        assert!(opened.contains(" data-shown=\"0\" data-zoom0=\"2.5\" data-zoom1=\"4\""));
         assert!(assets(&zoom).contains("uPlot") && assets("<p>no charts</p>").is_empty());
     }
 

@@ -1,19 +1,24 @@
 //! The rows of a fleet's table: a valve summed up for maintenance ([`ValveSummary`]: dead time,
-//! reversal delay, friction band, stroke speeds, findings), the fleet ranked by an attention
-//! score ([`Fleet`]) and its `summary.csv`. Plain data, so the fleet's page renders it
-//! without depending on the fleet analysis.
+//! reversal delay, friction band, stroke speeds, findings and what to do about each), the fleet
+//! ranked by consequence for the process ([`Fleet`]) and its `summary.csv`. Plain data, so the
+//! fleet's page renders it without depending on the fleet analysis.
 //!
 //! Not here: how a row is summed up from a diagnosis (`crate::fleet`, which fills these rows).
 //!
 //! The figures come from the diagnosis: the step delays it measured in the recording, and the
 //! figures of its final model ([`crate::diagnose::Figures`]), the same numbers its report,
-//! JSON and the Python package quote under the same names. The attention score
-//! adds, to the number of findings, how far each figure lies beyond what a healthy valve shows
-//! ([`Limits`]): `max(0, value / limit - 1)`, and for the stroke speed `limit / speed - 1`.
+//! JSON and the Python package quote under the same names.
+//!
+//! The rank is by priority ([`crate::vocabulary`]): each finding's size over what is worth
+//! maintenance, weighted by what it does to control, summed over the valve's findings. Valves of
+//! equal priority (the healthy ones) are ordered by the attention score, which adds, to the
+//! number of findings, how far each figure lies beyond what a healthy valve shows ([`Limits`]):
+//! `max(0, value / limit - 1)`, and for the stroke speed `limit / speed - 1`.
 
 use serde::{Deserialize, Serialize};
 
 use crate::diagnose::{NOMINAL_DEAD_TIME_S, NOMINAL_MIN_SLEW_PCT_PER_S};
+use crate::vocabulary::{valve_priority, Advice, Severity};
 
 /// What the ranking takes as healthy.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -69,8 +74,17 @@ pub struct ValveSummary {
     pub verdict: Option<String>,
     pub heldout_sse_before: Option<f64>,
     pub heldout_sse_after: Option<f64>,
-    /// Findings plus how far the figures lie beyond [`Limits`]; the fleet is ranked by it.
+    /// Findings plus how far the figures lie beyond [`Limits`]; orders valves of equal priority.
     pub attention: f64,
+    /// Each finding in the vocabulary's words, highest priority first.
+    #[serde(default)]
+    pub advice: Vec<Advice>,
+    /// The sum of the findings' priorities; the fleet is ranked by it.
+    #[serde(default)]
+    pub priority: f64,
+    /// The highest severity of the valve's findings (none without one).
+    #[serde(default)]
+    pub severity: Option<Severity>,
     /// The valve's own report, relative to the fleet's output directory.
     pub report: Option<String>,
 }
@@ -108,7 +122,7 @@ pub struct Fleet {
 }
 
 /// The columns of `summary.csv`, in order.
-pub(crate) const CSV_HEADER: [&str; 17] = [
+pub(crate) const CSV_HEADER: [&str; 20] = [
     "rank",
     "valve",
     "attention",
@@ -126,21 +140,27 @@ pub(crate) const CSV_HEADER: [&str; 17] = [
     "report",
     "error",
     "sizes",
+    "priority",
+    "severity",
+    "advice",
 ];
 
 impl Fleet {
-    /// Ranks `valves` (attention from the default [`Limits`], ties by name).
+    /// Ranks `valves`: by priority (from their advice), then attention (from the default
+    /// [`Limits`]), then name; valves that failed last.
     pub fn ranked(mut valves: Vec<ValveSummary>) -> Self {
         let limits = Limits::default();
         for v in &mut valves {
-            v.attention = if v.error.is_some() {
-                0.0
+            if v.error.is_some() {
+                (v.attention, v.priority, v.severity) = (0.0, 0.0, None);
             } else {
-                v.attention_under(&limits)
-            };
+                v.attention = v.attention_under(&limits);
+                (v.priority, v.severity) = valve_priority(&v.advice);
+            }
         }
         valves.sort_by(|a, b| {
             (a.error.is_some().cmp(&b.error.is_some()))
+                .then(b.priority.total_cmp(&a.priority))
                 .then(b.attention.total_cmp(&a.attention))
                 .then(a.valve.cmp(&b.valve))
         });
@@ -183,6 +203,11 @@ impl Fleet {
                 v.report.clone().unwrap_or_default(),
                 v.error.clone().unwrap_or_default(),
                 v.sizes.join(";"),
+                format!("{:.3}", v.priority),
+                v.severity.map_or("", Severity::name).to_string(),
+                (v.advice.iter().map(Advice::sentence))
+                    .collect::<Vec<_>>()
+                    .join(" "),
             ])?;
         }
         Ok(String::from_utf8(w.into_inner()?)?)

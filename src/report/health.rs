@@ -11,7 +11,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{drawn, AFTER, BEFORE, GREY};
+use super::plot::{drawn, AFTER, AXIS_FONT, BEFORE, GREY};
 
 /// One panel: its title, unit and the CSV columns of the figure, its baseline and its limit.
 const PANELS: [(&str, &str, [&str; 3]); 5] = [
@@ -61,7 +61,7 @@ const PANELS: [(&str, &str, [&str; 3]); 5] = [
 /// Width of the plotting column and of the legend column beside it, and a panel's height, px.
 const PLOT_W: u32 = 780;
 const LEGEND_W: u32 = 150;
-const PANEL_H: u32 = 190;
+const PANEL_H: u32 = 210;
 
 /// The health CSV's columns, by header name (NaN for an empty cell).
 struct Table {
@@ -178,10 +178,10 @@ fn draw_panel<DB: DrawingBackend>(
     let pad = ((hi - lo) * 0.08).max(1e-3);
     let (t0, t1) = (t[0], t[t.len() - 1].max(t[0] + 1e-9));
     let chart = ChartBuilder::on(plot)
-        .caption(format!("{title} ({unit})"), ("sans-serif", 13))
+        .caption(format!("{title} ({unit})"), AXIS_FONT)
         .margin(6)
-        .x_label_area_size(24)
-        .y_label_area_size(55)
+        .x_label_area_size(44)
+        .y_label_area_size(68)
         .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad));
     let Ok(mut chart) = chart else {
         return;
@@ -191,6 +191,8 @@ fn draw_panel<DB: DrawingBackend>(
             .configure_mesh()
             .x_desc("loop time (h)")
             .y_desc(unit)
+            .label_style(AXIS_FONT)
+            .axis_desc_style(AXIS_FONT)
             .light_line_style(WHITE.mix(0.0))
             .draw(),
     );
@@ -220,7 +222,7 @@ fn draw_panel<DB: DrawingBackend>(
     for (i, (name, style)) in entries.iter().enumerate() {
         let y = 40 + 20 * i as i32;
         drawn(side.draw(&Rectangle::new([(4, y - 4), (22, y + 4)], *style)));
-        drawn(side.draw(&Text::new(*name, (28, y - 6), ("sans-serif", 12))));
+        drawn(side.draw(&Text::new(*name, (28, y - 7), AXIS_FONT)));
     }
 }
 

@@ -62,15 +62,7 @@ fn diagnose_window(
 
 /// The effects of `d`: findings, then traces.
 fn entries(d: &Diagnosis) -> Vec<Entry> {
-    let findings = d.findings.iter().map(|f| Entry {
-        effect: f.effect,
-        finding: true,
-        size: f.size,
-    });
-    let traces = d.traces.iter().map(|t| Entry {
-        effect: t.effect,
-        finding: false,
-        size: t.size,
-    });
+    let findings = (d.findings.iter()).map(|f| Entry::new(f.effect, true, f.size));
+    let traces = (d.traces.iter()).map(|t| Entry::new(t.effect, false, t.size));
     findings.chain(traces).collect()
 }

@@ -2,8 +2,11 @@
 //! with inline SVG fallbacks, no server, no external files) of the analysis results.
 //!
 //! - [`diagnose`]: a diagnosis's sentences (evidence, verdict, notes), its text, its `--json`
-//!   document and its page (the recording against the model before and after, the residual,
-//!   the worst windows zoomed in, the step-delay evidence and the Table 1 rows).
+//!   document and its page (the verdict a maintenance planner acts on, then the recording
+//!   against the model before and after, the residual, the worst windows zoomed in, the
+//!   step-delay evidence and the Table 1 rows).
+//! - [`verdict`]: the verdicts in words (the planner's, from [`crate::vocabulary`], and the
+//!   modeller's), the sizes and figures; [`advice`]: the planner's findings as HTML.
 //! - [`identify`]: an identification's page (Tables 1 and 2, the paper's Figs. 5-10).
 //! - [`fleet`]: a fleet's page (its valves ranked for maintenance, each linked to its own page),
 //!   from the rows of [`fleet_table`] (which `crate::fleet` fills from the diagnoses).
@@ -18,6 +21,7 @@
 //! The pages share one skeleton ([`page`]); [`write_files`] saves a report's files. This module
 //! only formats results; it computes nothing about the valve.
 
+pub mod advice;
 pub mod chart;
 pub mod diagnose;
 pub mod fleet;
@@ -80,6 +84,9 @@ fn page(heading: &str, body: &str) -> String {
          body{{font-family:sans-serif;max-width:960px;margin:auto;color:#222}}\
          table{{border-collapse:collapse;margin:6px 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
          td:first-child{{text-align:left}}td.l{{text-align:left}}.verdict{{font-size:1.15em;background:#eef;padding:8px}}\
+         .card{{padding:6px 10px;margin:6px 0;border-left:6px solid #999}}\
+         .sev-high{{background:#fde2df;border-color:#c62828}}.sev-medium{{background:#fff3d6;border-color:#e6a100}}\
+         .sev-low{{background:#eef4fb;border-color:#6b8fb8}}.sev-none{{background:#eef7ee;border-color:#5a9a5a}}\
          </style></head><body><h1>{0}</h1>{1}{2}</body></html>",
         esc(heading),
         body,
@@ -88,20 +95,17 @@ fn page(heading: &str, body: &str) -> String {
     h
 }
 
-/// A Table 1 row of the HTML tables.
+/// A Table 1 row of the HTML tables (a figure that cannot be given is `n/a`, as in the text;
+/// [`crate::metrics::not_given`] says why).
 fn row(name: &str, s: &Scores) -> String {
-    let filtered = if s.filtered {
-        format!("{:.3} %", s.mae_filtered)
-    } else {
-        "n/a".into()
-    };
+    let [mae, filtered, r2, sse, rel, n] = crate::metrics::table1_cells(s);
+    let pct = |c: String| c.replace('%', " %");
     format!(
-        "<tr><td>{}</td><td>{:.3} %</td><td>{filtered}</td><td>{:.2} %</td><td>{:.3}</td><td>{:.2} %</td><td>{}</td></tr>",
+        "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{sse}</td><td>{}</td><td>{n}</td></tr>",
         esc(name),
-        s.mae,
-        100.0 * s.r2,
-        s.sse,
-        100.0 * s.rel_sse,
-        s.n
+        pct(mae),
+        pct(filtered),
+        pct(r2),
+        pct(rel)
     )
 }

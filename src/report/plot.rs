@@ -44,11 +44,15 @@ struct Entry<'a> {
     mark: Mark,
 }
 
+/// Font of tick labels and axis titles: plotters writes a font size of 15 as 12.1 px in the
+/// SVG, as legible as the page's text (its default of 12 came out at 9.7 px).
+pub(crate) const AXIS_FONT: (&str, u32) = ("sans-serif", 15);
+
 /// Height of a legend row, px.
 const LEGEND_ROW: i32 = 18;
 /// Width given to each character of a legend label, px: the SVG backend has no font metrics, so
-/// labels are laid out at a generous average width of the 13 px sans-serif font.
-const CHAR_W: i32 = 7;
+/// labels are laid out at a generous average width of their sans-serif font ([`AXIS_FONT`]).
+const CHAR_W: i32 = 8;
 
 /// Where each entry of a legend `width` px wide goes (left to right, wrapped) and the legend's
 /// height.
@@ -103,11 +107,7 @@ fn with_legend(
                 )),
                 Mark::Dot => legend.draw(&Circle::new((x + 10, mid), 3, e.color.filled())),
             });
-            drawn(legend.draw(&Text::new(
-                e.name,
-                (x + 26, mid - 7),
-                ("sans-serif", 13).into_font(),
-            )));
+            drawn(legend.draw(&Text::new(e.name, (x + 26, mid - 7), AXIS_FONT.into_font())));
         }
         drawn(root.present());
     }
@@ -125,8 +125,8 @@ fn framed<'a, DB: DrawingBackend>(
     let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 16))
         .margin(8)
-        .x_label_area_size(30)
-        .y_label_area_size(55)
+        .x_label_area_size(42)
+        .y_label_area_size(68)
         .build_cartesian_2d(x, y)
         .ok()?;
     drawn(
@@ -134,6 +134,8 @@ fn framed<'a, DB: DrawingBackend>(
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .label_style(AXIS_FONT)
+            .axis_desc_style(AXIS_FONT)
             .light_line_style(WHITE.mix(0.0))
             .draw(),
     );
@@ -270,8 +272,8 @@ pub fn scatter_lines(
         let chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 16))
             .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(50)
+            .x_label_area_size(42)
+            .y_label_area_size(64)
             .build_cartesian_2d(
                 (x0 - 1.0)..(x1 + 1.0),
                 (y0 - 0.05).min(0.0)..(y1 * 1.1 + 0.05),
@@ -284,6 +286,8 @@ pub fn scatter_lines(
                 .configure_mesh()
                 .x_desc(x_label)
                 .y_desc(y_label)
+                .label_style(AXIS_FONT)
+                .axis_desc_style(AXIS_FONT)
                 .draw(),
         );
         for (_, color, points) in curves {

@@ -1,8 +1,9 @@
 //! The deterministic figures README quotes, generated from the tool's own `--json` documents:
-//! the table of the shared recordings' diagnoses ([`diagnose_row`]), identify's Table 1 on the
-//! paper-like recording ([`table1`]), the standard response test of the emulated valve
-//! ([`response_table`], from its `response.json`), and README's marked blocks that hold them
-//! (`<!-- generated: NAME -->` ... `<!-- end generated -->`).
+//! the table of the shared recordings' diagnoses ([`diagnose_row`]), the fleet ranking of the
+//! same recordings ([`fleet_table`], from `summary.json`), identify's Table 1 on the paper-like
+//! recording ([`table1`]), the vocabulary's words ([`vocabulary_table`]), the standard response
+//! test of the emulated valve ([`response_table`], from its `response.json`), and README's
+//! marked blocks that hold them (`<!-- generated: NAME -->` ... `<!-- end generated -->`).
 //!
 //! `examples/readme-figures.rs` prints them or writes them into README ([`REGENERATE`]); the
 //! tests that already diagnose and identify those recordings compare README's blocks with them
@@ -38,6 +39,65 @@ pub const DIAGNOSE_CASES: &str = "diagnose-cases";
 pub const IDENTIFY_TABLE1: &str = "identify-table1";
 /// The recording of identify's Table 1 in README.
 pub const TABLE1_CASE: &str = "pub_sdd_paper_rs";
+
+/// The block of the fleet ranking of [`CASES`].
+pub const FLEET_CASES: &str = "fleet-cases";
+/// The block of the vocabulary's words.
+pub const VOCABULARY: &str = "vocabulary";
+
+/// The fleet ranking of a `summary.json` document `summary` as a Markdown table: rank, valve,
+/// severity, priority, what is wrong (each finding's plain name and what it does) and what to
+/// do first (the first clause of the highest-priority finding's action).
+pub fn fleet_table(summary: &Value) -> String {
+    let mut o = String::from(
+        "| rank | valve | severity | priority | what is wrong | to do first |\n|---|---|---|---|---|---|\n",
+    );
+    let valves = summary["valves"].as_array().cloned().unwrap_or_default();
+    for (i, v) in valves.iter().enumerate() {
+        let advice = v["advice"].as_array().cloned().unwrap_or_default();
+        let text = |a: &Value, key: &str| a[key].as_str().unwrap_or("").to_string();
+        let wrong: Vec<String> = (advice.iter())
+            .map(|a| format!("{} {}", text(a, "name"), text(a, "does")))
+            .collect();
+        let first = advice.first().map_or(String::new(), |a| text(a, "action"));
+        o += &format!(
+            "| {} | {} | {} | {:.1} | {} | {} |\n",
+            i + 1,
+            v["valve"].as_str().unwrap_or("?"),
+            v["severity"].as_str().unwrap_or("none"),
+            v["priority"].as_f64().unwrap_or(f64::NAN),
+            if wrong.is_empty() {
+                "nothing worth maintenance".to_string()
+            } else {
+                wrong.join("; ")
+            },
+            first.split(';').next().unwrap_or("")
+        );
+    }
+    o.trim_end().to_string()
+}
+
+/// The vocabulary as a Markdown table: each effect's name in the JSON, its plain name, what it
+/// does to control, the weight of that consequence in a finding's priority, and what to do.
+pub fn vocabulary_table() -> String {
+    use crate::model::composed::Effect;
+    use crate::vocabulary::words;
+    let mut o = String::from(
+        "| effect (JSON) | plain name | what it does to control | weight | what to do |\n|---|---|---|---|---|\n",
+    );
+    for e in Effect::ALL {
+        let w = words(e);
+        o += &format!(
+            "| `{}` | {} | {} | {} | {} |\n",
+            e.name(),
+            w.plain,
+            w.control,
+            w.consequence.weight(),
+            w.action
+        );
+    }
+    o.trim_end().to_string()
+}
 
 /// The block of the standard response test of `config/emulated.toml`, as fast as possible.
 pub const RESPONSE_EMULATED: &str = "response-emulated";
@@ -309,5 +369,33 @@ mod tests {
             assert!(row.starts_with(&format!("| {case} |")), "{row}");
         }
         assert!(block(readme, IDENTIFY_TABLE1).is_some_and(|b| b.contains("| Pin-cart II |")));
+        let fleet = block(readme, FLEET_CASES).expect("no fleet-cases block");
+        assert_eq!(fleet.lines().count(), 2 + CASES.len(), "{fleet}");
+    }
+
+    /// README's vocabulary is the table's (each ranking's figures are checked where the fleet
+    /// runs: `tests/fleet_cli.rs`).
+    #[test]
+    fn readme_quotes_the_vocabulary() {
+        let readme = include_str!("../../README.md");
+        if let Err(e) = check_block(readme, VOCABULARY, &vocabulary_table()) {
+            panic!("{e}");
+        }
+    }
+
+    #[test]
+    fn a_fleet_summary_is_a_ranking_table() {
+        let summary = json!({"valves": [
+            {"valve": "a", "severity": "high", "priority": 58.25, "advice": [
+                {"name": "lost motion (backlash)", "does": "loses 5.83 % (5.69-5.86) of travel on every reversal",
+                 "action": "check the packing; tighten"}]},
+            {"valve": "b", "severity": null, "priority": 0.0, "advice": []}
+        ]});
+        assert_eq!(
+            fleet_table(&summary),
+            "| rank | valve | severity | priority | what is wrong | to do first |\n|---|---|---|---|---|---|\n\
+             | 1 | a | high | 58.2 | lost motion (backlash) loses 5.83 % (5.69-5.86) of travel on every reversal | check the packing |\n\
+             | 2 | b | none | 0.0 | nothing worth maintenance |  |"
+        );
     }
 }

@@ -1,11 +1,14 @@
-//! A diagnosis's conclusion in words: the verdict (what was missing, its size with its
-//! interval, and the measure in which adding it improved the fit), the sizes of findings and
-//! traces, and the figures of the final model.
+//! A diagnosis's conclusion in words: the verdict a maintenance planner acts on (each finding
+//! in the words of [`crate::vocabulary`]: what is wrong with its size, how sure, how bad for
+//! control, what to do), the modeller's verdict (what the model was missing and the measure in
+//! which adding it improved the fit), the sizes of findings and traces, and the figures of the
+//! final model.
 //!
 //! Not here: the evidence of each finding or the notes (`report::diagnose`).
 
-use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Trace};
+use crate::diagnose::{Diagnosis, Figures, Measure, Note, Outcome, Trace};
 pub use crate::human::{sig3 as num, size_label as label, size_text};
+use crate::vocabulary::{self, capitalised, Advice};
 
 /// The measure a finding improved, in words.
 pub fn measure(m: &Measure) -> String {
@@ -58,17 +61,107 @@ pub fn figures(f: &Figures) -> String {
     )
 }
 
-/// `s` with its first letter in upper case.
-fn capitalised(s: &str) -> String {
-    let mut c = s.chars();
-    c.next()
-        .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+/// Every finding of `d` in the words of the vocabulary, highest priority first.
+pub fn advice(d: &Diagnosis) -> Vec<Advice> {
+    vocabulary::advice(d.findings.iter().map(|f| (f.effect, &f.size)))
 }
 
-/// The verdict: what was missing, how large, and what adding it improved (never a model made
-/// worse: stick-slip is judged in the slip distance), or that nothing worth maintenance was
-/// missing, with the traces below it.
+/// The traces of `d` in plain words, each `lost motion (backlash) loses 0.12 % of travel on
+/// every reversal`.
+pub fn plain_traces(d: &Diagnosis) -> Vec<String> {
+    (d.traces.iter())
+        .map(|t| {
+            let e = vocabulary::words(t.effect);
+            format!("{} {}", e.plain, vocabulary::does(&t.size))
+        })
+        .collect()
+}
+
+/// The verdict a maintenance planner acts on: each finding, highest priority first, in the
+/// vocabulary's words (severity, what is wrong with its size and unit, how sure, what it does
+/// to control, what to do), or that nothing worth maintenance was found; then what was too small
+/// to act on. No modeller's figures: those are in [`model_verdict`].
 pub fn verdict(d: &Diagnosis) -> String {
+    let traces = plain_traces(d);
+    let traces = if traces.is_empty() {
+        String::new()
+    } else {
+        format!(" Too small to act on: {}.", traces.join("; "))
+    };
+    let list = advice(d);
+    // A slow valve is said whether or not the model needed a speed limit.
+    let slow = d.notes.iter().find_map(|n| match *n {
+        Note::SlowStrokes {
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        } => Some(capitalised(&slow_strokes(
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        ))),
+        _ => None,
+    });
+    if !list.is_empty() {
+        let sentences: Vec<String> = list.iter().map(Advice::sentence).chain(slow).collect();
+        return sentences.join(" ") + &traces;
+    }
+    let (slow, nothing) = match slow {
+        Some(s) => (s + ". ", "Nothing else worth maintenance"),
+        None => (String::new(), "Nothing worth maintenance"),
+    };
+    slow + &match &d.outcome {
+        Outcome::NotSignificant { windows } if *windows > 0 => {
+            let (stretches, differ, them) = if *windows == 1 {
+                ("1 stretch".to_string(), "differs", "it")
+            } else {
+                (format!("{windows} stretches"), "differ", "them")
+            };
+            format!(
+                "{nothing}: {stretches} of the recording {differ} from the model by \
+                 more than the noise, but nothing the vocabulary names explains {them} beyond \
+                 chance and by a size worth maintenance.{traces}"
+            )
+        }
+        _ => format!(
+            "{nothing}: the valve does what its model does, within the noise of \
+             its reading.{traces}"
+        ),
+    }
+}
+
+/// That the valve strokes slowly ([`Note::SlowStrokes`]), with the speeds measured each way
+/// it was asked to go fast, and what to check.
+pub fn slow_strokes(
+    opening_pct_per_s: Option<f64>,
+    closing_pct_per_s: Option<f64>,
+    largest_step_pct: f64,
+    worth_pct_per_s: f64,
+) -> String {
+    let each = |what: &str, v: Option<f64>| v.map(|v| format!("{} %/s {what}", num(v)));
+    let speeds: Vec<String> = [
+        each("opening", opening_pct_per_s),
+        each("closing", closing_pct_per_s),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    format!(
+        "the valve strokes slowly: at most {} on steps of up to {} %, where a valve in good order \
+         strokes at {} %/s or faster; check the supply pressure, the pilot or booster and the air \
+         path (tubing, filters, exhaust), and the actuator size",
+        speeds.join(" and "),
+        num(largest_step_pct),
+        num(worth_pct_per_s)
+    )
+}
+
+/// The modeller's verdict: what was missing, how large, and what adding it improved (never a
+/// model made worse: stick-slip is judged in the slip distance), or that nothing worth
+/// maintenance was missing, with the traces below it.
+pub fn model_verdict(d: &Diagnosis) -> String {
     let traces = if d.traces.is_empty() {
         String::new()
     } else {

@@ -57,9 +57,9 @@ impl DiagnosisConfig {
             t,
             "window_s",
             self.window_s,
-            (2000.0 * period_s).max(60.0),
+            (2000.0 * period_s).max(30.0),
             86_400.0,
-            "a window in s, at least 60 s and 2000 cycles (diagnosis needs steps to judge)",
+            "a window in s, at least 30 s and 2000 cycles (diagnosis needs steps to judge)",
         )?;
         c.range(
             t,

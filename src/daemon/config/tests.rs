@@ -580,7 +580,7 @@ fn diagnosis_is_checked_against_its_table_and_needs_health() {
     let e = err("[health]\n\n[diagnosis]\nwindow_s = 10.0\n");
     assert!(
         e.starts_with(
-            "c.toml:4: diagnosis.window_s: 10 is out of range: a window in s, at least 60 s"
+            "c.toml:4: diagnosis.window_s: 10 is out of range: a window in s, at least 30 s"
         ),
         "{e}"
     );

@@ -23,14 +23,29 @@ use serde::Serialize;
 
 use crate::human::{sig3, size_label};
 use crate::model::composed::{Effect, Size};
+use crate::vocabulary::{self, Advice};
 
 /// One effect in a diagnosis: a finding (material) or a trace.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Entry {
     pub effect: Effect,
+    /// Its plain name in the vocabulary (`lost motion (backlash)`).
+    pub name: &'static str,
     /// A finding (worth maintenance), not a trace.
     pub finding: bool,
     pub size: Size,
+}
+
+impl Entry {
+    /// `effect` of `size`, a finding or a trace.
+    pub fn new(effect: Effect, finding: bool, size: Size) -> Entry {
+        Entry {
+            effect,
+            name: vocabulary::words(effect).plain,
+            finding,
+            size,
+        }
+    }
 }
 
 /// One diagnosis, as a line of the history.
@@ -47,10 +62,20 @@ pub struct Record {
     pub trigger: &'static str,
     /// The conclusion in words (as `diagnose` prints it).
     pub verdict: String,
+    /// Diagnosed from a reference model (the valve's health baseline model, or the final model of
+    /// its first whole window's diagnosis), so what it finds is what differs from that model;
+    /// false for the first diagnoses of a valve without a health baseline model.
+    pub compared: bool,
+    /// This diagnosis is the reference: the valve's first of a whole window.
+    pub reference: bool,
     /// Findings first, then traces.
     pub effects: Vec<Entry>,
+    /// Each finding in the vocabulary's words, highest priority first.
+    pub advice: Vec<Advice>,
     /// The alarms standing after this diagnosis, each naming its effect.
     pub alarms: Vec<String>,
+    /// The effect of each standing alarm, in the same order.
+    pub alarm_effects: Vec<Effect>,
     /// The full report, relative to the history's directory (none when reports are off or the
     /// diagnosis failed).
     pub report: Option<String>,
@@ -78,8 +103,8 @@ impl Baseline {
 
     /// Compares the effects of the diagnosis at loop time `t_s` with the baseline (the first
     /// of a `whole` window makes them the baseline) and returns the standing alarms and those
-    /// newly raised.
-    pub fn compare(&mut self, t_s: f64, whole: bool, now: &[Entry]) -> (Vec<String>, Vec<String>) {
+    /// newly raised, each with its effect.
+    pub fn compare(&mut self, t_s: f64, whole: bool, now: &[Entry]) -> (Alarms, Alarms) {
         let Some(base) = &self.effects else {
             if whole {
                 self.effects = Some(now.to_vec());
@@ -105,22 +130,18 @@ impl Baseline {
             };
             let text = message(e, then, start);
             if !self.alarmed.contains(&e.effect) {
-                raised.push(text.clone());
+                raised.push((e.effect, text.clone()));
             }
-            standing.push(text);
+            standing.push((e.effect, text));
         }
         self.since = since;
-        self.alarmed = (self.since.iter())
-            .filter(|(x, _)| {
-                standing
-                    .iter()
-                    .any(|a| a.starts_with(&format!("{}:", x.name())))
-            })
-            .map(|&(x, _)| x)
-            .collect();
+        self.alarmed = standing.iter().map(|a| a.0).collect();
         (standing, raised)
     }
 }
+
+/// Alarms, each with the effect it names.
+pub type Alarms = Vec<(Effect, String)>;
 
 /// `now` grew out of `then`: the same quantity, the intervals parted, towards worse, by a
 /// change worth maintenance.
@@ -129,19 +150,20 @@ fn grew(then: &Size, now: &Size) -> bool {
     then.name == now.name && parted && now.worth - then.worth >= 1.0
 }
 
-/// `backlash: friction band 0.40 % → 1.30 % since 1:32 h`, or for an effect the baseline did
-/// not show, `backlash: new, friction band 1.30 % (1.10-1.50) since 1:32 h`.
+/// `lost motion (backlash): friction band 0.40 % → 1.30 % since 1:32 h`, or for an effect the
+/// baseline did not show, `lost motion (backlash): new, friction band 1.30 % (1.10-1.50) since
+/// 1:32 h`.
 fn message(e: &Entry, then: Option<&Entry>, since_s: f64) -> String {
     let (what, unit) = size_label(e.size.name);
     let since = clock(since_s);
     match then {
         Some(b) => format!(
             "{}: {what} {}{unit} → {}{unit} since {since}",
-            e.effect.name(),
+            e.name,
             sig3(b.size.value),
             sig3(e.size.value)
         ),
-        None => format!("{}: new, {} since {since}", e.effect.name(), e.size.words()),
+        None => format!("{}: new, {} since {since}", e.name, e.size.words()),
     }
 }
 
@@ -156,10 +178,10 @@ mod tests {
     use super::*;
 
     fn band(value: f64, low: f64, high: f64, finding: bool) -> Entry {
-        Entry {
-            effect: Effect::Backlash,
+        Entry::new(
+            Effect::Backlash,
             finding,
-            size: Size {
+            Size {
                 name: "friction_band_pct",
                 unit: "%",
                 value,
@@ -168,7 +190,7 @@ mod tests {
                 worth: value / 0.3,
                 worth_low: low / 0.3,
             },
-        }
+        )
     }
 
     #[test]
@@ -185,16 +207,17 @@ mod tests {
         let once = b.compare(5520.0, true, &[band(1.3, 1.1, 1.5, true)]);
         assert_eq!(once, (vec![], vec![]));
         let (standing, raised) = b.compare(7200.0, true, &[band(1.6, 1.4, 1.8, true)]);
-        let text = "backlash: friction band 0.40 % → 1.60 % since 1:32 h";
-        assert_eq!(
-            (standing, raised),
-            (vec![text.to_string()], vec![text.to_string()])
-        );
+        let text = "lost motion (backlash): friction band 0.40 % → 1.60 % since 1:32 h";
+        let alarm = vec![(Effect::Backlash, text.to_string())];
+        assert_eq!((standing, raised), (alarm.clone(), alarm));
         // Standing, not raised again, with its first time.
         let (standing, raised) = b.compare(7800.0, true, &[band(1.3, 1.1, 1.5, true)]);
         assert_eq!(
             standing,
-            vec!["backlash: friction band 0.40 % → 1.30 % since 1:32 h"]
+            vec![(
+                Effect::Backlash,
+                "lost motion (backlash): friction band 0.40 % → 1.30 % since 1:32 h".to_string()
+            )]
         );
         assert!(raised.is_empty());
         // Shrunk far below: no alarm, and the standing one clears.
@@ -227,7 +250,11 @@ mod tests {
         let (_, raised) = b.compare(3780.0, true, &[band(1.4, 1.1, 1.5, true)]);
         assert_eq!(
             raised,
-            vec!["backlash: new, friction band 1.40 % (1.10-1.50) since 1:02 h"]
+            vec![(
+                Effect::Backlash,
+                "lost motion (backlash): new, friction band 1.40 % (1.10-1.50) since 1:02 h"
+                    .to_string()
+            )]
         );
     }
 }

@@ -18,7 +18,7 @@ use std::time::UNIX_EPOCH;
 use serde::Serialize;
 
 use crate::daemon::files::history_file;
-use crate::daemon::health_figures::{Figures, HealthLimits, Judged};
+use crate::daemon::health_figures::{Figures, HealthLimits, Held, Judged};
 use crate::recording::log_format::{Sample, Status};
 
 /// How much of each valve's trace the page shows, s.
@@ -45,6 +45,8 @@ pub(crate) struct HealthWindow {
     pub(crate) base: Option<Figures>,
     pub(crate) limits: Option<HealthLimits>,
     pub(crate) alarm: bool,
+    /// The figures in alarm.
+    pub(crate) held: Vec<Held>,
     /// The drifts past their limits and what the window could not measure.
     pub(crate) note: String,
 }
@@ -59,6 +61,8 @@ pub(crate) struct ValveBoard {
     health: Option<Mutex<Option<HealthWindow>>>,
     /// Diagnoses made (None without `[diagnosis]`).
     diagnoses: Option<Arc<AtomicU64>>,
+    /// Loop time of the first health window and of the first diagnosis, s.
+    first_t_s: (Option<f64>, Option<f64>),
     /// Where this run's lines of the diagnosis history start, bytes (the history keeps the
     /// lines of earlier runs before them, on their own loop time).
     history_from: AtomicU64,
@@ -83,11 +87,12 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 
 impl Board {
     /// A board for the valves `names` of a loop at `rate_hz`, with health windows and diagnosis
-    /// counts when those run; the daemon's files are in `dir`.
+    /// counts when those run (`runs`: the loop time of the first health window and of the
+    /// first diagnosis, each None when it does not run); the daemon's files are in `dir`.
     pub(crate) fn new(
         names: &[&str],
         rate_hz: f64,
-        (health, diagnosis): (bool, bool),
+        runs: (Option<f64>, Option<f64>),
         dir: &Path,
     ) -> Board {
         // Twice the points of TRACE_S: room for the points a change of status adds.
@@ -101,8 +106,9 @@ impl Board {
                         name: name.to_string(),
                         trace: Mutex::new(VecDeque::with_capacity(cap)),
                         cap,
-                        health: health.then(|| Mutex::new(None)),
-                        diagnoses: diagnosis.then(|| Arc::new(AtomicU64::new(0))),
+                        health: runs.0.map(|_| Mutex::new(None)),
+                        diagnoses: runs.1.map(|_| Arc::new(AtomicU64::new(0))),
+                        first_t_s: runs,
                         history_from: AtomicU64::new(0),
                         log_alarm: Mutex::new(None),
                     })
@@ -206,11 +212,18 @@ impl ValveBoard {
                 let f = w.figures?;
                 Some(f.judged(w.base.as_ref(), w.limits.as_ref()).to_vec())
             });
+            let (t_s, alarm) = (
+                w.as_ref().map(|w| w.t_s),
+                w.as_ref().is_some_and(|w| w.alarm),
+            );
+            let (note, held) = w.map(|w| (w.note, w.held)).unwrap_or_default();
             HealthJson {
-                t_s: w.as_ref().map(|w| w.t_s),
-                alarm: w.as_ref().is_some_and(|w| w.alarm),
-                note: w.map(|w| w.note).unwrap_or_default(),
+                t_s,
+                alarm,
+                note,
                 figures: judged.unwrap_or_default(),
+                alarms: held,
+                first_t_s: self.first_t_s.0,
             }
         });
         ValveJson {
@@ -220,6 +233,7 @@ impl ValveBoard {
             trace,
             health,
             diagnoses: (self.diagnoses.as_ref()).map(|d| d.load(Ordering::Relaxed)),
+            first_diagnosis_t_s: self.first_t_s.1,
             log_alarm: lock(&self.log_alarm).clone(),
         }
     }
@@ -294,6 +308,8 @@ struct ValveJson<'a> {
     health: Option<HealthJson>,
     /// Diagnoses made; null without `[diagnosis]`.
     diagnoses: Option<u64>,
+    /// Loop time of the first diagnosis, s (null without `[diagnosis]`).
+    first_diagnosis_t_s: Option<f64>,
     /// Why the valve's log cannot be written; null while it can.
     log_alarm: Option<String>,
 }
@@ -314,6 +330,10 @@ struct HealthJson {
     note: String,
     /// Each figure with its baseline and limit (empty when the window gave none).
     figures: Vec<Judged>,
+    /// The figures in alarm, each with its last measured value, limit and since when.
+    alarms: Vec<Held>,
+    /// Loop time of the first window, s.
+    first_t_s: Option<f64>,
 }
 
 #[cfg(test)]
@@ -345,7 +365,7 @@ mod tests {
         let board = Arc::new(Board::new(
             &["a", "b"],
             100.0,
-            (true, false),
+            (Some(600.0), None),
             Path::new("/x"),
         ));
         let v = parse(&board, None);
@@ -386,7 +406,12 @@ mod tests {
 
     #[test]
     fn a_trace_shows_the_last_minutes_only() {
-        let board = Arc::new(Board::new(&["a"], 100.0, (false, true), Path::new("/logs")));
+        let board = Arc::new(Board::new(
+            &["a"],
+            100.0,
+            (None, Some(1200.0)),
+            Path::new("/logs"),
+        ));
         let mut feed = board.feed(0, 100.0).unwrap();
         // Ten minutes, twice the page's stretch.
         for k in 0..60_000 {
@@ -423,7 +448,7 @@ mod tests {
 
     #[test]
     fn a_health_window_shows_its_figures_against_their_limits() {
-        let board = Board::new(&["a"], 100.0, (true, false), Path::new("/x"));
+        let board = Board::new(&["a"], 100.0, (Some(600.0), None), Path::new("/x"));
         let f = Figures {
             same_steps: 9,
             reversals: 6,
@@ -438,12 +463,61 @@ mod tests {
             ..f
         };
         let cfg = crate::daemon::config::HealthConfig::default();
+        let limits = Figures::limits(&base, &cfg);
+        // Past its limit at 600 s, then a window that cannot measure it: still in alarm, as
+        // last measured, since 600 s.
+        let mut held = [None; 5];
+        Held::update(&mut held, &f.judged(Some(&base), Some(&limits)), 600.0);
+        let unmeasured = Figures {
+            dead_time_s: None,
+            ..f
+        };
+        Held::update(
+            &mut held,
+            &unmeasured.judged(Some(&base), Some(&limits)),
+            630.0,
+        );
+        board.valve(0).unwrap().health(HealthWindow {
+            t_s: 630.0,
+            figures: Some(unmeasured),
+            base: Some(base),
+            limits: Some(limits),
+            alarm: true,
+            held: held.iter().flatten().copied().collect(),
+            note: String::new(),
+        });
+        let h = &parse(&board, None)["valves"][0]["health"];
+        let a = &h["alarms"][0];
+        assert_eq!(
+            (a["name"].as_str(), a["now"].as_f64()),
+            (Some("dead time"), Some(0.9))
+        );
+        assert_eq!(
+            (a["limit"].as_f64(), a["since_t_s"].as_f64()),
+            (Some(0.65), Some(600.0))
+        );
+        assert_eq!(
+            (a["measured_t_s"].as_f64(), h["first_t_s"].as_f64()),
+            (Some(600.0), Some(600.0))
+        );
+        assert_eq!(h["alarms"].as_array().map(Vec::len), Some(1));
+        assert!(held[0].is_some_and(|d| d.unmeasured().starts_with(
+            "dead time not measured in this window (too few steps): in alarm since 600.0 s, last 0.900 s"
+        )));
+        // Measured within its limit, it leaves the alarm.
+        let well = Figures {
+            dead_time_s: Some(0.5),
+            ..f
+        };
+        Held::update(&mut held, &well.judged(Some(&base), Some(&limits)), 660.0);
+        assert!(held.iter().all(Option::is_none), "{held:?}");
         board.valve(0).unwrap().health(HealthWindow {
             t_s: 660.0,
             figures: Some(f),
             base: Some(base),
-            limits: Some(Figures::limits(&base, &cfg)),
+            limits: Some(limits),
             alarm: true,
+            held: Vec::new(),
             note: f.drifts(&base, &cfg).join("; "),
         });
         let h = &parse(&board, None)["valves"][0]["health"];

@@ -1,10 +1,11 @@
 // The live page of valve-bridge's daemon (src/daemon/page/): every second it asks /api/live for
 // what is new (each valve's trace after the last point it has, its status, its last health
 // window, its count of diagnoses) and draws, per valve, O_P and V_P over the last minutes with
-// uPlot, the health figures against their limits and the alarms (health, diagnosis, a log the
-// disk refuses); when a valve has a new
-// diagnosis it reads /api/diagnoses/NAME and draws the effect sizes over time (a chart per unit,
-// each size with its 90 % interval) and the table of diagnoses, each linked to its report.
+// uPlot, the health figures against their limits and the alarms (each health alarm with its
+// figure, its limit, since when and the diagnosis that explains it; diagnosis alarms; a log the
+// disk refuses); when a valve has a new diagnosis it reads /api/diagnoses/NAME and draws the
+// effect sizes over time (a chart per unit, each size with its 90 % interval) and the table of
+// diagnoses in the vocabulary's words, each linked to its report.
 // Times are the browser's clock: loop time plus the wall-clock time of loop time 0.
 // window.vbCharts holds every chart (each valve's trace first, in the order of the valves);
 // window.vbLive counts the answers drawn (updates) and the polls that failed (failures).
@@ -33,16 +34,28 @@
     return tr;
   }
   function num(v, digits) { return v == null ? "–" : v.toFixed(digits); }
-  function clock(unix) { return new Date(unix * 1000).toLocaleTimeString(); }
+  function pad2(n) { return (n < 10 ? "0" : "") + n; }
+  // Wall-clock time of a Unix time, 24-hour HH:MM:SS (the same width in every locale).
+  function clock(unix) {
+    var d = new Date(unix * 1000);
+    return pad2(d.getHours()) + ":" + pad2(d.getMinutes()) + ":" + pad2(d.getSeconds());
+  }
+  // Loop time as the browser's clock with the loop time beside it.
+  function when(t) { return clock(live.started + t) + " (loop " + Math.round(t) + " s)"; }
+  // How long until loop time t, from the valve's last row.
+  function until(v, t) {
+    var s = v.lastT == null ? t : t - v.lastT;
+    return s <= 0 ? "any moment now" : "in about " + (s < 90 ? Math.ceil(s) + " s" : Math.ceil(s / 60) + " min");
+  }
+  // A time axis whose labels keep apart: HH:MM:SS every 90 px at least.
+  function timeAxis() {
+    return { space: 90, values: function (u, ticks) { return ticks.map(clock); } };
+  }
   function words(name) { return name.replace(/_/g, " "); }
   // A size's name without its unit: friction_band_pct is the friction band.
   function sizeName(name) { return words(name.replace(/_(pct_per_s|pct|s)$/, "")); }
-  // An effect with its size's name, once where they are the same: "backlash: friction band",
-  // "dead time".
-  function effectLabel(e) {
-    var size = sizeName(e.size.name);
-    return words(e.effect) === size ? size : words(e.effect) + ": " + size;
-  }
+  // An effect's plain name with its size's name: "lost motion (backlash): friction band".
+  function effectLabel(e) { return (e.name || words(e.effect)) + ": " + sizeName(e.size.name); }
   function width(div) { return Math.max(320, div.clientWidth); }
   function charts() {
     var all = live.valves.map(function (v) { return v.chart; });
@@ -60,7 +73,7 @@
       alarmBadge: el("span", "badge bad in-alarm", "in alarm"), alarms: el("ul", "alarms"),
       trace: el("div", "vb-chart trace"), health: el("div", "health"), diag: el("div", "diagnoses"),
       sizes: el("div", "sizes"), data: [[], [], []], lastT: null, count: undefined, history: [],
-      healthAlarm: null, sizeCharts: []
+      healthAlarms: [], healthT: null, firstDiagnosis: null, sizeCharts: []
     };
     v.alarmBadge.hidden = true;
     h2.appendChild(v.status);
@@ -76,7 +89,7 @@
       } } },
       series: [{}, { label: "O_P (%)", stroke: COLORS[0], width: 1.5 },
         { label: "V_P (%)", stroke: COLORS[1], width: 1.5 }],
-      axes: [{}, { label: "%" }]
+      axes: [timeAxis(), { label: "%" }]
     }, v.data, v.trace);
     live.valves.push(v);
     charts();
@@ -118,39 +131,81 @@
   function showHealth(v, h) {
     var box = v.health;
     box.textContent = "";
-    v.healthAlarm = h && h.alarm ? h.note : null;
+    v.healthAlarms = h && h.t_s != null ? h.alarms : [];
+    v.healthT = h ? h.t_s : null;
     if (h == null) {
       box.appendChild(el("p", "note", "No health check: the config has no [health]."));
       return;
     }
     if (h.t_s == null) {
-      box.appendChild(el("p", "note", "Health: waiting for the first window."));
+      box.appendChild(el("p", "note", "Health: the first window ends at loop time " +
+        Math.round(h.first_t_s) + " s (" + until(v, h.first_t_s) + ")."));
       return;
     }
+    var held = {};
+    h.alarms.forEach(function (a) { held[a.name] = a; });
     var t = el("table", "health-figures");
-    t.appendChild(el("caption", null, "Health over the window ending at loop time " +
-      h.t_s.toFixed(1) + " s" + (h.alarm ? ": in alarm" : "")));
+    t.appendChild(el("caption", null, "Health over the window ending at " + when(h.t_s) +
+      (h.alarms.length ? ": in alarm" : ": within its limits")));
     var head = row([], null);
     ["figure", "now", "baseline", "limit"].forEach(function (c) { head.appendChild(el("th", null, c)); });
     t.appendChild(head);
     h.figures.forEach(function (f) {
       var d = f.unit === "s" ? 3 : 2;
       var limit = f.limit == null ? "–" : (f.highest ? "at most " : "at least ") + num(f.limit, d);
-      t.appendChild(row([f.name + " (" + f.unit + ")", el("td", "num", num(f.now, d)),
-        el("td", "num", num(f.base, d)), el("td", "num", limit)], f.past ? "past" : null));
+      var now = f.now == null ? "not measured (too few steps)" : num(f.now, d);
+      var tr = row([f.name + " (" + f.unit + ")", el("td", "num", now),
+        el("td", "num", num(f.base, d)), el("td", "num", limit)], held[f.name] ? "past" : null);
+      tr.dataset.figure = f.name;
+      t.appendChild(tr);
     });
     box.appendChild(t);
     if (h.note) { box.appendChild(el("p", "note", h.note)); }
   }
 
+  // The diagnosis that explains an alarm raised at loop time `since`: the last one since then
+  // that names something worth maintenance, else the last one since then.
+  function explaining(v, since) {
+    var last = null, named = null;
+    v.history.forEach(function (r) {
+      if (r.error || r.t_s < since) { return; }
+      last = r;
+      if ((r.advice || []).length) { named = r; }
+    });
+    return named || last;
+  }
+
+  // A health alarm in words: its figure, its limit, since when, and what explains it.
+  function healthAlarm(v, a) {
+    var d = a.unit === "s" ? 3 : 2;
+    var text = "health alarm: " + a.name + " " + num(a.now, d) + " " + a.unit + ", " +
+      (a.highest ? "above" : "below") + " its limit of " + num(a.limit, d) + " " + a.unit +
+      " (baseline " + num(a.base, d) + " " + a.unit + "), since " + when(a.since_t_s);
+    if (v.healthT != null && a.measured_t_s < v.healthT) {
+      text += "; not measured since " + when(a.measured_t_s) + " (too few steps)";
+    }
+    if (v.count === null) { return text + "."; }
+    var r = explaining(v, a.since_t_s);
+    if (!r) { return text + "; its diagnosis is on its way."; }
+    var found = (r.advice || []).map(function (x) { return x.name + " " + x.does; });
+    return text + "; the diagnosis at " + when(r.t_s) + (found.length ?
+      " explains it: " + found.join("; ") + "." : " names nothing worth maintenance.");
+  }
+
   function showAlarms(v) {
     var items = [];
-    if (v.logAlarm != null) { items.push("log alarm: " + v.logAlarm); }
-    if (v.healthAlarm != null) { items.push("health alarm: " + v.healthAlarm); }
+    if (v.logAlarm != null) { items.push(el("li", "log", "log alarm: " + v.logAlarm)); }
+    (v.healthAlarms || []).forEach(function (a) {
+      var li = el("li", "health", healthAlarm(v, a));
+      li.dataset.figure = a.name;
+      items.push(li);
+    });
     var last = v.history.length ? v.history[v.history.length - 1] : null;
-    (last && last.alarms || []).forEach(function (a) { items.push("diagnosis alarm: " + a); });
+    (last && last.alarms || []).forEach(function (a) {
+      items.push(el("li", "diagnosis", "diagnosis alarm: " + a));
+    });
     v.alarms.textContent = "";
-    items.forEach(function (a) { v.alarms.appendChild(el("li", null, a)); });
+    items.forEach(function (li) { v.alarms.appendChild(li); });
     v.alarmBadge.hidden = items.length === 0;
   }
 
@@ -209,10 +264,27 @@
         title: "Effect sizes (" + unit + "), 90 % intervals", width: Math.min(width(v.sizes), 620),
         height: 220, bands: bands, series: series,
         scales: { x: xScale(data[0]) },
-        axes: [{}, { label: unit }]
+        axes: [timeAxis(), { label: unit }]
       }, data, div));
     });
     charts();
+  }
+
+  // What a diagnosis found, in the vocabulary's words: a line per finding, coloured by severity.
+  function found(r) {
+    var td = el("td", "verdict");
+    if (r.error) { td.textContent = "failed: " + r.error; return td; }
+    td.appendChild(el("div", "note", r.compared ? "What differs from the reference model:"
+      : r.reference ? "The reference: the valve as first diagnosed over a whole window (later diagnoses say what changed since):"
+        : "Diagnosed afresh, before the reference (the first whole window):"));
+    if (!(r.advice || []).length) { td.appendChild(el("div", null, r.verdict)); }
+    (r.advice || []).forEach(function (a) {
+      var line = el("div", "sev-" + a.severity);
+      line.appendChild(el("b", null, a.severity + " · " + a.name));
+      line.appendChild(document.createTextNode(" " + a.does + ". To do: " + a.action + "."));
+      td.appendChild(line);
+    });
+    return td;
   }
 
   function drawDiagnoses(v) {
@@ -220,21 +292,21 @@
     var box = v.diag;
     box.textContent = "";
     if (!v.history.length) {
-      box.appendChild(el("p", "note", "No diagnosis yet."));
+      box.appendChild(el("p", "note", "No diagnosis yet: the first is of the window ending at loop time " +
+        Math.round(v.firstDiagnosis) + " s (" + until(v, v.firstDiagnosis) + "), then a while to diagnose it."));
       return;
     }
     var t = el("table", "diagnosis-history");
     var head = row([], null);
-    ["time", "trigger", "verdict", "effects (90 % interval)", "alarms", ""]
+    ["time", "trigger", "what it found", "sizes (90 % interval)", "alarms", ""]
       .forEach(function (c) { head.appendChild(el("th", null, c)); });
     t.appendChild(head);
     v.history.slice(-50).reverse().forEach(function (r) {
-      var when = clock(live.started + r.t_s) + " (loop " + Math.round(r.t_s) + " s)";
       var effects = el("td");
       (r.effects || []).forEach(function (e) {
-        var s = e.size, line = el(e.finding ? "b" : "span", null, words(e.effect) + ": " +
+        var s = e.size, line = el(e.finding ? "b" : "span", null, effectLabel(e) + " " +
           s.value.toPrecision(3) + " " + s.unit + " (" + s.low.toPrecision(3) + "–" +
-          s.high.toPrecision(3) + ")" + (e.finding ? "" : ", trace"));
+          s.high.toPrecision(3) + ")" + (e.finding ? "" : ", too small to act on"));
         effects.appendChild(line);
         effects.appendChild(el("br"));
       });
@@ -244,8 +316,9 @@
         a.href = "/reports/" + r.report;
         link.appendChild(a);
       }
-      t.appendChild(row([when, r.trigger, el("td", "verdict", r.error ? "failed: " + r.error : r.verdict),
-        effects, (r.alarms || []).join("; "), link], null));
+      var trigger = r.trigger === "every_s" ? "scheduled" : r.trigger;
+      t.appendChild(row([when(r.t_s), trigger, found(r), effects, (r.alarms || []).join("; "),
+        link], null));
     });
     box.appendChild(t);
   }
@@ -264,6 +337,7 @@
       showStatus(v, vj);
       v.logAlarm = vj.log_alarm;
       showHealth(v, vj.health);
+      v.firstDiagnosis = vj.first_diagnosis_t_s;
       if (vj.diagnoses !== v.count) {
         v.count = vj.diagnoses;
         if (vj.diagnoses == null) {
@@ -272,6 +346,8 @@
         } else {
           loadDiagnoses(v);
         }
+      } else if (vj.diagnoses === 0) {
+        drawDiagnoses(v);
       }
       showAlarms(v);
     });

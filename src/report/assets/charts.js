@@ -2,7 +2,9 @@
 // <div class="vb-chart" data-set=ID> reads the series of <script id="vb-data-ID"> (over its
 // data-x0..data-x1 stretch of time when given). Drag across a chart to zoom into that time,
 // turn the wheel with Shift held to pan along it, double-click to go back; the legend shows the
-// values under the cursor. The drawn charts are window.vbCharts, in page order.
+// values under the cursor. A chart with data-shown draws only those series at first (a click on
+// a legend entry shows another); one with data-zoom0..data-zoom1 opens zoomed on that time (a
+// double-click shows all of it). The drawn charts are window.vbCharts, in page order.
 (function () {
   "use strict";
   var sets = {};
@@ -34,8 +36,10 @@
     }
     var data = [d.x.slice(a, b)].concat(d.y.map(function (c) { return c.slice(a, b); }));
     var series = [{ label: el.dataset.x, value: function (u, v) { return v == null ? "–" : v.toFixed(2); } }];
+    var shown = el.dataset.shown === undefined ? null : el.dataset.shown.split(",").map(Number);
     d.names.forEach(function (name, i) {
-      series.push({ label: name, stroke: d.colors[i], width: 1, value: function (u, v) { return number(v); } });
+      series.push({ label: name, stroke: d.colors[i], width: 1, show: !shown || shown.indexOf(i) >= 0,
+        value: function (u, v) { return number(v); } });
     });
     var chart = new uPlot({
       title: el.dataset.title,
@@ -46,6 +50,9 @@
       axes: [{ label: el.dataset.x }, { label: el.dataset.y }],
       series: series
     }, data, el);
+    if (el.dataset.zoom0 !== undefined) {
+      chart.setScale("x", { min: Number(el.dataset.zoom0), max: Number(el.dataset.zoom1) });
+    }
     // Shift+wheel pans by a tenth of the shown time, within the data (a plain wheel still
     // scrolls the page: uPlot has no pan of its own).
     chart.over.addEventListener("wheel", function (e) {

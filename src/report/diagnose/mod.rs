@@ -10,17 +10,18 @@ use std::fmt::Write;
 
 use serde_json::Value;
 
-use super::chart::Dataset;
+mod page;
+
+use super::esc;
 use super::identify::fmt_param;
-use super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
-pub use super::verdict::verdict;
-use super::verdict::{figures, measure, num, trace};
-use super::{esc, page, row};
+pub use super::verdict::{advice, model_verdict, verdict};
+use super::verdict::{figures, measure, slow_strokes, trace};
 use crate::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
 use crate::diagnose::locate::{Context, Window};
 use crate::diagnose::{Diagnosis, Effect, Finding, Note};
 use crate::metrics;
 use crate::recording::RecordingView;
+pub use page::html;
 
 /// What experiment separates `effect` from its look-alike `other` (or from its look-alikes):
 /// where the response test does, its command and plan.
@@ -334,24 +335,12 @@ pub fn note(n: &Note) -> String {
             closing_pct_per_s,
             largest_step_pct,
             worth_pct_per_s,
-        } => {
-            let each = |what: &str, v: Option<f64>| v.map(|v| format!("{} %/s {what}", num(v)));
-            let speeds: Vec<String> = [
-                each("opening", opening_pct_per_s),
-                each("closing", closing_pct_per_s),
-            ]
-            .into_iter()
-            .flatten()
-            .collect();
-            format!(
-                "the valve strokes slowly: at most {} on steps of up to {} %, where a valve in good order \
-                 strokes at {} %/s or faster; check the supply pressure, the pilot or booster and the air \
-                 path (tubing, filters, exhaust), and the actuator size",
-                speeds.join(" and "),
-                num(largest_step_pct),
-                num(worth_pct_per_s)
-            )
-        }
+        } => slow_strokes(
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        ),
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
             experiment(Effect::Backlash, None)
@@ -404,6 +393,8 @@ pub fn json(d: &Diagnosis) -> Value {
         }
     }
     v["verdict"] = Value::String(verdict(d));
+    v["model_verdict"] = Value::String(model_verdict(d));
+    v["advice"] = serde_json::to_value(advice(d)).unwrap_or(Value::Null);
     v
 }
 
@@ -479,6 +470,7 @@ pub fn text(d: &Diagnosis) -> String {
         let _ = writeln!(o, "{}", metrics::table1_header());
         let _ = writeln!(o, "{}", metrics::table1_row("before (baseline)", &h.before));
         let _ = writeln!(o, "{}", metrics::table1_row("after (final)", &h.after));
+        o.push_str(&metrics::table1_notes([&h.before, &h.after]));
     }
     let _ = writeln!(
         o,
@@ -491,177 +483,21 @@ pub fn text(d: &Diagnosis) -> String {
     for n in &d.notes {
         let _ = writeln!(o, "note: {}", note(n));
     }
-    let _ = writeln!(o, "\nverdict: {}", verdict(d));
-    o
-}
-
-/// The diagnosis report of a recording as one self-contained HTML page.
-pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
-    let mut h = String::new();
-    let _ = write!(
-        h,
-        "<p class=\"verdict\">{}</p><p>Baseline: <b>{}</b>. Noise floor of V_P: {:.3} % (standard deviation). Final model: <b>{}</b>: {}.</p>",
-        esc(&verdict(d)),
-        esc(&d.baseline.model),
-        d.noise_floor_pct,
-        esc(&d.final_model.model),
-        esc(&figures(&d.figures))
-    );
-    for n in &d.notes {
-        let _ = write!(h, "<p><i>Note: {}</i></p>", esc(&note(n)));
-    }
-    findings_html(&mut h, d);
-    curves_html(&mut h, rec, d);
-    steps_html(&mut h, d);
-    h.push_str("<h2>All windows of the baseline</h2><table><tr><th>start (s)</th><th>end (s)</th><th>excess (%²)</th><th>context</th></tr>");
-    for w in &d.mismatch_windows {
-        let _ = write!(
-            h,
-            "<tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td></tr>",
-            w.start_s,
-            w.end_s,
-            w.excess_sse,
-            esc(&context(w))
-        );
-    }
-    h.push_str("</table>");
-    page(&format!("Diagnosis: {title}"), &h)
-}
-
-/// The findings and the held-out Table 1 rows.
-fn findings_html(h: &mut String, d: &Diagnosis) {
-    h.push_str("<h2>Findings</h2>");
-    if d.findings.is_empty() {
-        h.push_str("<p>None.</p>");
-    }
-    for f in &d.findings {
-        let alternatives = if f.alternatives.is_empty() {
-            String::new()
-        } else {
-            let names: Vec<&str> = f.alternatives.iter().map(|e| e.name()).collect();
-            format!(" <small>(or, as well: {})</small>", names.join(", "))
-        };
-        let _ = write!(
-            h,
-            "<h3>{}{alternatives}</h3><p><b>{}</b> (90 % interval)</p><p>{}</p>{}<p>Improved: {}, ΔBIC {:.0}</p>",
-            f.effect.name(),
-            esc(&f.size.words()),
-            esc(&evidence(f)),
-            params_html(f),
-            esc(&measure(&f.measure)),
-            f.delta_bic
-        );
-    }
-    if !d.traces.is_empty() {
-        h.push_str("<h2>Traces (not worth maintenance)</h2><ul>");
-        for t in &d.traces {
-            let _ = write!(h, "<li>{}</li>", esc(&trace(t)));
+    let _ = writeln!(o, "\nmodel: {}", model_verdict(d));
+    let list = advice(d);
+    if list.is_empty() {
+        let _ = writeln!(o, "\nverdict: {}", verdict(d));
+    } else {
+        let _ = writeln!(o, "\nverdict, highest priority first:");
+        for a in &list {
+            let _ = writeln!(o, "  {}", a.sentence());
         }
-        h.push_str("</ul>");
+        let traces = super::verdict::plain_traces(d);
+        if !traces.is_empty() {
+            let _ = writeln!(o, "  Too small to act on: {}.", traces.join("; "));
+        }
     }
-    if let Some(c) = &d.heldout {
-        let _ = write!(
-            h,
-            "<h2>Table 1 on the held-out blocks</h2><table><tr><th>model</th><th>MAE</th><th>MAE filtered</th>\
-             <th>R²</th><th>SSE (%²)</th><th>Rel. SSE</th><th>samples</th></tr>{}{}</table>",
-            row("before (baseline)", &c.before),
-            row("after (final)", &c.after)
-        );
-    }
-}
-
-/// The whole recording, the residual, and the worst windows zoomed in.
-fn curves_html(h: &mut String, rec: &RecordingView, d: &Diagnosis) {
-    let (t, n) = (rec.t, rec.len());
-    let recording = [
-        Series {
-            name: "O_P",
-            y: rec.op,
-            color: EXTRA,
-        },
-        Series {
-            name: "V_P measured",
-            y: rec.vp,
-            color: MEASURED,
-        },
-        Series {
-            name: "baseline",
-            y: &d.sim_before,
-            color: BEFORE,
-        },
-        Series {
-            name: "final",
-            y: &d.sim_after,
-            color: AFTER,
-        },
-    ];
-    let data = Dataset::new("recording", t, &recording, 0..n);
-    h.push_str("<h2>Whole recording</h2>");
-    h.push_str(&data.html_and_chart("measured and simulated V_P", "position (%)", "time (s)"));
-    let residual =
-        |sim: &[f64]| -> Vec<f64> { rec.vp.iter().zip(sim).map(|(m, s)| m - s).collect() };
-    let (before, after) = (residual(&d.sim_before), residual(&d.sim_after));
-    let residuals = [
-        Series {
-            name: "baseline",
-            y: &before,
-            color: BEFORE,
-        },
-        Series {
-            name: "final",
-            y: &after,
-            color: AFTER,
-        },
-    ];
-    let res = Dataset::new("residual", t, &residuals, 0..n);
-    h.push_str(&res.html_and_chart(
-        "residual (measured - simulated)",
-        "residual (%)",
-        "time (s)",
-    ));
-    let mut worst = d.mismatch_windows.clone();
-    worst.sort_by(|a, b| b.excess_sse.total_cmp(&a.excess_sse));
-    let _ = write!(
-        h,
-        "<h2>Mismatch windows: {} before, {} after</h2><p>The worst, zoomed in (±3 s):</p>",
-        d.mismatch_windows.len(),
-        d.windows_after.len()
-    );
-    let dt = rec.dt;
-    for w in worst.iter().take(4) {
-        let a = (((w.start_s - t[0]) / dt - 3.0 / dt).max(0.0) as usize).min(n.saturating_sub(1));
-        let b = ((((w.end_s - t[0]) / dt) + 3.0 / dt) as usize).clamp(a + 1, n);
-        h.push_str(&data.chart(
-            &format!("{:.1}-{:.1} s: {}", w.start_s, w.end_s, context(w)),
-            "position (%)",
-            "time (s)",
-            a..b,
-        ));
-    }
-}
-
-/// The step delays against opening.
-fn steps_html(h: &mut String, d: &Diagnosis) {
-    let steps = |rev: bool| {
-        d.steps
-            .iter()
-            .filter(|s| s.reversal == rev)
-            .map(|s| (s.from_pct, s.delay_s))
-            .collect::<Vec<_>>()
-    };
-    let scatter = plot::scatter(
-        "step delay against opening (evidence for backlash and state-dependent delay)",
-        "V_P at the step (%)",
-        "delay (s)",
-        &[
-            ("same direction", AFTER, steps(false)),
-            ("reversal", BEFORE, steps(true)),
-        ],
-    );
-    if !scatter.is_empty() {
-        h.push_str("<h2>Step delays</h2>");
-        h.push_str(&scatter);
-    }
+    o
 }
 
 #[cfg(test)]
