@@ -73,6 +73,9 @@ pub(crate) const SECONDS_TARGET: f64 = 15.0;
 pub(crate) const RELIABLE: f64 = 0.80;
 /// Share of findings whose 90 % interval must hold the physical truth, per effect.
 pub(crate) const COVERAGE_TARGET: f64 = 0.80;
+/// Relative rounding an interval's ends may differ from the truth by and still hold it: a
+/// lattice read off the recording equals the drawn one to the last digits.
+const ROUNDING: f64 = 1e-9;
 
 fn short(e: Option<Effect>) -> &'static str {
     match e {
@@ -362,8 +365,9 @@ pub(crate) fn coverage(all: &[Outcome], effect: Effect) -> Option<Coverage> {
         })
         .collect();
     let same: Vec<&(&Size, &Truth)> = found.iter().filter(|(s, t)| s.name == t.name).collect();
+    let slack = |x: f64| ROUNDING * x.abs();
     let holds = (same.iter())
-        .filter(|(s, t)| s.low <= t.value && t.value <= s.high)
+        .filter(|(s, t)| s.low - slack(s.low) <= t.value && t.value <= s.high + slack(s.high))
         .count();
     Some(Coverage {
         name,

@@ -54,6 +54,12 @@ const MIN_SLOWDOWN: f64 = 0.6;
 /// answering low in its travel than high in it for a slowdown to be named (see
 /// [`Judge::slowdown_seen`]): the upper third of the openings visited 15 % slower.
 const SLOWDOWN_SEEN: f64 = 1.15;
+/// Fewest slips of V_P the current model does not make ([`facts::slips`], over the whole
+/// recording) for stiction to be named by the free-run error: stick-slip sticks and then
+/// jumps, while a valve in a deadband (a positioner's tolerance band, a dead zone on its
+/// input) rests anywhere within the band around its target and never jumps. A stickband
+/// fitted to a recording without jumps is a dead zone, whatever jump it was given.
+const SLIPS_SEEN: usize = 10;
 
 /// A refitted candidate and how it did on the held-out blocks.
 #[derive(Debug, Clone)]
@@ -106,6 +112,9 @@ pub(crate) struct Judge<'a> {
     pub cur: Errors,
     /// Correlation length of the current residual, samples.
     pub corr_len: f64,
+    /// Slips of V_P the current model does not make ([`facts::slips`] against
+    /// [`Judge::current_sim`]).
+    pub missed_slips: usize,
 }
 
 impl Judge<'_> {
@@ -145,7 +154,8 @@ impl Judge<'_> {
         let plausible = !pinned(own, &spec)
             && plausible(effect, &spec, self.facts)
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
-            && (effect != Effect::Saturation || self.stop_seen(&spec, ya));
+            && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
+            && (effect != Effect::Stiction || self.missed_slips >= SLIPS_SEEN);
         let material = plausible
             && size.worth >= tuning.materiality
             && heldout_share >= tuning.min_heldout_share;

@@ -41,6 +41,7 @@ mod refit;
 mod rounds;
 mod scorer;
 pub mod size;
+mod slow;
 mod speeds;
 mod stickslip;
 pub mod tuning;
@@ -174,7 +175,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
         current,
         mut findings,
         mut traces,
-        notes,
+        mut notes,
         by_slips,
         ..
     } = search;
@@ -197,14 +198,26 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     for t in traces.iter_mut() {
         t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
     }
-    let (findings, shrunk) = worth_maintenance(findings, &final_spec, data.tuning.materiality);
+    let (mut findings, shrunk) = worth_maintenance(findings, &final_spec, data.tuning.materiality);
     traces.extend(shrunk);
+    for s in
+        (findings.iter_mut().map(|f| &mut f.size)).chain(traces.iter_mut().map(|t| &mut t.size))
+    {
+        *s = size::with_model_spread(*s);
+    }
     let final_spec = if findings.is_empty() {
         baseline.spec.clone()
     } else {
         final_spec
     };
     let figures = figures(&final_spec, data.facts, rec.op);
+    // A valve found slow already has its speed limit among the findings.
+    let speed_found =
+        (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
+    let worth_speed = data.tuning.worth.stroke_speed_pct_per_s / data.tuning.materiality;
+    if let Some(slow) = slow::slow_strokes(data.facts, worth_speed).filter(|_| !speed_found) {
+        notes.push(slow);
+    }
     let sim_after = scorer.simulate(&final_spec);
     let residual_after: Vec<f64> = rec.vp.iter().zip(&sim_after).map(|(m, s)| m - s).collect();
     let windows_after = locate::windows(rec, &residual_after, data.sigma);
@@ -377,5 +390,44 @@ mod tests {
         let traced: Vec<(Effect, f64)> = traces.iter().map(|t| (t.effect, t.size.worth)).collect();
         assert_eq!(traced, [(Effect::Stiction, 0.6), (Effect::Deadband, 1.5)]);
         assert!((traces[0].heldout_share - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_slow_valve_the_baseline_fits_is_still_called_slow() {
+        // A sluggish first-order valve (1.2 s time constant, no speed limit) on 30 % steps:
+        // the fitted FOPDT baseline is the valve, no effect is missing, and it opens and
+        // closes at 25 %/s at most.
+        let dt = 0.01;
+        let op = steps(6000, 1000, &[30.0, 60.0]);
+        let e = crate::testkit::noise(op.len(), 0.05);
+        let mut x = op[0];
+        let vp: Vec<f64> = (op.iter().zip(e))
+            .map(|(&u, e)| {
+                x += (u - x) / 1.2 * dt;
+                x + e
+            })
+            .collect();
+        let rec = Columns::new(op, vp, dt);
+        let d = diagnose(&rec.view(), None, &|_, _| {}).expect("diagnosis runs");
+        assert!(d.findings.is_empty(), "{:?}", d.findings);
+        let slow = d.notes.iter().find_map(|n| match *n {
+            Note::SlowStrokes {
+                opening_pct_per_s: Some(open),
+                closing_pct_per_s: Some(close),
+                ..
+            } => Some((open, close)),
+            _ => None,
+        });
+        let (open, close) = slow.expect("the valve is called slow");
+        assert!((20.0..=26.0).contains(&open), "{open}");
+        assert!((20.0..=26.0).contains(&close), "{close}");
+        // The planner hears it first, though nothing was missing from the model.
+        let words = crate::report::verdict::verdict(&d);
+        assert!(
+            words.starts_with("The valve strokes slowly: at most ")
+                && words.contains(" %/s opening and ")
+                && words.contains("Nothing else worth maintenance: "),
+            "{words}"
+        );
     }
 }

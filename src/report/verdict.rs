@@ -6,7 +6,7 @@
 //!
 //! Not here: the evidence of each finding or the notes (`report::diagnose`).
 
-use crate::diagnose::{Diagnosis, Figures, Measure, Outcome, Trace};
+use crate::diagnose::{Diagnosis, Figures, Measure, Note, Outcome, Trace};
 pub use crate::human::{sig3 as num, size_label as label, size_text};
 use crate::vocabulary::{self, capitalised, Advice};
 
@@ -89,11 +89,30 @@ pub fn verdict(d: &Diagnosis) -> String {
         format!(" Too small to act on: {}.", traces.join("; "))
     };
     let list = advice(d);
+    // A slow valve is said whether or not the model needed a speed limit.
+    let slow = d.notes.iter().find_map(|n| match *n {
+        Note::SlowStrokes {
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        } => Some(capitalised(&slow_strokes(
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        ))),
+        _ => None,
+    });
     if !list.is_empty() {
-        let sentences: Vec<String> = list.iter().map(Advice::sentence).collect();
+        let sentences: Vec<String> = list.iter().map(Advice::sentence).chain(slow).collect();
         return sentences.join(" ") + &traces;
     }
-    match &d.outcome {
+    let (slow, nothing) = match slow {
+        Some(s) => (s + ". ", "Nothing else worth maintenance"),
+        None => (String::new(), "Nothing worth maintenance"),
+    };
+    slow + &match &d.outcome {
         Outcome::NotSignificant { windows } if *windows > 0 => {
             let (stretches, differ, them) = if *windows == 1 {
                 ("1 stretch".to_string(), "differs", "it")
@@ -101,16 +120,42 @@ pub fn verdict(d: &Diagnosis) -> String {
                 (format!("{windows} stretches"), "differ", "them")
             };
             format!(
-                "Nothing worth maintenance: {stretches} of the recording {differ} from the model by \
+                "{nothing}: {stretches} of the recording {differ} from the model by \
                  more than the noise, but nothing the vocabulary names explains {them} beyond \
                  chance and by a size worth maintenance.{traces}"
             )
         }
         _ => format!(
-            "Nothing worth maintenance: the valve does what its model does, within the noise of \
+            "{nothing}: the valve does what its model does, within the noise of \
              its reading.{traces}"
         ),
     }
+}
+
+/// That the valve strokes slowly ([`Note::SlowStrokes`]), with the speeds measured each way
+/// it was asked to go fast, and what to check.
+pub fn slow_strokes(
+    opening_pct_per_s: Option<f64>,
+    closing_pct_per_s: Option<f64>,
+    largest_step_pct: f64,
+    worth_pct_per_s: f64,
+) -> String {
+    let each = |what: &str, v: Option<f64>| v.map(|v| format!("{} %/s {what}", num(v)));
+    let speeds: Vec<String> = [
+        each("opening", opening_pct_per_s),
+        each("closing", closing_pct_per_s),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    format!(
+        "the valve strokes slowly: at most {} on steps of up to {} %, where a valve in good order \
+         strokes at {} %/s or faster; check the supply pressure, the pilot or booster and the air \
+         path (tubing, filters, exhaust), and the actuator size",
+        speeds.join(" and "),
+        num(largest_step_pct),
+        num(worth_pct_per_s)
+    )
 }
 
 /// The modeller's verdict: what was missing, how large, and what adding it improved (never a

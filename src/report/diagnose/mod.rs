@@ -15,7 +15,7 @@ mod page;
 use super::esc;
 use super::identify::fmt_param;
 pub use super::verdict::{advice, model_verdict, verdict};
-use super::verdict::{figures, measure, trace};
+use super::verdict::{figures, measure, slow_strokes, trace};
 use crate::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
 use crate::diagnose::locate::{Context, Window};
 use crate::diagnose::{Diagnosis, Effect, Finding, Note};
@@ -329,6 +329,17 @@ pub fn note(n: &Note) -> String {
              ({heldout_sse_before:.1} -> {heldout_sse_after:.1} %²), and one judged without it could stand in for it",
             effect.name(),
             size.words()
+        ),
+        Note::SlowStrokes {
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
+        } => slow_strokes(
+            opening_pct_per_s,
+            closing_pct_per_s,
+            largest_step_pct,
+            worth_pct_per_s,
         ),
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
