@@ -35,10 +35,11 @@
 //!
 //! Guard rails: the set-point stays within the source's `op_min_pct..op_max_pct`; what
 //! compensation adds to the controller's O_P changes by at most `max_rate_pct_per_s`; and the
-//! [`guard`] compares, every `guard_window_s`, what the valve does with compensation
-//! (reversals, travel, overshoot past the target, where it comes to rest) with what the
-//! identified model, driven by the same set-points, says it does: beyond `guard_margin` and
-//! the guard's slack, compensation switches itself off for good (the caller warns).
+//! [`guard`] compares, hold by hold, how far the valve goes past its target and how far from
+//! it it rests with what the identified model, driven by the same set-points and read as the
+//! valve is, says it does: when the holds beyond the model's by more than `guard_margin` and
+//! the noise are more than chance makes, over the last windows of `guard_window_s`,
+//! compensation switches itself off for good (the caller warns).
 //!
 //! Stepping allocates nothing. Not here: the daemon's log and metrics, the config's file
 //! checks (`crate::daemon::config`), the bench.
@@ -79,10 +80,11 @@ pub struct CompensationConfig {
     /// The smallest move of the controller's O_P that is compensated, % (the controller's own
     /// noise raises it).
     pub min_move_pct: f64,
-    /// The guard's window, s.
+    /// The guard's window, s: a verdict weighs the judged holds of the last
+    /// [`guard::WINDOWS_POOLED`] windows.
     pub guard_window_s: f64,
-    /// How much more (relative) the valve may reverse, travel, overshoot and miss its targets
-    /// with compensation than its model says it does with it.
+    /// How much more (relative) the valve may overshoot and miss its target in a hold with
+    /// compensation than its model says it does with it, on top of the allowance for noise.
     pub guard_margin: f64,
 }
 
@@ -97,7 +99,7 @@ impl Default for CompensationConfig {
             kick_share: 0.8,
             max_rate_pct_per_s: 500.0,
             min_move_pct: 0.1,
-            guard_window_s: 60.0,
+            guard_window_s: 20.0,
             guard_margin: 0.1,
         }
     }
