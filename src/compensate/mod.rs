@@ -11,18 +11,19 @@
 //!   ([`kick`]). A kick can only make the positioner push harder up to its speed limit: a
 //!   reversal that already runs at full flow cannot be shortened by any set-point.
 //! - **deadband**: the inverse of the model's deadband (the valve stops short by half of it):
-//!   the set-point goes half the band beyond where the valve should stop, in the direction of
-//!   the move.
+//!   the set-point goes half the band beyond the target, on the side the valve comes from
+//!   ([`step`]).
 //! - **calibration**: the inverse of the fitted gain and offset (`V_P = a O_P + b` at rest).
 //!
 //! The kick acts only while the model says the stem cannot move yet (the pressure inside the
-//! band). The deadband step begins with every move the controller asks for, on the side the
-//! valve comes from (closing moves get it below the target, opening ones above), and lasts
-//! until the controller's next move: a valve held at the edge of its deadband stays at the
-//! target. Both begin only on moves of the controller larger than its own noise (three times
-//! its mean sample-to-sample change, at least `min_move_pct`, two samples in a row): a noisy
-//! controller output is not a sequence of reversals worth kicking (that would make the valve
-//! follow the noise).
+//! band). The deadband step's side is the direction of the controller's move (closing moves get
+//! it below the target, opening ones above), never the model's state, which a kick pulls past
+//! the target; it is sent with a move that starts within the band, and after one from outside
+//! it waits until the V_P read has come to rest in the band, so a stem that arrives fast is
+//! not carried past the target; it lasts until the controller's next move. Both begin only on
+//! moves of the controller larger than its own noise (three times its mean sample-to-sample
+//! change, at least `min_move_pct`, two samples in a row): a noisy controller output is not a
+//! sequence of reversals worth kicking (that would make the valve follow the noise).
 //!
 //! The model the compensator steps is the identified one in its friction-band form (the form
 //! `diagnose` finds for a stem with Coulomb friction, `[effects] friction_band_pct`): the band
@@ -31,7 +32,9 @@
 //! all; it is read as the band a 1 % reversal crosses in that time, `B = P_k · 1 % · T(V)`,
 //! fitted as a band growing with opening (`open_slowdown`), so the kick follows the crossing
 //! time at the current opening. On a valve that really crosses in a fixed time, kicks change
-//! nothing. Stick-slip (`stickband_pct`, `breakaway_pct`) is not compensated.
+//! nothing. A stroke speed the model's log did not determine (`stroke_speed_undetermined`) is
+//! not used: the compensator's models have no speed limit but the positioner's gain. Stick-slip
+//! (`stickband_pct`, `breakaway_pct`) is not compensated.
 //!
 //! Guard rails: the set-point stays within the source's `op_min_pct..op_max_pct`; what
 //! compensation adds to the controller's O_P changes by at most `max_rate_pct_per_s`; and the
@@ -46,6 +49,7 @@
 
 pub mod guard;
 mod kick;
+mod step;
 pub mod trial;
 
 use std::path::PathBuf;
@@ -57,6 +61,7 @@ use crate::model::{Effects, ModelError, ModelKind, ModelSpec, Valve};
 use guard::Guard;
 pub use guard::Window;
 use kick::Plan;
+use step::DeadbandStep;
 
 /// `[valve.compensation]`: the model and the parts in use.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -189,6 +194,9 @@ pub struct Identified {
     pub calibration_gain: f64,
     /// See `calibration_gain`, %.
     pub calibration_offset_pct: f64,
+    /// The model's log determined its stroke speed; if not, the compensator's models have no
+    /// speed limit but the positioner's gain.
+    pub stroke_speed_known: bool,
 }
 
 /// The compensator of one valve: its settings, its models and their state.
@@ -222,12 +230,8 @@ pub struct Compensator {
     /// Samples in a row the controller has asked for a move beyond the gate, and which way.
     asked_run: u32,
     asked_dir: f64,
-    /// The side of the deadband step, +1 (opening) or -1 (closing): the side the valve comes
-    /// from, kept once the model has come within the gate of the wish.
-    deadband_dir: f64,
-    /// The controller's O_P when it last asked for a move: the deadband step lasts while it
-    /// stays within the gate of it (None: no step).
-    step_op: Option<f64>,
+    /// The deadband step: its side, when it begins and ends.
+    step: DeadbandStep,
     /// The gate of the last sample, %.
     gate: f64,
     /// A kick or a deadband step shaped the last set-point (not the calibration alone).
@@ -269,6 +273,7 @@ impl Compensator {
         if model.model == ModelKind::Physical {
             return Err(CompensateError::Physical);
         }
+        let model = &without_undetermined_speed(model);
         let (inverse_spec, identified) = inverse_model(model, dt, (op_min, op_max));
         Ok(Compensator {
             parts: Parts {
@@ -300,8 +305,7 @@ impl Compensator {
             seen: 0,
             asked_run: 0,
             asked_dir: 0.0,
-            deadband_dir: 1.0,
-            step_op: None,
+            step: DeadbandStep::new(identified.deadband_pct),
             gate: 0.0,
             shaping: false,
         })
@@ -337,11 +341,16 @@ impl Compensator {
                 id.calibration_gain, id.calibration_offset_pct
             ));
         }
-        if parts.is_empty() {
+        let what = if parts.is_empty() {
             "nothing (the model has no band, deadband or calibration the enabled parts answer)"
                 .into()
         } else {
             parts.join(", ")
+        };
+        if id.stroke_speed_known {
+            what
+        } else {
+            format!("{what}; the model's stroke speed is not used (its log did not determine it)")
         }
     }
 
@@ -371,6 +380,7 @@ impl Compensator {
     /// The V_P read for the last set-point (None when none was read); returns the guard's
     /// verdict when a window ends. A window judged worse switches compensation off for good.
     pub fn observe(&mut self, vp_pct: Option<f64>) -> Option<Window> {
+        self.step.observe(vp_pct, self.guard.noise_pct());
         let window = self.guard.add(guard::Sample {
             op: self.last_op,
             target: self.base(self.last_op),
@@ -404,7 +414,7 @@ impl Compensator {
         self.with.reset(op, self.calibrated(op));
         self.without.reset(op, self.calibrated(op));
         (self.last_op, self.last_sent, self.excursion) = (op, op, 0.0);
-        self.step_op = None;
+        self.step.reset(op);
     }
 
     /// Where the valve settles for the O_P `op` by the model's calibration, %.
@@ -434,28 +444,8 @@ impl Compensator {
         } else {
             base
         };
-        // The deadband step begins with a move and lasts until the controller leaves the place
-        // it asked for: a valve held at the edge of its deadband stays at the target, one let
-        // go as its model arrives stops short wherever the valve is slower than the model.
-        if moving {
-            self.step_op = Some(op);
-        } else if self.step_op.is_some_and(|o| (op - o).abs() > self.gate) {
-            self.step_op = None;
-        }
-        let before_deadband = if self.parts.deadband && self.step_op.is_some() {
-            // A band on the input moves its target; one in the positioner acts on the valve.
-            let from = if id.deadband_in_positioner {
-                cart
-            } else {
-                self.inverse.input_target()
-            };
-            let gap = wish - from;
-            // Decided where the move begins: near the wish the model's stem may stop a hair
-            // either side of it, which is no change of direction.
-            if gap.abs() > self.gate {
-                self.deadband_dir = gap.signum();
-            }
-            wish + self.deadband_dir * id.deadband_pct / 2.0
+        let before_deadband = if self.parts.deadband {
+            wish + self.step.offset(op, moving, (base, cart), self.gate)
         } else {
             wish
         };
@@ -506,6 +496,20 @@ impl Compensator {
     }
 }
 
+/// `model` with a stroke speed its log did not determine taken out: no limit but the
+/// positioner's gain (a kick planned on a speed the valve may not have would stop short of its
+/// plan, not overshoot it, and the guard's figures do not hang on a speed).
+fn without_undetermined_speed(model: &ModelSpec) -> ModelSpec {
+    let mut spec = model.clone();
+    if spec.stroke_speed_undetermined {
+        if let Some(p) = spec.pincart2.as_mut() {
+            p.dy_max_pct_per_s = composed::NO_LIMIT_PCT_PER_S;
+        }
+        spec.effects.closing_slew_pct_per_s = 0.0;
+    }
+    spec
+}
+
 /// The model in the form the compensator steps (friction band, no dead time, no stick-slip,
 /// no sensor), and what it took from it.
 fn inverse_model(
@@ -523,6 +527,7 @@ fn inverse_model(
         deadband_in_positioner: e.positioner_deadband_pct > e.deadband_pct,
         calibration_gain: e.calibration_gain,
         calibration_offset_pct: e.calibration_offset_pct,
+        stroke_speed_known: !model.stroke_speed_undetermined,
     };
     if let Some(mut p) = spec.pincart2 {
         (identified.band_pct, identified.open_slowdown) = if e.friction_band_pct > 0.0 {

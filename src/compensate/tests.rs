@@ -115,14 +115,15 @@ fn the_inverse_calibration_and_deadband_bring_the_valve_to_the_target() {
 #[test]
 fn the_deadband_step_is_on_the_side_of_the_move_closing_as_well_as_opening() {
     // A band on the input (the form diagnose writes for a positioner deadband seen through a
-    // log) and one in the positioner; steps both ways, each held 3 s.
+    // log) and one in the positioner, and the band on the input with a friction band whose
+    // kicks pull the model's input target past the wish; steps both ways, each held 3 s.
     let levels = [50.0, 49.0, 51.0, 49.5, 48.0, 49.0];
     let op: Vec<f64> = levels
         .iter()
         .flat_map(|&x| std::iter::repeat_n(x, 300))
         .collect();
-    for positioner in [false, true] {
-        let mut valve = band_valve(0.0);
+    for (friction, positioner) in [(0.0, false), (0.0, true), (1.0, false)] {
+        let mut valve = band_valve(friction);
         if positioner {
             valve.effects.positioner_deadband_pct = 0.5;
         } else {
@@ -138,19 +139,19 @@ fn the_deadband_step_is_on_the_side_of_the_move_closing_as_well_as_opening() {
             // Every set-point the step adds is beyond the target on the side of the move.
             assert!(
                 sent[hold.clone()].iter().all(|&s| dir * (s - to) >= -1e-9),
-                "{positioner} {from} -> {to}: {:?}",
+                "{friction} {positioner} {from} -> {to}: {:?}",
                 &sent[hold.start..hold.start + 40]
             );
             // Without, the valve stops short; with, at the target.
             let end = hold.end - 1;
             assert!(
                 dir * (to - plain[end]) > 0.2,
-                "{positioner} {from} -> {to}: {}",
+                "{friction} {positioner} {from} -> {to}: {}",
                 plain[end]
             );
             assert!(
                 (comped[end] - to).abs() < 0.03,
-                "{positioner} {from} -> {to}: {} against {} without",
+                "{friction} {positioner} {from} -> {to}: {} against {} without",
                 comped[end],
                 plain[end]
             );
