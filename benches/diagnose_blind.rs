@@ -1,24 +1,31 @@
-//! A blind, randomised benchmark of `diagnose` on physical valves.
+//! A blind, randomised benchmark of `diagnose` on valves of two families it does not share.
 //!
 //! Draws valves from the physical model (`model = "physical"`, not the composed pin-cart valve
-//! diagnosis fits): healthy ones, ones with one effect of the vocabulary, and ones with two,
-//! under five excitations (random steps, closed-loop level control, small steps, ramps, a mix),
-//! three sensor-noise levels, with and without a fine sensor lattice. Each valve is labelled
-//! from its physics by the thresholds in `benches/blind/cases.rs`, never from what diagnosis
-//! finds; each 10-minute recording at 100 Hz is diagnosed and scored (`benches/blind/score.rs`).
+//! diagnosis fits) and from a digital positioner simulated apart from the project's models
+//! (`valve_bridge::synth::digital`): healthy ones, ones with one effect of the vocabulary, and
+//! ones with two, under five excitations (random steps, closed-loop level control, small
+//! steps, ramps, a mix), three sensor-noise levels, with and without a fine sensor lattice.
+//! Each valve is labelled from its physics by the thresholds in `benches/blind/cases.rs`, never
+//! from what diagnosis finds, with the physical truth of each label's size; each 10-minute
+//! recording at 100 Hz is diagnosed and scored (`benches/blind/score.rs`), every table for
+//! each family apart (and for both together when both run).
 //!
-//! Run: `cargo bench --bench diagnose_blind -- [--seed N] [--cases N] [--only EFFECT|none]
-//! [--jsonl PATH] [--as-logged] [--materiality X] [--heldout-share Y]` (also `VB_BLIND_SEED`,
-//! `VB_BLIND_CASES`; defaults seed 1, 220 cases, plus the broadened healthy class: 33 healthy
-//! valves in closed loop under a noisy controller). `--as-logged` diagnoses each recording as
+//! Run: `cargo bench --bench diagnose_blind -- [--seed N] [--cases N] [--family F]
+//! [--only EFFECT|none] [--jsonl PATH] [--as-logged] [--materiality X] [--heldout-share Y]`
+//! (also `VB_BLIND_SEED`, `VB_BLIND_CASES`; defaults seed 1, 220 physical valves plus the
+//! broadened healthy class: 33 healthy valves in closed loop under a noisy controller, then
+//! half as many digital ones, 110 and 16). `--family physical|digital|all` (default all) runs
+//! one family or both; the physical family's valves are those of the same seed before the
+//! digital one was added. `--as-logged` diagnoses each recording as
 //! the daemon logs it (per mille, 0.5 % of the rows without V_P in bursts of 1-3);
 //! `--materiality` and `--heldout-share` set the [`diagnose::Tuning`] thresholds; `--stride K`
 //! runs every K-th valve of the plan (the same valves as the full run's, by index).
-//! `--jsonl` writes one JSON line per case (physics, labels, findings, scores) for analysis;
-//! `--case N` runs only the case of that index; `--csv DIR` also writes each case's recording
-//! (`case-N.csv`) and its truth (`case-N.truth.json`, the labels and the physical model file
-//! `case-N.toml`), so `valve-bridge diagnose DIR/case-N.csv` repeats it; `--write-only` with
-//! `--csv` writes the cases without diagnosing them.
+//! `--jsonl` writes one JSON line per case (physics, labels with their truth, findings with
+//! their sizes, scores) for analysis; `--case N` runs only the case of that index; `--csv DIR`
+//! also writes each case's recording (`case-N.csv`) and its truth (`case-N.truth.json`: the
+//! labels, their truth and the valve's parameters; for the physical family also its model
+//! file `case-N.toml`), so `valve-bridge diagnose DIR/case-N.csv` repeats it; `--write-only`
+//! with `--csv` writes the cases without diagnosing them.
 
 #[path = "blind/cases.rs"]
 mod cases;
@@ -39,6 +46,8 @@ const DURATION_S: f64 = 600.0;
 struct Options {
     seed: u64,
     cases: usize,
+    /// The family to run, or both.
+    family: Option<cases::Family>,
     only: Option<Option<Effect>>,
     case: Option<usize>,
     jsonl: Option<PathBuf>,
@@ -66,6 +75,7 @@ fn options() -> Result<Options, String> {
     let mut o = Options {
         seed: env_number("VB_BLIND_SEED")?.unwrap_or(1),
         cases: env_number("VB_BLIND_CASES")?.map_or(220, |n| n as usize),
+        family: None,
         only: None,
         case: None,
         jsonl: None,
@@ -88,6 +98,17 @@ fn options() -> Result<Options, String> {
                 o.cases = value("a number")?
                     .parse()
                     .map_err(|_| "--cases: expected a whole number".to_string())?
+            }
+            "--family" => {
+                let v = value("physical, digital or all")?;
+                o.family = match v.as_str() {
+                    "all" => None,
+                    name => Some(
+                        (cases::Family::ALL.into_iter())
+                            .find(|f| f.name() == name)
+                            .ok_or(format!("--family {name}: physical, digital or all"))?,
+                    ),
+                };
             }
             "--only" => {
                 let v = value("an effect name or `none`")?;
@@ -128,7 +149,7 @@ fn options() -> Result<Options, String> {
             "--bench" => {}
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`: use --seed N, --cases N, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only, --as-logged, --materiality X, --heldout-share Y, --stride K"
+                    "unknown argument `{other}`: use --seed N, --cases N, --family F, --only EFFECT|none, --case N, --jsonl PATH, --csv DIR, --write-only, --as-logged, --materiality X, --heldout-share Y, --stride K"
                 ))
             }
         }
@@ -149,6 +170,9 @@ fn main() -> std::process::ExitCode {
 fn run() -> Result<(), String> {
     let o = options()?;
     let mut plans = cases::plans(o.seed, o.cases);
+    if let Some(family) = o.family {
+        plans.retain(|p| p.family == family);
+    }
     if let Some(only) = o.only {
         plans.retain(|p| match only {
             None => p.effects.is_empty(),
@@ -204,20 +228,24 @@ fn run() -> Result<(), String> {
             .map_err(|e| format!("case {}: diagnose: {e}", plan.index))?;
         let seconds = started.elapsed().as_secs_f64();
         let out = score::Outcome {
+            family: plan.family.name(),
             excitation: plan.excitation,
             labels: case.labels.clone(),
             sizes: case.sizes.clone(),
+            truth: case.truth.clone(),
             findings: d.findings.iter().map(|f| f.effect).collect(),
+            sized: d.findings.iter().map(|f| (f.effect, f.size)).collect(),
             baseline_heldout_sse: d.baseline.heldout_sse,
             final_heldout_sse: d.final_model.heldout_sse,
             seconds,
             items: items(&d),
         };
         eprintln!(
-            "{:>4}/{} case {:>3} {:<13} noise {:.2} lattice {:.3} labels [{}] found [{}] gain {:>5.1} % {:.1} s",
+            "{:>4}/{} case {:>3} {:<8} {:<13} noise {:.2} lattice {:.3} labels [{}] found [{}] gain {:>5.1} % {:.1} s",
             k + 1,
             plans.len(),
             plan.index,
+            plan.family.name(),
             plan.excitation,
             case.noise_pct,
             case.lattice_pct,
@@ -235,14 +263,37 @@ fn run() -> Result<(), String> {
     if o.write_only {
         return Ok(());
     }
-    score::print_confusion(&outcomes);
-    let (precision, recall) = score::print_precision_recall(&outcomes);
-    score::print_smallest_found(&outcomes, &cases::EXCITATIONS);
+    let mut groups: Vec<(&str, Vec<score::Outcome>)> = cases::Family::ALL
+        .into_iter()
+        .map(|f| {
+            let of: Vec<score::Outcome> = (outcomes.iter())
+                .filter(|x| x.family == f.name())
+                .cloned()
+                .collect();
+            (f.name(), of)
+        })
+        .filter(|(_, of)| !of.is_empty())
+        .collect();
+    if groups.len() > 1 {
+        groups.push(("all families", outcomes));
+    }
+    for (name, group) in &groups {
+        report(name, group, o.tuning.min_heldout_share);
+    }
+    Ok(())
+}
+
+/// Every table over the valves of `group` (one family, or all).
+fn report(name: &str, group: &[score::Outcome], share: f64) {
+    println!("\n======== {name}: {} valves ========", group.len());
+    score::print_confusion(group);
+    let (precision, recall) = score::print_precision_recall(group);
+    score::print_smallest_found(group, &cases::EXCITATIONS);
     let mut excitations = cases::EXCITATIONS.to_vec();
     excitations.push(cases::NOISY_LOOP);
-    score::print_curve(&outcomes, &excitations, o.tuning.min_heldout_share);
-    score::print_overall(&outcomes, precision, recall);
-    Ok(())
+    score::print_curve(group, &excitations, share);
+    score::print_coverage(group);
+    score::print_overall(group, precision, recall);
 }
 
 /// The findings and traces of `d`, weighed (see [`score::Item`]).
@@ -263,7 +314,7 @@ fn items(d: &diagnose::Diagnosis) -> Vec<score::Item> {
     findings.chain(traces).collect()
 }
 
-/// The case's recording, model file and truth, for the command line.
+/// The case's recording, truth and (physical family) model file, for the command line.
 fn write_case(dir: &std::path::Path, case: &cases::Case) -> Result<(), String> {
     let stem = dir.join(format!("case-{}", case.plan.index));
     let csv = stem.with_extension("csv");
@@ -273,33 +324,71 @@ fn write_case(dir: &std::path::Path, case: &cases::Case) -> Result<(), String> {
         let path = stem.with_extension(ext);
         std::fs::write(&path, text).map_err(|e| format!("--csv: {}: {e}", path.display()))
     };
-    write("toml", case.spec.to_toml())?;
-    let sizes: Vec<serde_json::Value> = case
-        .sizes
-        .iter()
-        .map(|(e, s)| json!({"effect": e.name(), "size": s}))
-        .collect();
-    write(
-        "truth.json",
-        json!({
-            "case": format!("case-{}", case.plan.index),
-            "effects": case.labels.iter().map(|e| e.name()).collect::<Vec<_>>(),
-            "sizes": sizes,
-            "excitation": case.plan.excitation,
-            "noise_pct": case.noise_pct,
-            "lattice_pct": case.lattice_pct,
-        })
-        .to_string(),
-    )
+    if let cases::Physics::Physical(spec) = &case.physics {
+        write("toml", spec.to_toml())?;
+    }
+    let mut truth = case_json(case);
+    truth.insert("case".into(), json!(format!("case-{}", case.plan.index)));
+    truth.insert(
+        "effects".into(),
+        json!(case.labels.iter().map(|e| e.name()).collect::<Vec<_>>()),
+    );
+    write("truth.json", serde_json::Value::Object(truth).to_string())
 }
 
 fn names(v: &[Effect]) -> String {
     v.iter().map(|e| e.name()).collect::<Vec<_>>().join(",")
 }
 
-/// One case as a JSON line: its physics, labels, findings and scores.
-fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) -> String {
+/// What a case is: its plan, sensor, draws, labels with their truth, and its valve's
+/// parameters (the physical model's, or the digital valve's).
+fn case_json(case: &cases::Case) -> serde_json::Map<String, serde_json::Value> {
     let plan = &case.plan;
+    let sizes: Vec<serde_json::Value> = case
+        .sizes
+        .iter()
+        .map(|(e, s)| json!({"effect": e.name(), "size": s}))
+        .collect();
+    let truth: Vec<serde_json::Value> = case
+        .truth
+        .iter()
+        .map(|t| json!({"effect": t.effect.name(), "name": t.name, "value": t.value}))
+        .collect();
+    let mut out: serde_json::Map<String, serde_json::Value> = [
+        ("index", json!(plan.index)),
+        ("seed", json!(plan.seed)),
+        ("family", json!(plan.family.name())),
+        ("excitation", json!(plan.excitation)),
+        ("noise_pct", json!(case.noise_pct)),
+        ("lattice_pct", json!(case.lattice_pct)),
+        ("draws", json!(case.draws)),
+        ("planned", json!(names(&plan.effects))),
+        ("labels", json!(names(&case.labels))),
+        ("sizes", json!(sizes)),
+        ("truth", json!(truth)),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    match &case.physics {
+        cases::Physics::Physical(spec) => {
+            out.insert("dead_time_s".into(), json!(spec.dead_time_s));
+            out.insert(
+                "travel".into(),
+                json!([spec.travel.min_pct, spec.travel.max_pct]),
+            );
+            out.insert("physical".into(), json!(spec.physical));
+        }
+        cases::Physics::Digital(params) => {
+            out.insert("digital".into(), json!(params));
+        }
+    }
+    out
+}
+
+/// One case as a JSON line: its physics, labels with their truth, findings with their sizes,
+/// and scores.
+fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) -> String {
     let findings: Vec<serde_json::Value> = d
         .findings
         .iter()
@@ -316,32 +405,19 @@ fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) 
             })
         })
         .collect();
-    let sizes: Vec<serde_json::Value> = case
-        .sizes
-        .iter()
-        .map(|(e, s)| json!({"effect": e.name(), "size": s}))
-        .collect();
-    json!({
-        "index": plan.index,
-        "seed": plan.seed,
-        "excitation": plan.excitation,
-        "noise_pct": case.noise_pct,
-        "lattice_pct": case.lattice_pct,
-        "draws": case.draws,
-        "planned": names(&plan.effects),
-        "labels": names(&out.labels),
-        "sizes": sizes,
-        "dead_time_s": case.spec.dead_time_s,
-        "travel": [case.spec.travel.min_pct, case.spec.travel.max_pct],
-        "physical": case.spec.physical,
-        "findings": findings,
-        "baseline_heldout_sse": out.baseline_heldout_sse,
-        "final_heldout_sse": out.final_heldout_sse,
-        "gain": out.gain(),
-        "seconds": out.seconds,
-        "verdict": report::verdict(d),
-        "traces": d.traces,
-        "notes": d.notes,
-    })
-    .to_string()
+    let mut line = case_json(case);
+    line.extend(
+        [
+            ("findings", json!(findings)),
+            ("baseline_heldout_sse", json!(out.baseline_heldout_sse)),
+            ("final_heldout_sse", json!(out.final_heldout_sse)),
+            ("gain", json!(out.gain())),
+            ("seconds", json!(out.seconds)),
+            ("verdict", json!(report::verdict(d))),
+            ("traces", json!(d.traces)),
+            ("notes", json!(d.notes)),
+        ]
+        .map(|(k, v)| (k.to_string(), v)),
+    );
+    serde_json::Value::Object(line).to_string()
 }

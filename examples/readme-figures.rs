@@ -1,7 +1,8 @@
 //! Generates the deterministic figures README quotes (`valve_bridge::report::readme`): diagnoses
-//! the nine shared recordings and identifies the paper-like one, then prints README's generated
-//! blocks, or with `--write` puts them into README.md. Tests compare README with the same rows
-//! (`tests/diagnose_cases.rs`, `tests/identify_cli.rs`), so a stale figure fails CI.
+//! the nine shared recordings, identifies the paper-like one and runs the standard response test
+//! on the emulated valve, then prints README's generated blocks, or with `--write` puts them into
+//! README.md. Tests compare README with the same rows (`tests/diagnose_cases.rs`,
+//! `tests/identify_cli.rs`, `tests/response_test.rs`), so a stale figure fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
 //! optimised in debug builds too, and the tests that check README are debug builds).
@@ -11,6 +12,8 @@
 use std::path::Path;
 
 use anyhow::Context;
+use valve_bridge::daemon::response::Test;
+use valve_bridge::daemon::{Config, RunOptions};
 use valve_bridge::fit::{self, Options};
 use valve_bridge::model::ModelKind;
 use valve_bridge::recording::{self, ReadOptions};
@@ -47,10 +50,12 @@ fn main() -> anyhow::Result<()> {
     ];
     let id = fit::identify(&rec.view(), &Options::for_models(&models), &|_, _| {})?;
     let table1 = readme::table1(&serde_json::to_value(&id)?);
+    let response = response_test(root)?;
     bar.finish_and_clear();
     let blocks = [
         (readme::DIAGNOSE_CASES, rows.join("\n")),
         (readme::IDENTIFY_TABLE1, table1),
+        (readme::RESPONSE_EMULATED, response),
     ];
     if write {
         let path = root.join("README.md");
@@ -67,4 +72,26 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// README's response test: the standard plan on `config/emulated.toml`, as fast as possible.
+fn response_test(root: &Path) -> anyhow::Result<String> {
+    let path = root.join("config/emulated.toml");
+    let test = Test::new(Config::load(Some(&path))?, &path, None, "standard")?;
+    let (plan, setpoint_step) = (test.plan.clone(), test.setpoint_step_pct);
+    let dir = tempfile::tempdir()?;
+    let summary = test.run(
+        false,
+        RunOptions {
+            log_dir: Some(dir.path().to_path_buf()),
+            virtual_clock: true,
+            ..RunOptions::default()
+        },
+    )?;
+    let files: Vec<_> = (summary.valves.iter())
+        .flat_map(|v| v.log.files.clone())
+        .collect();
+    let rec = recording::read_all(&files, &ReadOptions::default())?;
+    let found = valve_bridge::response::analyse(&rec, &plan, setpoint_step)?;
+    Ok(readme::response_table(&serde_json::to_value(&found)?))
 }

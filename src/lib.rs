@@ -16,13 +16,15 @@
 //! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
 //! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
 //! - [`fleet`]: many recordings diagnosed in parallel, summed up and ranked for maintenance.
+//! - [`response`]: a response test's log read for what the valve did (dead time, T63, T86,
+//!   overshoot, resolution, dead band); the daemon's [`daemon::response`] runs the test.
 //! - [`report`]: self-contained HTML reports with SVG charts.
 //! - [`signal`]: time-only O_P generators (random steps, steps, ramp, sine, PRBS, replay, constant).
 //! - [`synth`]: synthetic recordings (random steps, small steps, ramps, a mix, or a closed level
 //!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
 //! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
 //!
-//! `fit`, `diagnose`, `fleet` and `report` are the `analysis` feature (on by default); without
+//! `fit`, `diagnose`, `fleet`, `response` and `report` are the `analysis` feature (on by default); without
 //! it the library is the daemon's runtime alone, and the daemon refuses `[diagnosis]`
 //! ([`daemon::DaemonError::NoDiagnosis`]).
 
@@ -43,6 +45,8 @@ pub mod priority;
 pub mod recording;
 #[cfg(feature = "analysis")]
 pub mod report;
+#[cfg(feature = "analysis")]
+pub mod response;
 pub mod signal;
 pub mod synth;
 pub mod toml_file;

@@ -44,6 +44,9 @@ enum Analysis {
     Steps(cli::steps::Args),
     /// Demonstrations: `demo concealed` hides an effect in a recording and diagnoses it.
     Demo(cli::demo::Args),
+    /// Run a response test on a valve (steps of several sizes both ways, a slow ramp out and
+    /// back) and report its dead time, T63, T86, overshoot, resolution and dead band.
+    ResponseTest(cli::response_test::Args),
 }
 
 #[cfg(feature = "analysis")]
@@ -56,6 +59,7 @@ impl Analysis {
             Analysis::Identify(a) => cli::identify::run(a),
             Analysis::Steps(a) => cli::steps::run(a),
             Analysis::Fleet(a) => cli::fleet::run(a),
+            Analysis::ResponseTest(a) => cli::response_test::run(a),
         }
     }
 }

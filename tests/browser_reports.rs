@@ -1,12 +1,13 @@
 //! The report pages in a real browser: identify's and diagnose's `report.html` (of a 30 s
-//! recording) and fleet's `index.html` with one of its valves' pages, written by the binary and
+//! recording), fleet's `index.html` with one of its valves' pages, and a response test's
+//! `report.html` (eight steps and a signature on the emulated valve), written by the binary and
 //! opened in headless Chromium by `tests/browser/check_reports.py` (Playwright for Python driving
 //! Debian's Chromium). Fails on a console error, a chart that drew nothing, or a drag that does
 //! not zoom (Shift+wheel that does not pan, a double-click that does not reset) a chart's time
 //! range.
 //!
 //! With `VB_SCREENSHOTS=DIR` the pages' screenshots are saved as `DIR/report-{identify,
-//! diagnose,fleet,fleet-valve}.png` (README's with `VB_SCREENSHOTS=docs`), identify's and
+//! diagnose,fleet,fleet-valve,response}.png` (README's with `VB_SCREENSHOTS=docs`), identify's and
 //! diagnose's then of README's examples (`pub_sdd_paper_rs`, `pub_backlash_rs`). Without
 //! Chromium or Playwright the test is a visible skip, or a failure under `VB_REQUIRE_TOOLS=1`.
 
@@ -62,6 +63,26 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
     std::fs::copy(&recording, d("valves/fv-101.csv")).unwrap();
     cut("pub_asym_rs.csv", 60, &dir.path().join("valves/fv-102.csv"));
     run(&["fleet", &d("valves"), "--out", &d("fleet")]);
+    std::fs::write(
+        d("plan.toml"),
+        "openings_pct = [50.0]\nsizes_pct = [1.0, 5.0]\npattern = [1, 1, -1, -1]\n\
+         [hold]\nmin_s = 3.0\nmax_s = 10.0\nstill_s = 1.0\nstill_pct = 0.05\n\
+         [signature]\nopening_pct = 50.0\nspan_pct = 1.0\nrate_pct_per_s = 0.5\n",
+    )
+    .unwrap();
+    let emulated = format!("{ROOT}/config/emulated.toml");
+    let plan = d("plan.toml");
+    let out = d("response");
+    run(&[
+        "response-test",
+        "--config",
+        &emulated,
+        "--plan",
+        &plan,
+        "--out",
+        &out,
+        "--as-fast-as-possible",
+    ]);
 
     let mut cmd = Command::new("python3");
     cmd.arg(format!("{ROOT}/tests/browser/check_reports.py"))
@@ -77,6 +98,8 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
         ("diagnose", d("diagnose/report.html"), "2"),
         ("fleet", d("fleet/index.html"), "0"),
         ("fleet-valve", d("fleet/valves/fv-102/report.html"), "2"),
+        // Eight steps and the signature.
+        ("response", d("response/report.html"), "9"),
     ] {
         cmd.args(["--page", name, &page, charts]);
     }
@@ -86,7 +109,7 @@ fn reports_draw_zoom_and_log_no_errors_in_chromium() {
         out.status.success(),
         "the pages failed in Chromium:\n{text}"
     );
-    for name in ["identify", "diagnose", "fleet"] {
+    for name in ["identify", "diagnose", "fleet", "response"] {
         assert!(
             text.contains(&format!("{name}: ")),
             "{name} was not checked:\n{text}"

@@ -1,20 +1,31 @@
-//! The blind benchmark's cases (`benches/blind/cases.rs`) on recordings as long as the bench's: one valve per
-//! effect and a healthy one are labelled with exactly the planned effects, only the planned
-//! physics leaves the healthy ranges, generation is deterministic, and the full plan holds
-//! every effect often enough. Diagnosis is not run here.
+//! The blind benchmark's physical family (`benches/blind/cases.rs`, `physical.rs`) on
+//! recordings as long as the bench's: one valve per effect and a healthy one are labelled with
+//! exactly the planned effects, only the planned physics leaves the healthy ranges, generation
+//! is deterministic, and the full plan holds every effect often enough. Diagnosis is not run
+//! here (the digital family: `tests/diagnose_blind_digital.rs`).
 
 #[path = "../benches/blind/cases.rs"]
 mod cases;
 
-use cases::{build, outside_healthy, plans, Plan, EXCITATIONS, NOISY_LOOP};
+use cases::physical::outside_healthy;
+use cases::{build, plans, Family, Physics, Plan, EXCITATIONS, NOISY_LOOP};
 use valve_bridge::diagnose::Effect;
 
 const SHORT_S: f64 = 600.0;
+
+/// The physical valve of a case of the physical family.
+fn spec(case: &cases::Case) -> &valve_bridge::model::ModelSpec {
+    match &case.physics {
+        Physics::Physical(spec) => spec,
+        Physics::Digital(_) => panic!("case {} is digital", case.plan.index),
+    }
+}
 
 fn plan(i: usize, effects: Vec<Effect>) -> Plan {
     Plan {
         index: i,
         seed: 1000 + i as u64,
+        family: Family::Physical,
         effects,
         excitation: EXCITATIONS[i % EXCITATIONS.len()],
     }
@@ -30,10 +41,10 @@ fn one_valve_per_effect_is_labelled_with_it_alone() {
         let mut want = effects.clone();
         want.sort_by_key(|e| *e as usize);
         assert_eq!(case.labels, want, "plan {effects:?}, {} draws", case.draws);
-        let mut outside = outside_healthy(&case.spec);
+        let mut outside = outside_healthy(spec(&case));
         outside.sort_by_key(|e| *e as usize);
-        assert_eq!(outside, want, "{:?}", case.spec);
-        case.spec.validate().unwrap();
+        assert_eq!(outside, want, "{:?}", spec(&case));
+        spec(&case).validate().unwrap();
         assert_eq!(case.rec.len(), (SHORT_S / cases::DT) as usize);
     }
 }
@@ -42,7 +53,7 @@ fn one_valve_per_effect_is_labelled_with_it_alone() {
 fn generation_is_deterministic() {
     let p = plan(3, vec![Effect::Backlash]);
     let (a, b) = (build(&p, 60.0).unwrap(), build(&p, 60.0).unwrap());
-    assert_eq!(a.spec, b.spec);
+    assert_eq!(spec(&a), spec(&b));
     assert_eq!((&a.rec.op, &a.rec.vp), (&b.rec.op, &b.rec.vp));
     let other = build(&plan(4, vec![Effect::Backlash]), 60.0).unwrap();
     assert_ne!(a.rec.vp, other.rec.vp);
@@ -60,14 +71,17 @@ fn a_healthy_valve_of_the_broadened_class_has_no_label() {
         };
         let case = build(&p, SHORT_S).unwrap();
         assert!(case.labels.is_empty(), "{:?}", case.labels);
-        let ph = case.spec.physical.unwrap();
+        let ph = spec(&case).physical.unwrap();
         assert!(ph.coulomb_band_pct <= 0.2 && ph.positioner_gain_per_s >= 2.0);
     }
 }
 
 #[test]
 fn the_full_plan_covers_every_effect_and_excitation() {
-    let all = plans(1, 200);
+    let all: Vec<Plan> = plans(1, 200)
+        .into_iter()
+        .filter(|p| p.family == Family::Physical)
+        .collect();
     assert_eq!(all.len(), 230);
     let broad = all.iter().filter(|p| p.excitation == NOISY_LOOP).count();
     assert_eq!(broad, 30);

@@ -1,6 +1,7 @@
 //! What the loop calls every cycle for the `modbus-server` source and the Prometheus metrics
 //! allocates nothing: reading the controller's set-point, publishing V_P and status, and
-//! updating the metric handles. Nor does stepping a model (the physical valve, with its internal
+//! updating the metric handles. Nor does walking a response test's plan (its O_P, and judging
+//! from each row whether V_P has settled), nor stepping a model (the physical valve, with its internal
 //! steps and seeded sensor noise), nor a drifting one, nor compensating a set-point and judging
 //! its guard windows. A Modbus cycle, over TCP and over RTU against sim-device, allocates no
 //! more than tokio-modbus's own call does (its request future and the reply's words, which
@@ -118,6 +119,51 @@ fn per_cycle_calls_do_not_allocate() {
     assert_eq!(counted, 0, "allocations in 500 cycles");
     // The counter does count.
     assert_eq!(allocations(|| drop(std::hint::black_box(vec![0u8; 64]))), 1);
+}
+
+#[test]
+fn walking_a_response_tests_plan_does_not_allocate() {
+    let config = Config::embedded_default().unwrap();
+    let test =
+        valve_bridge::daemon::response::Test::new(config, Path::new("t.toml"), None, "quick")
+            .unwrap();
+    let cfg = &test.config;
+    let mut source = Source::new(&cfg.source, &cfg.safety, cfg.loop_.period_s());
+    let (mut vp, mut k, mut counted) = (50.0, 0u64, 0);
+    loop {
+        let t_s = k as f64 * 0.01;
+        let mut op = None;
+        counted += allocations(|| {
+            op = source.op_at(t_s);
+            if let Some(op) = op {
+                let row = Sample {
+                    t_s,
+                    op_pct: Some(op),
+                    vp_pct: (k % 9 != 0).then_some(vp),
+                    status: if k % 9 != 0 {
+                        Status::Ok
+                    } else {
+                        Status::Timeout
+                    },
+                    lateness_us: None,
+                    latency_us: None,
+                    op_sent_pct: Some(op),
+                    op_controller_pct: Some(op),
+                    utc: std::time::SystemTime::UNIX_EPOCH,
+                };
+                source.feedback(&row);
+                std::hint::black_box(source.progress());
+            }
+        });
+        let Some(op) = op else { break };
+        vp += 0.1 * (op - vp);
+        k += 1;
+    }
+    assert_eq!(source.progress(), Some((29, 29)));
+    assert_eq!(
+        counted, 0,
+        "allocations in the {k} cycles of the quick plan"
+    );
 }
 
 #[test]

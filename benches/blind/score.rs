@@ -2,20 +2,29 @@
 //! finding, precision and recall over all findings (a finding of a planned effect too faint to
 //! label counts neither way), the false-finding rate on healthy valves (nothing planned),
 //! the held-out gain, the smallest size found reliably per excitation, the time per case, the
-//! curve of healthy valves with a finding against recall over the materiality threshold, and
-//! the overall figures against their targets. Only arithmetic and printing; no diagnosis.
+//! curve of healthy valves with a finding against recall over the materiality threshold, how
+//! often the interval of a finding's size holds the physical truth, and the overall figures
+//! against their targets; each over the valves it is given (the bench hands it each family
+//! apart). Only arithmetic and printing; no diagnosis.
 
-use valve_bridge::diagnose::Effect;
+use valve_bridge::diagnose::{Effect, Size};
+
+use crate::cases::Truth;
 
 /// What one case was and what diagnosis said about it.
 #[derive(Debug, Clone)]
 pub(crate) struct Outcome {
+    pub family: &'static str,
     pub excitation: &'static str,
     pub labels: Vec<Effect>,
     /// Each planned effect with the size it was drawn at.
     pub sizes: Vec<(Effect, f64)>,
+    /// The physical size of each label.
+    pub truth: Vec<Truth>,
     /// The effects found, in the order diagnosis found them.
     pub findings: Vec<Effect>,
+    /// The size of each finding, with its interval.
+    pub sized: Vec<(Effect, Size)>,
     pub baseline_heldout_sse: f64,
     pub final_heldout_sse: f64,
     pub seconds: f64,
@@ -62,6 +71,8 @@ pub(crate) const GAIN_TARGET: f64 = 0.50;
 pub(crate) const SECONDS_TARGET: f64 = 15.0;
 /// Share of cases a size bin must find to count as found reliably.
 pub(crate) const RELIABLE: f64 = 0.80;
+/// Share of findings whose 90 % interval must hold the physical truth, per effect.
+pub(crate) const COVERAGE_TARGET: f64 = 0.80;
 
 fn short(e: Option<Effect>) -> &'static str {
     match e {
@@ -314,6 +325,84 @@ pub(crate) fn print_curve(all: &[Outcome], excitations: &[&str], share: f64) {
             100.0 * s,
             pct(a, h),
             pct(hits, l)
+        );
+    }
+}
+
+/// How the sizes of one effect's findings compare with the physical truth of its labels.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Coverage {
+    /// The truth's size (`dead_time_s`, ...).
+    pub name: &'static str,
+    /// Labelled valves, those with a finding of the effect, and those whose finding is sized
+    /// in the truth's unit (a friction band may be quoted as a crossing time).
+    pub labelled: usize,
+    pub found: usize,
+    pub sized: usize,
+    /// Of the sized ones, how many 90 % intervals hold the truth.
+    pub holds: usize,
+    /// The median of reported over true (NaN when none is sized).
+    pub ratio: f64,
+}
+
+/// The [`Coverage`] of `effect` over `all`, or `None` when no valve is labelled with it.
+pub(crate) fn coverage(all: &[Outcome], effect: Effect) -> Option<Coverage> {
+    let truths: Vec<(&Outcome, &Truth)> = (all.iter())
+        .flat_map(|o| {
+            (o.truth.iter())
+                .filter(move |t| t.effect == effect)
+                .map(move |t| (o, t))
+        })
+        .collect();
+    let name = truths.first()?.1.name;
+    let found: Vec<(&Size, &Truth)> = (truths.iter())
+        .filter_map(|(o, t)| {
+            let size = o.sized.iter().find(|(f, _)| *f == effect)?;
+            Some((&size.1, *t))
+        })
+        .collect();
+    let same: Vec<&(&Size, &Truth)> = found.iter().filter(|(s, t)| s.name == t.name).collect();
+    let holds = (same.iter())
+        .filter(|(s, t)| s.low <= t.value && t.value <= s.high)
+        .count();
+    Some(Coverage {
+        name,
+        labelled: truths.len(),
+        found: found.len(),
+        sized: same.len(),
+        holds,
+        ratio: median(same.iter().map(|(s, t)| s.value / t.value).collect()),
+    })
+}
+
+/// Per effect, the [`Coverage`] of its findings' intervals over the truth.
+pub(crate) fn print_coverage(all: &[Outcome]) {
+    println!(
+        "\nSizes against the physical truth (findings of a labelled effect; target: the interval holds it in >= {:.0} %):",
+        100.0 * COVERAGE_TARGET
+    );
+    println!(
+        "{:<22}{:<25}{:>9}{:>7}{:>7}{:>8}{:>10}{:>15}",
+        "effect", "size", "labelled", "found", "sized", "holds", "coverage", "reported/true"
+    );
+    for e in Effect::ALL {
+        let Some(c) = coverage(all, e) else {
+            continue;
+        };
+        println!(
+            "{:<22}{:<25}{:>9}{:>7}{:>7}{:>8}{:>10}{:>15}",
+            e.name(),
+            c.name,
+            c.labelled,
+            c.found,
+            c.sized,
+            c.holds,
+            pct(c.holds, c.sized),
+            if c.ratio.is_finite() {
+                format!("{:.2}", c.ratio)
+            } else {
+                "-".into()
+            }
         );
     }
 }

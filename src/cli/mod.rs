@@ -33,6 +33,8 @@ pub(crate) mod identify;
 #[cfg(feature = "analysis")]
 pub(crate) mod input;
 pub(crate) mod probe;
+#[cfg(feature = "analysis")]
+pub(crate) mod response_test;
 pub(crate) mod run;
 #[cfg(feature = "analysis")]
 pub(crate) mod simulate;

@@ -45,19 +45,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let config = Config::load(Some(&args.config))?;
-    let names: Vec<&str> = config.valves.iter().map(|v| v.label()).collect();
-    let picked = match &args.valve {
-        Some(name) => config.valves.iter().find(|v| v.label() == name),
-        None if config.valves.len() == 1 => config.valves.first(),
-        None => None,
-    };
-    let Some(valve) = picked else {
-        bail!(
-            "{}: name the valve to probe with --valve (one of {})",
-            args.config.display(),
-            names.join(", ")
-        );
-    };
+    let valve =
+        (config.valve(args.valve.as_deref())).with_context(|| args.config.display().to_string())?;
     let (link, device) = match &valve.backend {
         ValveSpec::ModbusTcp(link, device) => (Link::Tcp(link.clone()), device),
         ValveSpec::ModbusRtu(link, device) => (Link::Rtu(link.clone()), device),

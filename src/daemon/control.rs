@@ -381,6 +381,9 @@ impl Loop {
         lane.stats.record(&row, lateness);
         if i == 0 {
             self.live.publish(&row);
+            if let Some(moves) = lane.source.progress() {
+                self.live.publish_progress(moves);
+            }
         }
         if let Some(m) = &lane.metrics {
             m.record(&row);

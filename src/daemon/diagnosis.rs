@@ -151,11 +151,6 @@ pub struct Watched {
     pub(crate) log_alarm: Arc<LogAlarm>,
 }
 
-/// The history of the valve named `valve` in the log directory `dir`.
-pub fn history_file(dir: &Path, valve: &str) -> PathBuf {
-    dir.join(format!("diagnosis-{valve}.jsonl"))
-}
-
 /// A window to diagnose.
 #[derive(Debug)]
 struct Job {
@@ -303,7 +298,7 @@ pub fn start(
     for w in valves {
         let done = Arc::new(AtomicU64::new(f64::NAN.to_bits()));
         let skipped = Arc::new(AtomicU64::new(0));
-        let path = history_file(dir, &w.name);
+        let path = files::history_file(dir, &w.name);
         let (file, size) = files::open_history(&path, b"")?;
         files::refuse_link(&dir.join(format!("diagnosis-{}", w.name)))?;
         if let Some(b) = &w.board {
@@ -569,7 +564,7 @@ mod tests {
         drop(running);
         drop(feed);
         let report = thread.join().unwrap().unwrap().remove(0);
-        let text = std::fs::read_to_string(history_file(dir.path(), "a")).unwrap();
+        let text = std::fs::read_to_string(files::history_file(dir.path(), "a")).unwrap();
         (report, text.lines().map(String::from).collect())
     }
 

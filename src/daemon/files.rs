@@ -284,6 +284,11 @@ pub(crate) fn open_read(dir: &Path, rel: &[&str]) -> io::Result<File> {
     no_follow().read(true).open(path)
 }
 
+/// The live-diagnosis history of the valve named `valve` in the log directory `dir`.
+pub(super) fn history_file(dir: &Path, valve: &str) -> PathBuf {
+    dir.join(format!("diagnosis-{valve}.jsonl"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -25,10 +25,11 @@
 //! the log's 0.0001 % before sending), V_P to the log's precision.
 //!
 //! Files: [`running`] starts the threads ([`start`], [`Running`]), [`control`] is the loop
-//! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread; [`error`] the errors; this file holds the options and [`run`]
-//! (signals and progress display). The log directory's files are opened by `files` (never
-//! through a symbolic link, each new one with its header on the disk) and written through
-//! [`log_file`] (which outlives a full disk).
+//! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread;
+//! [`error`] the errors; [`response`] runs a response test through all of it; this file holds
+//! the options and [`run`] (signals and progress display). The log directory's files are
+//! opened by `files` (never through a symbolic link, each new one with its header on the disk)
+//! and written through [`log_file`] (which outlives a full disk).
 //!
 //! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis (the
 //! daemon runs diagnosis and plotting only as the [`Analysis`] it is handed).
@@ -49,6 +50,7 @@ pub mod log_file;
 pub mod logger;
 mod net;
 mod page;
+pub mod response;
 mod running;
 pub mod schedule;
 pub mod service;
@@ -160,8 +162,11 @@ fn show(bar: &ProgressBar, running: &Running) {
         return;
     }
     let v = running.live().view();
+    let moves = v.moves.map_or(String::new(), |(done, all)| {
+        format!("  move {done} of {all}")
+    });
     bar.set_message(format!(
-        "t {:.1} s  samples {}  O_P {:.2} %  V_P {:.2} %  timing p99 {:.0} us",
+        "t {:.1} s  samples {}  O_P {:.2} %  V_P {:.2} %  timing p99 {:.0} us{moves}",
         v.samples as f64 / running.rate_hz(),
         v.samples,
         v.op_pct,

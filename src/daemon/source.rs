@@ -10,14 +10,16 @@
 //! its kind only. The generators themselves live in [`crate::signal`] (offline generation uses
 //! them too); a source adds the clamp to `[source]`'s range. Generated sources do not know about valves or
 //! timing.
-//! The `modbus-server` source is the exception: its set-points were range-checked when written
-//! (its safe O_P, like the stop action's, is not clamped), and the loop hands it each cycle's row
-//! ([`Source::feedback`]) to publish V_P to the controller.
+//! Two sources see each cycle's row ([`Source::feedback`]): the `modbus-server` source publishes
+//! V_P to the controller (its set-points were range-checked when written; its safe O_P, like the
+//! stop action's, is not clamped), and a response test's [`Schedule`] ends a step's hold once V_P
+//! has settled.
 
 use std::sync::Arc;
 
 use super::config::{SafetyConfig, SourceConfig, SourceSpec};
 use super::hil::Controller;
+use super::response::schedule::Schedule;
 use crate::modbus::server::RegisterBank;
 use crate::recording::log_format::Sample;
 use crate::signal::{Prbs, RandomSteps, Signal};
@@ -35,6 +37,8 @@ enum Kind {
     /// A time-only generator of [`crate::signal`] (boxed once: its random generator is large).
     Generated(Box<Signal>),
     Controller(Controller),
+    /// A response test's plan, walked as V_P settles.
+    Plan(Box<Schedule>),
 }
 
 impl Source {
@@ -56,6 +60,7 @@ impl Source {
             SourceSpec::ModbusServer(server) => {
                 Kind::Controller(Controller::new(server, cfg.op_range(), safety))
             }
+            SourceSpec::ResponseTest(plan) => Kind::Plan(Box::new(Schedule::new(plan, period_s))),
         };
         Source {
             kind,
@@ -75,11 +80,13 @@ impl Source {
         }
     }
 
-    /// The O_P at loop time `t_s` (s from the first cycle), clamped; `None` once a replay is over.
+    /// The O_P at loop time `t_s` (s from the first cycle), clamped; `None` once a replay or a
+    /// response test is over.
     pub fn op_at(&mut self, t_s: f64) -> Option<f64> {
         let raw = match &mut self.kind {
             Kind::Generated(g) => g.op_at(t_s)?,
             Kind::Controller(c) => return Some(c.op_at(t_s)),
+            Kind::Plan(p) => p.op_at(t_s)?,
         };
         Some(raw.clamp(self.min_pct, self.max_pct))
     }
@@ -105,10 +112,21 @@ impl Source {
         }
     }
 
-    /// Hands a cycle's row to the source (the controller publishes its V_P and status).
-    pub fn feedback(&self, row: &Sample) {
-        if let Kind::Controller(c) = &self.kind {
-            c.feedback(row);
+    /// Hands a cycle's row to the source (the controller publishes its V_P and status, a
+    /// response test judges whether the valve has settled).
+    pub fn feedback(&mut self, row: &Sample) {
+        match &mut self.kind {
+            Kind::Controller(c) => c.feedback(row),
+            Kind::Plan(p) => p.feedback(row),
+            Kind::Generated(_) => {}
+        }
+    }
+
+    /// A response test's moves done and in all (`None` for other sources).
+    pub fn progress(&self) -> Option<(usize, usize)> {
+        match &self.kind {
+            Kind::Plan(p) => Some(p.progress()),
+            _ => None,
         }
     }
 }

@@ -126,6 +126,8 @@ pub struct Live {
     op_bits: AtomicU64,
     vp_bits: AtomicU64,
     p99_ns: AtomicU64,
+    /// A response test's moves done (high 32 bits) and in all (low 32 bits); 0 for others.
+    moves: AtomicU64,
 }
 
 /// A snapshot of [`Live`].
@@ -139,6 +141,8 @@ pub struct LiveView {
     pub vp_pct: f64,
     /// Timing error p99 so far, µs.
     pub p99_us: f64,
+    /// A response test's moves done and in all (`None` for other sources).
+    pub moves: Option<(u32, u32)>,
 }
 
 impl Live {
@@ -152,6 +156,12 @@ impl Live {
             sample.vp_pct.unwrap_or(f64::NAN).to_bits(),
             Ordering::Relaxed,
         );
+    }
+
+    /// Publishes a response test's moves done and in all.
+    pub fn publish_progress(&self, (done, all): (usize, usize)) {
+        let packed = (done.min(u32::MAX as usize) as u64) << 32 | all.min(u32::MAX as usize) as u64;
+        self.moves.store(packed, Ordering::Relaxed);
     }
 
     /// Publishes the timing p99.
@@ -176,6 +186,10 @@ impl Live {
                 f64::from_bits(self.vp_bits.load(Ordering::Relaxed))
             },
             p99_us: self.p99_ns.load(Ordering::Relaxed) as f64 / 1e3,
+            moves: match self.moves.load(Ordering::Relaxed) {
+                0 => None,
+                m => Some(((m >> 32) as u32, m as u32)),
+            },
         }
     }
 }

@@ -216,7 +216,7 @@ pub fn analyse_recording(
 /// Longest run of rows without V_P a step's answer may contain: a lost reply now and then
 /// (one to three rows) moves a measured delay by at most that much; a longer gap could hide
 /// when V_P moved.
-const MAX_MISSING_ROWS: usize = 3;
+pub const MAX_MISSING_ROWS: usize = 3;
 
 /// Analyses the steps of a recording's O_P and the answers in its V_P. A step counts only when
 /// V_P was measured on the sample before the jump, no more than [`MAX_MISSING_ROWS`] in a row
@@ -255,9 +255,7 @@ pub fn analyse(rec: &RecordingView, opts: &StepOptions) -> StepAnalysis {
             let v0 = vp[a - 1];
             let moved = |share: f64| {
                 let need = (share * size.abs()).max(4.0 * sigma);
-                (a..end)
-                    .find(|&j| vp[j].is_finite() && (vp[j] - v0) * dir >= need)
-                    .map(|j| (j - a) as f64 * dt)
+                time_to_move(vp, a..end, (v0, dir), need, dt)
             };
             steps.push(Step {
                 index: a,
@@ -314,8 +312,27 @@ pub fn analyse(rec: &RecordingView, opts: &StepOptions) -> StepAnalysis {
     }
 }
 
+/// The time from sample `span.start` until V_P has moved `need` from `v0` in the direction
+/// `dir` (+1 opening, -1 closing), s: the first sample of `span` that has; `None` when none has.
+/// Rows without V_P (NaN) are passed over, never taken for a move.
+pub fn time_to_move(
+    vp: &[f64],
+    span: std::ops::Range<usize>,
+    (v0, dir): (f64, f64),
+    need: f64,
+    dt: f64,
+) -> Option<f64> {
+    let a = span.start;
+    span.into_iter()
+        .find(|&j| {
+            vp.get(j)
+                .is_some_and(|v| v.is_finite() && (v - v0) * dir >= need)
+        })
+        .map(|j| (j - a) as f64 * dt)
+}
+
 /// The longest run of rows without a measured value (NaN) in `x`.
-fn longest_missing(x: &[f64]) -> usize {
+pub fn longest_missing(x: &[f64]) -> usize {
     let (mut run, mut longest) = (0, 0);
     for v in x {
         run = if v.is_finite() { 0 } else { run + 1 };

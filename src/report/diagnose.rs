@@ -22,28 +22,31 @@ use crate::diagnose::{Diagnosis, Effect, Finding, Note};
 use crate::metrics;
 use crate::recording::RecordingView;
 
-/// What experiment separates `effect` from its look-alike `other` (or from its look-alikes).
+/// What experiment separates `effect` from its look-alike `other` (or from its look-alikes):
+/// where the response test does, its command and plan.
 pub fn experiment(effect: Effect, other: Option<Effect>) -> &'static str {
     let pair = |a, b| (effect == a && other == Some(b)) || (effect == b && other == Some(a));
     if pair(Effect::SlewRate, Effect::MinSpeed) {
-        return "steps of several sizes, 0.5 to 20 % (`[source] kind = \"steps\"`): a slew limit caps only the large moves, a minimum speed shows in the small ones";
+        return "the response test's steps of 0.25 to 10 % (`valve-bridge response-test --plan quick`): a slew limit lengthens only the large steps' T86, a minimum speed the small ones'";
     }
     match effect {
         Effect::Backlash | Effect::Deadband | Effect::StateDependentDelay => {
-            "random steps with many reversals over the whole travel (`[source] kind = \"random-steps\"`)"
+            "the standard response test (`valve-bridge response-test --plan standard`): reversals of every size at 25, 50 and 75 %, where lost motion delays the small reversals, a deadband stops short of every step (its final error) and a state-dependent delay grows with the opening, and the signature's dead band"
         }
         Effect::Quantization | Effect::Stiction => {
-            "a slow ramp (`[source] kind = \"ramp\"`): stiction moves in jumps larger than the sensor step"
+            "the response test's slow ramp out and back (`valve-bridge response-test --plan quick`, its signature): stiction moves in jumps larger than the sensor step"
         }
         Effect::SlewRate | Effect::Asymmetry => {
-            "large steps in both directions (`[source] kind = \"steps\"` from 20 to 90 % and back)"
+            "the response test's 10 % steps both ways (`valve-bridge response-test --plan quick`): T86 opening against closing"
         }
         Effect::Calibration | Effect::Saturation => {
             "steps held to steady state across the whole travel, up to 0 and 100 % (`[source] kind = \"steps\"`)"
         }
-        Effect::DeadTime => "small steps (<= 1 %) held for several seconds",
+        Effect::DeadTime => {
+            "the response test's small steps held until the valve settles (`valve-bridge response-test --plan quick`)"
+        }
         Effect::MinSpeed => {
-            "steps of several sizes, 0.5 to 20 % (`[source] kind = \"steps\"`): a minimum speed shows in the small ones"
+            "the response test's steps of 0.25 to 10 % (`valve-bridge response-test --plan quick`): a minimum speed shows in the small ones"
         }
     }
 }
@@ -635,5 +638,46 @@ fn steps_html(h: &mut String, d: &Diagnosis) {
     if !scatter.is_empty() {
         h.push_str("<h2>Step delays</h2>");
         h.push_str(&scatter);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::response::plan::Plan;
+
+    #[test]
+    fn the_experiments_name_a_response_test_plan_that_exists() {
+        let mut named = 0;
+        for effect in Effect::ALL {
+            for other in std::iter::once(None).chain(Effect::ALL.map(Some)) {
+                let text = experiment(effect, other);
+                let Some((_, rest)) = text.split_once("valve-bridge response-test --plan ") else {
+                    continue;
+                };
+                let plan: String = rest
+                    .chars()
+                    .take_while(char::is_ascii_alphanumeric)
+                    .collect();
+                assert!(
+                    Plan::load(&plan, (0.0, 100.0)).is_ok(),
+                    "{effect:?}: {plan}"
+                );
+                named += 1;
+            }
+        }
+        assert!(named > 0);
+        let look_alike = note(&Note::LookAlike {
+            effect: Effect::Backlash,
+            other: Effect::StateDependentDelay,
+            removed_share: 0.5,
+            other_removed_share: 0.48,
+        });
+        assert!(
+            look_alike.contains("`valve-bridge response-test --plan standard`"),
+            "{look_alike}"
+        );
+        let few = note(&Note::FewReversals { reversals: 2 });
+        assert!(few.contains("valve-bridge response-test"), "{few}");
     }
 }

@@ -10,6 +10,8 @@
 //! - [`plot`]: the SVG charts.
 //! - [`chart`]: the interactive time-series charts (uPlot, embedded), the SVG kept for a page
 //!   without scripts.
+//! - [`response`]: a response test's text and page (every step and the signature charted with
+//!   its figures marked, the spec's lines).
 //! - [`live`]: the analysis the daemon runs beside its loop (a window's diagnosis and report,
 //!   the health plot), handed to it as a [`crate::daemon::Analysis`].
 //!
@@ -25,6 +27,7 @@ pub mod identify;
 pub mod live;
 pub mod plot;
 pub mod readme;
+pub mod response;
 pub mod verdict;
 
 use std::fmt::Write;

@@ -174,7 +174,8 @@ fn thin(y: &[f64], range: std::ops::Range<usize>) -> Vec<usize> {
     out
 }
 
-/// A time-series chart of `series` against `t` (labelled `x_label`) over the samples `range`.
+/// A time-series chart of `series` against `t` (labelled `x_label`) over the samples `range`; a
+/// missing value (NaN) breaks a series' line.
 pub fn lines(
     title: &str,
     y_label: &str,
@@ -214,10 +215,16 @@ pub fn lines(
         };
         for s in series.iter().filter(|s| s.y.len() >= range.end) {
             let idx = thin(s.y, range.clone());
-            drawn(chart.draw_series(LineSeries::new(
-                idx.iter().map(|&k| (t[k], s.y[k])),
-                s.color.stroke_width(1),
-            )));
+            // A missing value (NaN) is a gap: each run of values is a line of its own.
+            for run in idx
+                .split(|&k| !s.y[k].is_finite())
+                .filter(|r| !r.is_empty())
+            {
+                drawn(chart.draw_series(LineSeries::new(
+                    run.iter().map(|&k| (t[k], s.y[k])),
+                    s.color.stroke_width(1),
+                )));
+            }
         }
     })
 }

@@ -1,6 +1,7 @@
 //! The deterministic figures README quotes, generated from the tool's own `--json` documents:
-//! the table of the shared recordings' diagnoses ([`diagnose_row`]) and identify's Table 1 on the
-//! paper-like recording ([`table1`]), and README's marked blocks that hold them
+//! the table of the shared recordings' diagnoses ([`diagnose_row`]), identify's Table 1 on the
+//! paper-like recording ([`table1`]), the standard response test of the emulated valve
+//! ([`response_table`], from its `response.json`), and README's marked blocks that hold them
 //! (`<!-- generated: NAME -->` ... `<!-- end generated -->`).
 //!
 //! `examples/readme-figures.rs` prints them or writes them into README ([`REGENERATE`]); the
@@ -37,6 +38,9 @@ pub const DIAGNOSE_CASES: &str = "diagnose-cases";
 pub const IDENTIFY_TABLE1: &str = "identify-table1";
 /// The recording of identify's Table 1 in README.
 pub const TABLE1_CASE: &str = "pub_sdd_paper_rs";
+
+/// The block of the standard response test of `config/emulated.toml`, as fast as possible.
+pub const RESPONSE_EMULATED: &str = "response-emulated";
 
 /// The head of the diagnoses' table.
 pub const DIAGNOSE_HEADER: &str =
@@ -189,6 +193,43 @@ pub fn check_line(readme: &str, name: &str, prefix: &str, want: &str) -> Result<
             "README.md's block `{name}` has no line starting `{prefix}`; it should read\n  {want}\nregenerate it with `{REGENERATE}`"
         )),
     }
+}
+
+/// The worst figures per step size and the signature of a response test, from its
+/// `response.json` document `r`.
+pub fn response_table(r: &Value) -> String {
+    let secs = |v: &Value| v.as_f64().map_or("-".into(), |v| format!("{v:.2} s"));
+    let pct = |v: &Value| v.as_f64().map_or("-".into(), |v| format!("{v:.2} %"));
+    let side = |w: &Value| {
+        format!(
+            "{}, {}, {}/{}",
+            secs(&w["dead_time_s"]),
+            secs(&w["t86_s"]),
+            w["resolved"],
+            w["steps"]
+        )
+    };
+    let mut rows = vec![
+        "| step | opening: worst dead time, T86, resolved | closing: the same |".to_string(),
+        "|---|---|---|".to_string(),
+    ];
+    for s in r["summary"].as_array().into_iter().flatten() {
+        rows.push(format!(
+            "| {} % | {} | {} |",
+            s["size_pct"].as_f64().unwrap_or(f64::NAN),
+            side(&s["open"]),
+            side(&s["close"])
+        ));
+    }
+    let g = &r["signature"];
+    rows.push(String::new());
+    rows.push(format!(
+        "Signature: dead band {}, hysteresis {}, resolution {}.",
+        pct(&g["dead_band_pct"]),
+        pct(&g["hysteresis_pct"]),
+        pct(&g["resolution_pct"])
+    ));
+    rows.join("\n")
 }
 
 /// Checks that block `name` of `readme` is `want`, naming the first line that differs.

@@ -1,7 +1,9 @@
 //! Synthetic recordings: any model file driven by the paper's random steps, small steps,
 //! ramps, a mix of those, or a closed level-control loop, with seeded measurement noise. For
 //! demos, tests and benchmarks that need a recording whose physics is known (an effect hidden
-//! on purpose, or none at all); [`physical`] builds physical valves with one named effect.
+//! on purpose, or none at all); [`physical`] builds physical valves with one named effect, and
+//! [`digital`] simulates a digital positioner apart from the project's models, recorded
+//! through the same excitations ([`record`] takes any [`Actuator`]).
 //!
 //! The closed loop is an outlet valve holding a tank level under a PI controller ([`level`]),
 //! so O_P moves gently and reverses often, the way a valve sees normal operation. The
@@ -10,6 +12,7 @@
 //! so no noise is added to it here. [`logged`] turns a recording into what the daemon's log
 //! would hold of it (per mille, lost replies). Nothing here reads or writes files.
 
+pub mod digital;
 pub mod excite;
 pub mod level;
 pub mod logged;
@@ -31,6 +34,8 @@ pub enum SynthError {
     Model(#[from] ModelError),
     #[error(transparent)]
     Recording(#[from] RecordingError),
+    #[error(transparent)]
+    Digital(#[from] digital::DigitalError),
     #[error("noise of {0} %: must be a finite standard deviation >= 0")]
     Noise(f64),
     #[error("noise of {0} % on a physical valve: its sensor makes its own noise ([physical] sensor_noise_pct); pass 0")]
@@ -72,6 +77,26 @@ impl Excitation {
     }
 }
 
+/// A valve a recording can be made of: put at rest, then stepped one sample at a time.
+/// [`Valve`] is one (any model file); [`digital`]'s positioner is another, written apart from
+/// the models.
+pub trait Actuator {
+    /// At rest at V_P `vp_pct` with O_P `op_pct` (the excitation's first value).
+    fn reset(&mut self, op_pct: f64, vp_pct: f64);
+    /// One sample with O_P `op_pct`: the recorded V_P.
+    fn step(&mut self, op_pct: f64) -> f64;
+}
+
+impl Actuator for Valve {
+    fn reset(&mut self, op_pct: f64, vp_pct: f64) {
+        Valve::reset(self, op_pct, vp_pct);
+    }
+
+    fn step(&mut self, op_pct: f64) -> f64 {
+        Valve::step(self, op_pct)
+    }
+}
+
 /// Runs `spec` for `duration_s` at `dt` under `excitation`, adding Gaussian noise of
 /// `noise_pct` (standard deviation, %) to the recorded V_P (0 for a physical valve, whose
 /// sensor is noisy by itself). Deterministic for a given `seed`.
@@ -86,15 +111,29 @@ pub fn generate(
     if spec.model == ModelKind::Physical && noise_pct != 0.0 {
         return Err(SynthError::NoiseOnPhysical(noise_pct));
     }
-    let n = (duration_s / dt).round() as usize;
     let mut valve = Valve::new(spec, dt)?;
+    record(&mut valve, excitation, duration_s, dt, noise_pct, seed)
+}
+
+/// Runs `valve` for `duration_s` at `dt` under `excitation`, as [`generate`] runs a model
+/// file: the same O_P for the same `seed`, whatever the valve does with it (in closed loop the
+/// tank and controller draw from the generator in the same order).
+pub fn record(
+    valve: &mut impl Actuator,
+    excitation: Excitation,
+    duration_s: f64,
+    dt: f64,
+    noise_pct: f64,
+    seed: u64,
+) -> Result<Recording, SynthError> {
+    let n = (duration_s / dt).round() as usize;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noise = Normal::new(0.0, noise_pct).map_err(|_| SynthError::Noise(noise_pct))?;
     let mut rec = Columns::with_capacity(n);
     let mut open = match excitation {
         Excitation::ClosedLoop { level_pct } => {
             let plant = LevelLoop::new(level_pct);
-            closed_loop(&mut valve, plant, n, dt, &noise, &mut rng, &mut rec);
+            closed_loop(valve, plant, n, dt, &noise, &mut rng, &mut rec);
             return Ok(Recording::from_vectors(rec.t, rec.op, rec.vp)?);
         }
         Excitation::NoisyLoop {
@@ -102,7 +141,7 @@ pub fn generate(
             level_noise_pct,
         } => {
             let plant = LevelLoop::new(level_pct).with_level_noise(level_noise_pct);
-            closed_loop(&mut valve, plant, n, dt, &noise, &mut rng, &mut rec);
+            closed_loop(valve, plant, n, dt, &noise, &mut rng, &mut rec);
             return Ok(Recording::from_vectors(rec.t, rec.op, rec.vp)?);
         }
         Excitation::RandomSteps => OpenLoop::random_steps(seed),
@@ -145,7 +184,7 @@ impl Columns {
 
 /// The PI level loop `plant` through `valve`, V_P recorded with `noise`.
 fn closed_loop(
-    valve: &mut Valve,
+    valve: &mut impl Actuator,
     mut plant: LevelLoop,
     n: usize,
     dt: f64,

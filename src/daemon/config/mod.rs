@@ -1,8 +1,8 @@
 //! The daemon's TOML configuration: the file's shape, its checks, and the checked [`Config`]
 //! the daemon runs from; the embedded default.
 //!
-//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]`, `[metrics]`
-//! `[health]` and `[diagnosis]`, all optional (no `[metrics]`: no Prometheus endpoint; no
+//! A config has the tables `[loop]`, `[valve]`, `[source]`, `[safety]`, `[log]`, `[metrics]`,
+//! `[health]`, `[diagnosis]` and `[test]` (the response test's), all optional (no `[metrics]`: no Prometheus endpoint; no
 //! `[health]`: no live health check; no `[diagnosis]`: no live diagnosis). Several valves are several
 //! `[[valve]]` tables, each with a `name` and, optionally, a `[valve.source]` of its own.
 //! `[valve] kind = ...` and `[source] kind = ...` pick a backend and an O_P source; the settings of
@@ -80,6 +80,8 @@ pub struct Config {
     pub health: Option<HealthConfig>,
     /// The live diagnosis of every valve, if any (needs `health`).
     pub diagnosis: Option<DiagnosisConfig>,
+    /// The response test (`valve-bridge response-test`).
+    pub test: TestConfig,
 }
 
 /// A config file as written, before its checks (field order is the order `expected one of`
@@ -104,6 +106,23 @@ struct ConfigFile {
     metrics: Option<MetricsConfig>,
     health: Option<HealthConfig>,
     diagnosis: Option<DiagnosisConfig>,
+    #[serde(default)]
+    test: TestConfig,
+}
+
+/// `[test]`: the response test (`valve-bridge response-test`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TestConfig {
+    /// Ask for `--yes` before the test moves a real valve (false: a bench valve the test may
+    /// always move).
+    pub confirm: bool,
+}
+
+impl Default for TestConfig {
+    fn default() -> Self {
+        TestConfig { confirm: true }
+    }
 }
 
 /// `[loop]`: rate and clock.
@@ -151,6 +170,16 @@ pub enum ClockKind {
     Real,
     /// Cycles run back to back on a simulated clock (tests, offline runs).
     Virtual,
+}
+
+/// No valve, or more than one, fits `--valve`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}name the valve with --valve (one of {})", asked.as_ref().map_or(String::new(), |a| format!("no valve is named `{a}`: ")), names.join(", "))]
+pub struct ValveChoice {
+    /// The name asked for, if any.
+    pub asked: Option<String>,
+    /// The valves' names.
+    pub names: Vec<String>,
 }
 
 /// `[metrics]`: the Prometheus endpoint.
@@ -397,6 +426,7 @@ impl ConfigFile {
             metrics: self.metrics,
             health: self.health,
             diagnosis: self.diagnosis,
+            test: self.test,
         };
         if let Some(s) = config.controller_server() {
             let driven = config.valves.iter().filter(|v| v.source.is_none()).count();
@@ -432,6 +462,20 @@ impl Config {
     /// The source of O_P of `valve`: its own `source` table, else `[source]`.
     pub fn source_of<'a>(&'a self, valve: &'a ValveConfig) -> &'a SourceConfig {
         valve.source.as_ref().unwrap_or(&self.source)
+    }
+
+    /// The valve `name` names, or the only one when `name` is None (`--valve` of `probe` and
+    /// `response-test`).
+    pub fn valve(&self, name: Option<&str>) -> Result<&ValveConfig, ValveChoice> {
+        let picked = match name {
+            Some(name) => self.valves.iter().find(|v| v.label() == name),
+            None if self.valves.len() == 1 => self.valves.first(),
+            None => None,
+        };
+        picked.ok_or_else(|| ValveChoice {
+            asked: name.map(str::to_string),
+            names: self.valves.iter().map(|v| v.label().to_string()).collect(),
+        })
     }
 
     /// The server of the process controller (`[source.modbus-server]`), when it drives a valve.

@@ -17,6 +17,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{Check, ClockKind, ListenAddr, LoopConfig};
+use crate::daemon::response::plan::Plan;
 use crate::modbus::map::{self, RegisterMap};
 use crate::net::Limits;
 use crate::recording::{self, ColumnMap, ReadOptions, RecordingError};
@@ -74,6 +75,9 @@ pub enum SourceSpec {
     /// `modbus-server`: whatever a process controller writes into the daemon's Modbus TCP
     /// server (HIL).
     ModbusServer(ModbusServerConfig),
+    /// `response-test`: a response test's plan, walked as V_P settles (`valve-bridge
+    /// response-test` sets it; no config file names it).
+    ResponseTest(Arc<Plan>),
 }
 
 impl SourceSpec {
@@ -88,6 +92,7 @@ impl SourceSpec {
             SourceSpec::Replay(_) => "replay",
             SourceSpec::Constant(_) => "constant",
             SourceSpec::ModbusServer(_) => "modbus-server",
+            SourceSpec::ResponseTest(_) => "response-test",
         }
     }
 }

@@ -17,7 +17,7 @@ use std::time::UNIX_EPOCH;
 
 use serde::Serialize;
 
-use crate::daemon::diagnosis::history_file;
+use crate::daemon::files::history_file;
 use crate::daemon::health_figures::{Figures, HealthLimits, Judged};
 use crate::recording::log_format::{Sample, Status};
 

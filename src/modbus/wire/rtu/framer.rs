@@ -11,7 +11,9 @@
 //!   byte for byte the same (a held set-point): a slave answers in order, so the frame is that
 //!   reply, and the current one's is still to come;
 //! - any other frame, and every frame between two requests, goes to the oldest unanswered
-//!   request it fits (a late reply: counted, dropped) or, fitting none, is unexpected: counted,
+//!   request it fits that was sent after the unit's newest answered one (a late reply:
+//!   counted, dropped; a slave answers in order, so an older one was dropped for good) or,
+//!   fitting none, is unexpected: counted,
 //!   and when it follows a reply passed on in the same window, that reply is marked
 //!   *unverified* ([`Unverified`]): it may have been a reply later than `late_reply_ms`.
 //!
@@ -283,13 +285,10 @@ impl Framer {
                 return true;
             }
         }
-        let Some(i) = (self.sent())
-            .find(|(_, s)| !s.answered && shaped(&s.expect))
-            .map(|(i, _)| i)
-        else {
+        let unit = f[0];
+        let Some(i) = self.awaiting(unit, shaped) else {
             return false;
         };
-        let unit = f[0];
         self.answer(i, unit, now, state);
         true
     }
@@ -355,6 +354,21 @@ impl Framer {
             .map(|(i, _)| i)
     }
 
+    /// The oldest unanswered request of `unit` that a frame `fits` may answer: one sent after
+    /// the unit's newest answered request. A slave answers in order, so an older one went
+    /// unanswered for good (a dropped request), and a late reply given to it would read as
+    /// far later than it is.
+    fn awaiting(&self, unit: u8, fits: impl Fn(&Expect) -> bool) -> Option<usize> {
+        let after = (self.sent().enumerate())
+            .filter(|(_, (_, s))| s.answered && s.expect.unit == unit)
+            .map(|(k, _)| k + 1)
+            .last()
+            .unwrap_or(0);
+        (self.sent().skip(after))
+            .find(|(_, s)| !s.answered && s.expect.unit == unit && fits(&s.expect))
+            .map(|(i, _)| i)
+    }
+
     /// The request at `i` of `unit` got its reply at `now`, late: counted, and the horizon grows
     /// if it was later than that.
     fn answer(&mut self, i: usize, unit: u8, now: Instant, state: &WireState) {
@@ -380,10 +394,8 @@ impl Framer {
     /// A frame that answers no current request: the reply to the oldest unanswered request it
     /// fits, or unexpected.
     fn late(&mut self, frame: &[u8], now: Instant, state: &WireState) {
-        let answered = (self.sent())
-            .find(|(_, s)| !s.answered && matches!(s.expect.fit(frame, |_, _| true), Fit::Yes))
-            .map(|(i, _)| i);
-        match answered {
+        let fits = |e: &Expect| matches!(e.fit(frame, |_, _| true), Fit::Yes);
+        match self.awaiting(frame[0], fits) {
             Some(i) => self.answer(i, frame[0], now, state),
             None => self.unexpected(frame, now, state),
         }

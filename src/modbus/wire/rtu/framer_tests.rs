@@ -200,6 +200,25 @@ fn a_reply_later_than_the_horizon_raises_it() {
 }
 
 #[test]
+fn a_late_reply_is_never_given_to_a_request_the_device_dropped() {
+    let mut line = Line::new();
+    // The device answers, then drops a request; the line is held for it, then the next ones
+    // are answered.
+    line.exchange(&fc23(500), &[&fc23_reply(500, 489)]);
+    line.at(10).exchange(&fc23(500), &[]);
+    assert!(line.at(10).settle(&[]).is_some());
+    line.at(100).exchange(&fc23(500), &[&fc23_reply(500, 490)]);
+    // Two seconds on, a reply comes 15 ms late: it is the last request's, not the dropped
+    // one's of two seconds before, and the horizon stays.
+    line.at(2000).exchange(&fc23(500), &[&fc23_reply(500, 491)]);
+    line.at(10).exchange(&fc23(500), &[]);
+    assert_eq!(line.at(15).settle(&[&fc23_reply(500, 492)]), None);
+    assert_eq!(line.state.stale_replies(), 1);
+    assert_eq!(line.f.horizon(), HORIZON);
+    assert_eq!(line.state.raised_horizon(), None);
+}
+
+#[test]
 fn a_second_reply_in_one_window_marks_the_first() {
     let mut line = Line::new();
     let two = [fc23_reply(500, 490), fc23_reply(500, 491)].concat();
