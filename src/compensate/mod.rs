@@ -439,18 +439,19 @@ impl Compensator {
         // Kick and deadband step only while the controller asks for a move.
         let cart = (self.inverse.pin_reach(1.0)).map_or(base, |r| r.cart_pct);
         let moving = self.moving(op, base - cart);
-        let wish = if moving {
-            base + self.kick(base - cart)
+        // The step keeps the direction of the controller's moves whether or not it is sent.
+        let step = self.step.offset(op, moving, (base, cart), self.gate);
+        let step = if self.parts.deadband { step } else { 0.0 };
+        // A kick only in the direction of the controller's move: a model whose kick pulled its
+        // input target past the wish would otherwise ask for a kick back.
+        let kick = if moving && (base - cart).signum() == self.step.dir() {
+            self.kick(base - cart)
         } else {
-            base
+            0.0
         };
-        let before_deadband = if self.parts.deadband {
-            wish + self.step.offset(op, moving, (base, cart), self.gate)
-        } else {
-            wish
-        };
-        self.shaping = (before_deadband - base).abs() > SAME_PLACE_PCT;
-        (before_deadband - id.calibration_offset_pct) / id.calibration_gain
+        let shaped = base + kick + step;
+        self.shaping = (shaped - base).abs() > SAME_PLACE_PCT;
+        (shaped - id.calibration_offset_pct) / id.calibration_gain
     }
 
     /// Whether the controller asks the valve to move: `asked` (the wanted core input minus

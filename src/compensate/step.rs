@@ -174,6 +174,11 @@ impl DeadbandStep {
         }
     }
 
+    /// The direction of the controller's last move, +1 (opening) or -1 (closing).
+    pub(super) fn dir(&self) -> f64 {
+        self.dir
+    }
+
     /// The V_P read for the last set-point (None when none was read), with the noise of the
     /// reading `noise_pct` (standard deviation, %).
     pub(super) fn observe(&mut self, vp: Option<f64>, noise_pct: f64) {

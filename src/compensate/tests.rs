@@ -115,22 +115,40 @@ fn the_inverse_calibration_and_deadband_bring_the_valve_to_the_target() {
 #[test]
 fn the_deadband_step_is_on_the_side_of_the_move_closing_as_well_as_opening() {
     // A band on the input (the form diagnose writes for a positioner deadband seen through a
-    // log) and one in the positioner, and the band on the input with a friction band whose
-    // kicks pull the model's input target past the wish; steps both ways, each held 3 s.
+    // log) and one in the positioner, each compensated with its own model; and a valve with a
+    // friction band and a positioner deadband of 0.5 % compensated with a model of that band on
+    // the input, whose kicks pull the model's input target past the wish. Steps both ways, each
+    // held 3 s.
     let levels = [50.0, 49.0, 51.0, 49.5, 48.0, 49.0];
     let op: Vec<f64> = levels
         .iter()
         .flat_map(|&x| std::iter::repeat_n(x, 300))
         .collect();
-    for (friction, positioner) in [(0.0, false), (0.0, true), (1.0, false)] {
+    let with = |friction: f64, positioner: bool| {
         let mut valve = band_valve(friction);
         if positioner {
             valve.effects.positioner_deadband_pct = 0.5;
         } else {
             valve.effects.deadband_pct = 0.744;
         }
+        valve
+    };
+    let cases = [
+        (with(0.0, false), with(0.0, false)),
+        (with(0.0, true), with(0.0, true)),
+        (with(1.0, true), {
+            let mut m = band_valve(1.0);
+            m.effects.deadband_pct = 0.5;
+            m
+        }),
+    ];
+    for (valve, model) in cases {
+        let (friction, positioner) = (
+            valve.effects.friction_band_pct,
+            valve.effects.positioner_deadband_pct > 0.0,
+        );
         let (_, plain) = run(&valve, None, &op);
-        let mut comp = compensator(&valve);
+        let mut comp = compensator(&model);
         let (sent, comped) = run(&valve, Some(&mut comp), &op);
         for (i, w) in levels.windows(2).enumerate() {
             let (from, to) = (w[0], w[1]);
