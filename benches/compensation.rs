@@ -374,7 +374,9 @@ fn main() -> Result<(), Error> {
         in_process_part(seeds, kick_share, &plot_path)?;
     }
     if let Some(secs) = modbus_secs {
-        let outcome = modbus::run(&work_dir().join("modbus"), secs, &|what| eprintln!("{what}"))?;
+        let outcome = modbus::run(&work_dir().join("modbus"), secs, &|what| {
+            eprintln!("{what}")
+        })?;
         modbus_tables(&outcome, secs);
     }
     Ok(())

@@ -55,7 +55,11 @@ fn compensator_for(model: &ModelSpec) -> Compensator {
 
 /// The compensator of the model diagnose finds on 10 minutes of the valve's mixed log.
 fn compensator(valve: &ModelSpec) -> Compensator {
-    compensator_for(&diagnosed(valve, Excitation::Mixed { low_pct: 40.0 }, 600.0))
+    compensator_for(&diagnosed(
+        valve,
+        Excitation::Mixed { low_pct: 40.0 },
+        600.0,
+    ))
 }
 
 /// The compensator of a model given as TOML, default settings.
@@ -192,7 +196,9 @@ fn a_small_step_log_leaves_the_stroke_speed_undetermined_and_compensation_does_n
     let comp = compensator_for(&model);
     assert!(
         comp.describe().starts_with("backlash (friction band 1.")
-            && comp.describe().ends_with("the model's stroke speed is not used (its log did not determine it)"),
+            && comp
+                .describe()
+                .ends_with("the model's stroke speed is not used (its log did not determine it)"),
         "{}",
         comp.describe()
     );
@@ -241,9 +247,15 @@ fn a_foreign_deadband_valve_ends_its_moves_at_the_target_with_the_guard_on() {
         (n, ends)
     };
     let plain = trial::run(&valve, None, Scenario::Sequence, secs, DT, 1).unwrap();
-    let comped =
-        trial::run(&valve, Some(compensator_for(&model)), Scenario::Sequence, secs, DT, 1)
-            .unwrap();
+    let comped = trial::run(
+        &valve,
+        Some(compensator_for(&model)),
+        Scenario::Sequence,
+        secs,
+        DT,
+        1,
+    )
+    .unwrap();
     assert_eq!(comped.switched_off_s, None);
     let ((without, a), (with, b)) = (within(&plain), within(&comped));
     assert!(without == 0 && with >= 11, "{a:?} -> {b:?}");

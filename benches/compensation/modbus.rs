@@ -485,7 +485,11 @@ pub(crate) fn run(
     for (i, log) in logs.iter().enumerate() {
         progress(&format!("Modbus: diagnosing {}", names[i]));
         let steps = settled(log, &work.join(format!("log-{}", i + 1)))?;
-        models.push(diagnose(&vb, &steps, &work.join(format!("diag-{}", i + 1)))?);
+        models.push(diagnose(
+            &vb,
+            &steps,
+            &work.join(format!("diag-{}", i + 1)),
+        )?);
     }
     let described = (models.iter())
         .map(|m| super::compensator(m).map(|c| c.describe()))

@@ -77,7 +77,11 @@ fn a_valve_resting_away_from_where_its_model_rests_misses_in_every_hold() {
     let mut verdicts = Vec::new();
     let mut at = (50.0, 49.5);
     for k in 0..6 {
-        let (op, short) = if k % 2 == 0 { (50.0, 49.5) } else { (48.0, 48.5) };
+        let (op, short) = if k % 2 == 0 {
+            (50.0, 49.5)
+        } else {
+            (48.0, 48.5)
+        };
         verdicts.extend(approach(&mut g, (100, op), (op, short), &mut at));
     }
     // One window is no evidence; the second, with its misses, is: it ends at its first hold
@@ -97,7 +101,10 @@ fn a_valve_resting_away_from_where_its_model_rests_misses_in_every_hold() {
     for k in 0..6 {
         let op = if k % 2 == 0 { 50.0 } else { 48.0 };
         if let Some(w) = approach(&mut g, (100, op), (op, op), &mut at) {
-            assert!(!w.worse && w.evidence.iter().all(|e| e.exceeding == 0), "{w:?}");
+            assert!(
+                !w.worse && w.evidence.iter().all(|e| e.exceeding == 0),
+                "{w:?}"
+            );
         }
     }
 }
@@ -122,7 +129,10 @@ fn a_valve_carried_past_its_targets_overshoots_and_one_hold_is_chance() {
     };
     let w = run(&|_| true);
     assert_eq!(w.exceeded, Some(Figure::Overshoot), "{w:?}");
-    assert!((w.evidence_of(Figure::Overshoot).by_pct - 0.6).abs() < 0.01, "{w:?}");
+    assert!(
+        (w.evidence_of(Figure::Overshoot).by_pct - 0.6).abs() < 0.01,
+        "{w:?}"
+    );
     // One overshooting hold in six is what chance may do.
     let w = run(&|k| k == 2);
     assert_eq!(w.evidence_of(Figure::Overshoot).exceeding, 1, "{w:?}");

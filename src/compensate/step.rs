@@ -240,6 +240,9 @@ mod tests {
             }
         }
         assert!((r.anchor - 49.4).abs() > 0.01, "{r:?}");
-        assert!(r.at_rest().is_some_and(|at| (at - 49.4).abs() < 1e-9), "{r:?}");
+        assert!(
+            r.at_rest().is_some_and(|at| (at - 49.4).abs() < 1e-9),
+            "{r:?}"
+        );
     }
 }
