@@ -11,17 +11,19 @@
 //! the paper's level loop, the paper's random steps, and small steps. Figures per run:
 //! `valve_bridge::compensate::trial::Figures`.
 //!
-//! Then the physical valves once more over Modbus ([`modbus`]): each a unit of sim-device,
-//! logged by `valve-bridge run`, diagnosed by `valve-bridge diagnose` from that log, and run
-//! with and without compensation, in real time (short runs).
+//! Then foreign valves over Modbus ([`modbus`]): physical valves with physics the model
+//! `diagnose` fits does not have, each a unit of sim-device, logging 200 s of their own small
+//! steps through `valve-bridge run`, diagnosed by `valve-bridge diagnose` from that log, and run
+//! without compensation, with it and the default guard, and with it while the guard does not
+//! judge, in real time: small steps, and the sequence of closing and opening moves.
 //!
 //! Run: `cargo bench --bench compensation -- [--seeds N] [--kick-share S] [--plot PATH]
-//! [--modbus-log-s S] [--modbus-run-s S] [--no-modbus]` (default 3 seeds and the default
-//! `kick_share`; shares above the config's limit of 1 are taken, to show why there is one;
-//! over Modbus a 300 s log and 180 s runs). It writes the SVG of a reversal of the 1.5 % valve
-//! with and without compensation to PATH (default `target/compensation-bench/reversal.svg`),
-//! and the set-point sent to `PATH-kick.svg`; the Modbus part's files go to
-//! `target/compensation-bench/modbus/`.
+//! [--modbus-log-s S] [--modbus-run-s S] [--no-modbus | --modbus-only]` (default 3 seeds and
+//! the default `kick_share`; shares above the config's limit of 1 are taken, to show why there
+//! is one; over Modbus a 200 s log and 200 s runs of small steps). It writes the SVG of a
+//! reversal of the 1.5 % valve with and without compensation to PATH (default
+//! `target/compensation-bench/reversal.svg`), and the set-point sent to `PATH-kick.svg`; the
+//! Modbus part's files go to `target/compensation-bench/modbus/`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -65,6 +67,8 @@ struct Args {
     plot: PathBuf,
     /// The Modbus part's log and runs, s (None: not run).
     modbus: Option<(f64, f64)>,
+    /// Run the valves in process (`--modbus-only`: not).
+    in_process: bool,
 }
 
 fn options() -> Result<Args, Error> {
@@ -72,7 +76,8 @@ fn options() -> Result<Args, Error> {
         seeds: 3,
         kick_share: CompensationConfig::default().kick_share,
         plot: work_dir().join("reversal.svg"),
-        modbus: Some((300.0, 180.0)),
+        modbus: Some((200.0, 200.0)),
+        in_process: true,
     };
     let secs = |a: Option<String>, name: &str| -> Result<f64, Error> {
         let s: f64 = a.ok_or(format!("{name} needs seconds"))?.parse()?;
@@ -100,6 +105,7 @@ fn options() -> Result<Args, Error> {
                 out.modbus = out.modbus.map(|m| (m.0, s));
             }
             "--no-modbus" => out.modbus = None,
+            "--modbus-only" => out.in_process = false,
             "--bench" => {}
             other => return Err(format!("unknown argument `{other}`").into()),
         }
@@ -362,7 +368,22 @@ fn main() -> Result<(), Error> {
         kick_share,
         plot: plot_path,
         modbus: modbus_secs,
+        in_process,
     } = options()?;
+    if in_process {
+        in_process_part(seeds, kick_share, &plot_path)?;
+    }
+    if let Some(secs) = modbus_secs {
+        let outcome = modbus::run(&work_dir().join("modbus"), secs, &|what| {
+            eprintln!("{what}")
+        })?;
+        modbus_tables(&outcome, secs);
+    }
+    Ok(())
+}
+
+/// The valves in process: their models, the table and the plot.
+fn in_process_part(seeds: u64, kick_share: f64, plot_path: &PathBuf) -> Result<(), Error> {
     let benches = benches(kick_share)?;
     println!("Models identified from each valve's own 15-minute log, and what they compensate:");
     for b in &benches {
@@ -381,57 +402,121 @@ fn main() -> Result<(), Error> {
         .iter()
         .find(|b| b.name.contains("1.5 %"))
         .ok_or("no 1.5 % valve")?;
-    reversal_plot(b, &plot_path)?;
-    if let Some((log_s, run_s)) = modbus_secs {
-        let physical: Vec<(String, ModelSpec)> = benches
-            .iter()
-            .filter(|b| b.valve.model == ModelKind::Physical && !b.name.contains("identify"))
-            .map(|b| (b.name.clone(), b.valve.clone()))
-            .collect();
-        let outcomes = modbus::run(
-            &physical,
-            &work_dir().join("modbus"),
-            (log_s, run_s, LOG_SEED),
-            &|what| eprintln!("{what}"),
-        )?;
-        modbus_table(&outcomes, (log_s, run_s));
-    }
+    reversal_plot(b, plot_path)?;
     Ok(())
 }
 
-/// The Modbus part's table.
-fn modbus_table(outcomes: &[modbus::Outcome], (log_s, run_s): (f64, f64)) {
-    println!();
-    println!("Over Modbus (sim-device, seed 1): models diagnosed from each valve's {log_s:.0} s log over Modbus, runs of {run_s:.0} s:");
-    let first = outcomes
-        .iter()
-        .filter(|o| o.scenario == outcomes[0].scenario);
-    for o in first {
-        println!("- {}: {}", o.name, o.described);
+/// `a → b (±c %)`.
+fn pct_change(a: f64, b: f64) -> String {
+    let c = if a > 0.0 { 100.0 * (b / a - 1.0) } else { 0.0 };
+    format!("{b:.3} ({c:+.0} %)")
+}
+
+/// What the guard did in a run.
+fn guard_cell(f: &modbus::Figures) -> String {
+    match &f.switched_off {
+        None => "on".into(),
+        Some((t, why)) if why.is_empty() => format!("off at {t:.1} s"),
+        Some((t, why)) => format!("off at {t:.1} s ({why})"),
     }
+}
+
+/// The Modbus part's tables: per valve and model, without, with the guard and with the guard
+/// not judging.
+fn modbus_tables(o: &modbus::Outcome, (log_s, run_s): (f64, f64)) {
     println!();
-    println!("| valve | scenario | tracking error of the V_P read, % RMS | travel, % | reversals | rows that read a V_P | compensation |");
-    println!("|---|---|---|---|---|---|---|");
-    for o in outcomes {
-        let pct = |a: f64, b: f64| if a > 0.0 { 100.0 * (b / a - 1.0) } else { 0.0 };
-        let (a, b) = (&o.without, &o.with);
+    println!("Over Modbus (sim-device in real time, foreign valves), models diagnosed from each valve's own {log_s:.0} s small-step log:");
+    for (name, d) in o.names.iter().zip(&o.described) {
+        println!("- {name}: {d}");
+    }
+    let rows = table_rows(o);
+    small_steps_table(o, &rows, run_s);
+    sequence_table(o, &rows);
+}
+
+/// The tables' rows: `valve | model` and the cases without, with the guard and with the guard
+/// not judging. The cases come in threes but for the healthy valve given another's model,
+/// whose "without" is the healthy valve's own.
+fn table_rows(o: &modbus::Outcome) -> Vec<(String, [usize; 3])> {
+    use modbus::Variant;
+    let find = |valve: usize, model: usize, v: Variant| {
+        (o.cases.iter()).position(|c| c.valve == valve && c.model == model && c.variant == v)
+    };
+    let mut pairs: Vec<(usize, usize)> = o.cases.iter().map(|c| (c.valve, c.model)).collect();
+    pairs.dedup();
+    pairs
+        .into_iter()
+        .filter_map(|(valve, model)| {
+            let idx = [
+                find(valve, valve, Variant::Without)?,
+                find(valve, model, Variant::Guarded)?,
+                find(valve, model, Variant::Unguarded)?,
+            ];
+            let whose = if valve == model {
+                "its own".to_string()
+            } else {
+                format!("the {} valve's", o.names[model])
+            };
+            Some((format!("{} | {whose}", o.names[valve]), idx))
+        })
+        .collect()
+}
+
+/// The small steps' table.
+fn small_steps_table(o: &modbus::Outcome, rows: &[(String, [usize; 3])], run_s: f64) {
+    println!();
+    println!("Small steps, {run_s:.0} s (seed 1): tracking error of the stem against its healthy twin, % RMS; travel and reversals of the stem through 0.1 %");
+    println!();
+    println!("| valve | model | without | with the guard | guard not judging | travel, % | reversals | rows that read a V_P | the guard |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for (label, [a, g, u]) in rows {
+        let (a, g, u) = (&o.small[*a], &o.small[*g], &o.small[*u]);
         println!(
-            "| {} | {} | {:.3} → {:.3} ({:+.0} %) | {:.0} → {:.0} ({:+.0} %) | {} → {} | {} and {} of {} | {} |",
-            o.name,
-            o.scenario.name(),
+            "| {label} | {:.3} | {} | {} | {:.1} / {:.1} / {:.1} | {} / {} / {} | {} / {} / {} of {} | {} |",
             a.tracking_pct,
-            b.tracking_pct,
-            pct(a.tracking_pct, b.tracking_pct),
+            pct_change(a.tracking_pct, g.tracking_pct),
+            pct_change(a.tracking_pct, u.tracking_pct),
             a.travel.travel_pct,
-            b.travel.travel_pct,
-            pct(a.travel.travel_pct, b.travel.travel_pct),
+            g.travel.travel_pct,
+            u.travel.travel_pct,
             a.travel.reversals,
-            b.travel.reversals,
+            g.travel.reversals,
+            u.travel.reversals,
             a.read.0,
-            b.read.0,
-            a.read.1.max(b.read.1),
-            o.switched_off_s
-                .map_or("on".to_string(), |t| format!("off at {t:.0} s")),
+            g.read.0,
+            u.read.0,
+            a.read.1,
+            guard_cell(g),
+        );
+    }
+}
+
+/// The sequence's table.
+fn sequence_table(o: &modbus::Outcome, rows: &[(String, [usize; 3])]) {
+    println!();
+    println!(
+        "The sequence {:?} % twice, each level held {:.0} s: holds whose stem ends within {} % of the target, and the ends (stem - target, %)",
+        trial::SEQUENCE, trial::SEQUENCE_HOLD_S, trial::SEQUENCE_TOLERANCE_PCT
+    );
+    println!();
+    println!("| valve | model | without | with the guard | guard not judging | ends with the guard | the guard |");
+    println!("|---|---|---|---|---|---|---|");
+    let within = |f: &modbus::Figures| {
+        let n = (f.ends.iter())
+            .filter(|e| e.abs() <= trial::SEQUENCE_TOLERANCE_PCT)
+            .count();
+        format!("{n} of {}", f.ends.len())
+    };
+    for (label, [a, g, u]) in rows {
+        let (a, g, u) = (&o.sequence[*a], &o.sequence[*g], &o.sequence[*u]);
+        let ends: Vec<String> = g.ends.iter().map(|e| format!("{e:+.2}")).collect();
+        println!(
+            "| {label} | {} | {} | {} | {} | {} |",
+            within(a),
+            within(g),
+            within(u),
+            ends.join(" "),
+            guard_cell(g),
         );
     }
 }

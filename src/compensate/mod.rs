@@ -11,18 +11,19 @@
 //!   ([`kick`]). A kick can only make the positioner push harder up to its speed limit: a
 //!   reversal that already runs at full flow cannot be shortened by any set-point.
 //! - **deadband**: the inverse of the model's deadband (the valve stops short by half of it):
-//!   the set-point goes half the band beyond where the valve should stop, in the direction of
-//!   the move.
+//!   the set-point goes half the band beyond the target, on the side the valve comes from
+//!   ([`step`]).
 //! - **calibration**: the inverse of the fitted gain and offset (`V_P = a O_P + b` at rest).
 //!
 //! The kick acts only while the model says the stem cannot move yet (the pressure inside the
-//! band). The deadband step begins with every move the controller asks for, on the side the
-//! valve comes from (closing moves get it below the target, opening ones above), and lasts
-//! until the controller's next move: a valve held at the edge of its deadband stays at the
-//! target. Both begin only on moves of the controller larger than its own noise (three times
-//! its mean sample-to-sample change, at least `min_move_pct`, two samples in a row): a noisy
-//! controller output is not a sequence of reversals worth kicking (that would make the valve
-//! follow the noise).
+//! band). The deadband step's side is the direction of the controller's move (closing moves get
+//! it below the target, opening ones above), never the model's state, which a kick pulls past
+//! the target; it is sent with a move that starts within the band, and after one from outside
+//! it waits until the V_P read has come to rest in the band, so a stem that arrives fast is
+//! not carried past the target; it lasts until the controller's next move. Both begin only on
+//! moves of the controller larger than its own noise (three times its mean sample-to-sample
+//! change, at least `min_move_pct`, two samples in a row): a noisy controller output is not a
+//! sequence of reversals worth kicking (that would make the valve follow the noise).
 //!
 //! The model the compensator steps is the identified one in its friction-band form (the form
 //! `diagnose` finds for a stem with Coulomb friction, `[effects] friction_band_pct`): the band
@@ -31,20 +32,24 @@
 //! all; it is read as the band a 1 % reversal crosses in that time, `B = P_k · 1 % · T(V)`,
 //! fitted as a band growing with opening (`open_slowdown`), so the kick follows the crossing
 //! time at the current opening. On a valve that really crosses in a fixed time, kicks change
-//! nothing. Stick-slip (`stickband_pct`, `breakaway_pct`) is not compensated.
+//! nothing. A stroke speed the model's log did not determine (`stroke_speed_undetermined`) is
+//! not used: the compensator's models have no speed limit but the positioner's gain. Stick-slip
+//! (`stickband_pct`, `breakaway_pct`) is not compensated.
 //!
 //! Guard rails: the set-point stays within the source's `op_min_pct..op_max_pct`; what
 //! compensation adds to the controller's O_P changes by at most `max_rate_pct_per_s`; and the
-//! [`guard`] compares, every `guard_window_s`, what the valve does with compensation
-//! (reversals, travel, overshoot past the target, where it comes to rest) with what the
-//! identified model, driven by the same set-points, says it does: beyond `guard_margin` and
-//! the guard's slack, compensation switches itself off for good (the caller warns).
+//! [`guard`] compares, hold by hold, how far the valve goes past its target and how far from
+//! it it rests with what the identified model, driven by the same set-points and read as the
+//! valve is, says it does: when the holds beyond the model's by more than `guard_margin` and
+//! the noise are more than chance makes, over the last windows of `guard_window_s`,
+//! compensation switches itself off for good (the caller warns).
 //!
 //! Stepping allocates nothing. Not here: the daemon's log and metrics, the config's file
 //! checks (`crate::daemon::config`), the bench.
 
 pub mod guard;
 mod kick;
+mod step;
 pub mod trial;
 
 use std::path::PathBuf;
@@ -56,6 +61,7 @@ use crate::model::{Effects, ModelError, ModelKind, ModelSpec, Valve};
 use guard::Guard;
 pub use guard::Window;
 use kick::Plan;
+use step::DeadbandStep;
 
 /// `[valve.compensation]`: the model and the parts in use.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -79,10 +85,11 @@ pub struct CompensationConfig {
     /// The smallest move of the controller's O_P that is compensated, % (the controller's own
     /// noise raises it).
     pub min_move_pct: f64,
-    /// The guard's window, s.
+    /// The guard's window, s: a verdict weighs the judged holds of the last
+    /// [`guard::WINDOWS_POOLED`] windows.
     pub guard_window_s: f64,
-    /// How much more (relative) the valve may reverse, travel, overshoot and miss its targets
-    /// with compensation than its model says it does with it.
+    /// How much more (relative) the valve may overshoot and miss its target in a hold with
+    /// compensation than its model says it does with it, on top of the allowance for noise.
     pub guard_margin: f64,
 }
 
@@ -97,7 +104,7 @@ impl Default for CompensationConfig {
             kick_share: 0.8,
             max_rate_pct_per_s: 500.0,
             min_move_pct: 0.1,
-            guard_window_s: 60.0,
+            guard_window_s: 20.0,
             guard_margin: 0.1,
         }
     }
@@ -187,6 +194,9 @@ pub struct Identified {
     pub calibration_gain: f64,
     /// See `calibration_gain`, %.
     pub calibration_offset_pct: f64,
+    /// The model's log determined its stroke speed; if not, the compensator's models have no
+    /// speed limit but the positioner's gain.
+    pub stroke_speed_known: bool,
 }
 
 /// The compensator of one valve: its settings, its models and their state.
@@ -220,12 +230,8 @@ pub struct Compensator {
     /// Samples in a row the controller has asked for a move beyond the gate, and which way.
     asked_run: u32,
     asked_dir: f64,
-    /// The side of the deadband step, +1 (opening) or -1 (closing): the side the valve comes
-    /// from, kept once the model has come within the gate of the wish.
-    deadband_dir: f64,
-    /// The controller's O_P when it last asked for a move: the deadband step lasts while it
-    /// stays within the gate of it (None: no step).
-    step_op: Option<f64>,
+    /// The deadband step: its side, when it begins and ends.
+    step: DeadbandStep,
     /// The gate of the last sample, %.
     gate: f64,
     /// A kick or a deadband step shaped the last set-point (not the calibration alone).
@@ -267,6 +273,7 @@ impl Compensator {
         if model.model == ModelKind::Physical {
             return Err(CompensateError::Physical);
         }
+        let model = &without_undetermined_speed(model);
         let (inverse_spec, identified) = inverse_model(model, dt, (op_min, op_max));
         Ok(Compensator {
             parts: Parts {
@@ -298,8 +305,7 @@ impl Compensator {
             seen: 0,
             asked_run: 0,
             asked_dir: 0.0,
-            deadband_dir: 1.0,
-            step_op: None,
+            step: DeadbandStep::new(identified.deadband_pct),
             gate: 0.0,
             shaping: false,
         })
@@ -335,11 +341,16 @@ impl Compensator {
                 id.calibration_gain, id.calibration_offset_pct
             ));
         }
-        if parts.is_empty() {
+        let what = if parts.is_empty() {
             "nothing (the model has no band, deadband or calibration the enabled parts answer)"
                 .into()
         } else {
             parts.join(", ")
+        };
+        if id.stroke_speed_known {
+            what
+        } else {
+            format!("{what}; the model's stroke speed is not used (its log did not determine it)")
         }
     }
 
@@ -369,6 +380,7 @@ impl Compensator {
     /// The V_P read for the last set-point (None when none was read); returns the guard's
     /// verdict when a window ends. A window judged worse switches compensation off for good.
     pub fn observe(&mut self, vp_pct: Option<f64>) -> Option<Window> {
+        self.step.observe(vp_pct, self.guard.noise_pct());
         let window = self.guard.add(guard::Sample {
             op: self.last_op,
             target: self.base(self.last_op),
@@ -402,7 +414,7 @@ impl Compensator {
         self.with.reset(op, self.calibrated(op));
         self.without.reset(op, self.calibrated(op));
         (self.last_op, self.last_sent, self.excursion) = (op, op, 0.0);
-        self.step_op = None;
+        self.step.reset(op);
     }
 
     /// Where the valve settles for the O_P `op` by the model's calibration, %.
@@ -427,38 +439,19 @@ impl Compensator {
         // Kick and deadband step only while the controller asks for a move.
         let cart = (self.inverse.pin_reach(1.0)).map_or(base, |r| r.cart_pct);
         let moving = self.moving(op, base - cart);
-        let wish = if moving {
-            base + self.kick(base - cart)
+        // The step keeps the direction of the controller's moves whether or not it is sent.
+        let step = self.step.offset(op, moving, (base, cart), self.gate);
+        let step = if self.parts.deadband { step } else { 0.0 };
+        // A kick only in the direction of the controller's move: a model whose kick pulled its
+        // input target past the wish would otherwise ask for a kick back.
+        let kick = if moving && (base - cart).signum() == self.step.dir() {
+            self.kick(base - cart)
         } else {
-            base
+            0.0
         };
-        // The deadband step begins with a move and lasts until the controller leaves the place
-        // it asked for: a valve held at the edge of its deadband stays at the target, one let
-        // go as its model arrives stops short wherever the valve is slower than the model.
-        if moving {
-            self.step_op = Some(op);
-        } else if self.step_op.is_some_and(|o| (op - o).abs() > self.gate) {
-            self.step_op = None;
-        }
-        let before_deadband = if self.parts.deadband && self.step_op.is_some() {
-            // A band on the input moves its target; one in the positioner acts on the valve.
-            let from = if id.deadband_in_positioner {
-                cart
-            } else {
-                self.inverse.input_target()
-            };
-            let gap = wish - from;
-            // Decided where the move begins: near the wish the model's stem may stop a hair
-            // either side of it, which is no change of direction.
-            if gap.abs() > self.gate {
-                self.deadband_dir = gap.signum();
-            }
-            wish + self.deadband_dir * id.deadband_pct / 2.0
-        } else {
-            wish
-        };
-        self.shaping = (before_deadband - base).abs() > SAME_PLACE_PCT;
-        (before_deadband - id.calibration_offset_pct) / id.calibration_gain
+        let shaped = base + kick + step;
+        self.shaping = (shaped - base).abs() > SAME_PLACE_PCT;
+        (shaped - id.calibration_offset_pct) / id.calibration_gain
     }
 
     /// Whether the controller asks the valve to move: `asked` (the wanted core input minus
@@ -504,6 +497,20 @@ impl Compensator {
     }
 }
 
+/// `model` with a stroke speed its log did not determine taken out: no limit but the
+/// positioner's gain (a kick planned on a speed the valve may not have would stop short of its
+/// plan, not overshoot it, and the guard's figures do not hang on a speed).
+fn without_undetermined_speed(model: &ModelSpec) -> ModelSpec {
+    let mut spec = model.clone();
+    if spec.stroke_speed_undetermined {
+        if let Some(p) = spec.pincart2.as_mut() {
+            p.dy_max_pct_per_s = composed::NO_LIMIT_PCT_PER_S;
+        }
+        spec.effects.closing_slew_pct_per_s = 0.0;
+    }
+    spec
+}
+
 /// The model in the form the compensator steps (friction band, no dead time, no stick-slip,
 /// no sensor), and what it took from it.
 fn inverse_model(
@@ -521,6 +528,7 @@ fn inverse_model(
         deadband_in_positioner: e.positioner_deadband_pct > e.deadband_pct,
         calibration_gain: e.calibration_gain,
         calibration_offset_pct: e.calibration_offset_pct,
+        stroke_speed_known: !model.stroke_speed_undetermined,
     };
     if let Some(mut p) = spec.pincart2 {
         (identified.band_pct, identified.open_slowdown) = if e.friction_band_pct > 0.0 {

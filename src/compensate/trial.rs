@@ -2,7 +2,8 @@
 //! [`Compensator`], and the figures that judge it (the compensation bench, and its tests).
 //!
 //! Scenarios: the paper's level loop (the PI controller and tank of [`crate::synth::level`]),
-//! the paper's random-step experiment, and small steps (0.2-2 %, [`SmallSteps`]). The valve is
+//! the paper's random-step experiment, small steps (0.2-2 %, [`SmallSteps`]) and a sequence of
+//! moves of 1-2 % held 10 s (where a deadband valve comes to rest). The valve is
 //! stepped exactly as the daemon's emulated valve is: the compensator gets the controller's
 //! O_P, the valve the set-point, and the compensator the V_P read.
 //!
@@ -27,6 +28,12 @@ use crate::synth::{physical, LevelLoop};
 
 /// Deadband of the travel count, %: five standard deviations of a healthy sensor's noise.
 pub const TRAVEL_DEADBAND_PCT: f64 = 0.1;
+/// The levels of [`Scenario::Sequence`], %: closing and opening moves of 1-2 %.
+pub const SEQUENCE: [f64; 6] = [50.0, 49.0, 51.0, 49.5, 48.0, 49.0];
+/// How long each level of [`Scenario::Sequence`] is held, s.
+pub const SEQUENCE_HOLD_S: f64 = 10.0;
+/// A hold of [`Scenario::Sequence`] ends at its level when the stem is within this of it, %.
+pub const SEQUENCE_TOLERANCE_PCT: f64 = 0.15;
 
 /// What drives the valve.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -37,6 +44,9 @@ pub enum Scenario {
     RandomSteps,
     /// Steps of 0.2-2 % held 2-10 s around 40 %, often reversing.
     SmallSteps,
+    /// [`SEQUENCE`] twice, each level held [`SEQUENCE_HOLD_S`], after a hold at its last level
+    /// (so each level is a move): where a deadband valve comes to rest ([`sequence_at`]).
+    Sequence,
 }
 
 impl Scenario {
@@ -53,6 +63,7 @@ impl Scenario {
             Scenario::LevelLoop => "level loop",
             Scenario::RandomSteps => "random steps",
             Scenario::SmallSteps => "small steps",
+            Scenario::Sequence => "sequence",
         }
     }
 }
@@ -105,6 +116,7 @@ pub fn run(
             Scenario::LevelLoop => plant.controller(t, dt, &mut rng),
             Scenario::RandomSteps => steps.op_at(t),
             Scenario::SmallSteps => small.op_at(t),
+            Scenario::Sequence => sequence_at(t),
         };
         if k == 0 {
             v.reset(op, op);
@@ -128,6 +140,29 @@ pub fn run(
         out.stem.push(stem.step(sent));
     }
     Ok(out)
+}
+
+/// The O_P of [`Scenario::Sequence`] at `t_s`: its last level for the first hold, then its
+/// levels twice, the last held on.
+pub fn sequence_at(t_s: f64) -> f64 {
+    let hold = (t_s / SEQUENCE_HOLD_S).floor() as usize;
+    let n = SEQUENCE.len();
+    match hold {
+        0 => SEQUENCE[n - 1],
+        h => SEQUENCE[(h - 1).min(2 * n - 1) % n],
+    }
+}
+
+/// Where the `stem` ends each hold of [`Scenario::Sequence`] (driven by `op`, both sampled
+/// every `dt` from its start), minus its level, %.
+pub fn sequence_ends(stem: &[f64], op: &[f64], dt: f64) -> Vec<f64> {
+    let hold = (SEQUENCE_HOLD_S / dt).round() as usize;
+    (1..=2 * SEQUENCE.len())
+        .filter_map(|h| {
+            let end = (h + 1) * hold - 1;
+            Some(stem.get(end)? - op.get(end)?)
+        })
+        .collect()
 }
 
 /// The figures of a run.
@@ -161,7 +196,7 @@ pub fn figures(run: &Run, nominal: &ModelSpec, dt: f64) -> Result<Figures, Model
 
 /// `valve` with a noise-free sensor of the same calibration (a sensor's noise and lattice do
 /// not act back on the valve, so this copy follows the stem exactly).
-fn noise_free(valve: &ModelSpec) -> ModelSpec {
+pub fn noise_free(valve: &ModelSpec) -> ModelSpec {
     let mut clean = valve.clone();
     if let Some(p) = clean.physical.as_mut() {
         p.sensor_noise_pct = 0.0;

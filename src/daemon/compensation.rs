@@ -10,7 +10,7 @@
 use super::config::ValveConfig;
 use super::error::DaemonError;
 use super::exporter::CompensationMetrics;
-use crate::compensate::guard::Figure;
+use crate::compensate::guard;
 use crate::compensate::{CompensateError, Compensator, Window};
 use crate::model::ModelSpec;
 use crate::recording::log_format::{round_pct, Sample};
@@ -26,6 +26,8 @@ pub struct CompensationReport {
     pub last: Option<Window>,
     /// Loop time at which the guard switched compensation off, s.
     pub switched_off_s: Option<f64>,
+    /// The window whose verdict switched it off.
+    pub tripping: Option<Window>,
 }
 
 /// A valve's compensator and its figures.
@@ -71,6 +73,7 @@ impl Compensation {
                 windows: 0,
                 last: None,
                 switched_off_s: None,
+                tripping: None,
             },
             t_s: 0.0,
         }))
@@ -95,12 +98,16 @@ impl Compensation {
         }
         if !self.comp.active() && self.report.switched_off_s.is_none() {
             self.report.switched_off_s = Some(self.t_s);
-            let (figure, valve, model) = guard_figures(&w);
+            self.report.tripping = Some(w);
+            let e = w.exceeded.map(|f| w.evidence_of(f)).unwrap_or_default();
             tracing::warn!(
                 valve = %self.valve,
-                "compensation switched off: over the last window the valve's {figure} with it, \
-                 {valve}, exceeds what its model says compensation gives, {model}; the \
-                 controller's O_P is sent unchanged from now on"
+                "compensation switched off: over the last {} guard windows the valve's {} (chance \
+                 makes as many holds exceed with probability {:.1e}); the controller's O_P is \
+                 sent unchanged from now on",
+                guard::WINDOWS_POOLED,
+                tripped(&w),
+                e.chance,
             );
         }
     }
@@ -111,26 +118,18 @@ impl Compensation {
     }
 }
 
-/// The figure that tripped the guard, the valve's and the model's, in words.
-fn guard_figures(w: &Window) -> (&'static str, String, String) {
+/// What tripped the guard in `w`, in words: the figure, in how many of the judged holds of the
+/// pooled windows the valve exceeded its model, and by how much on average.
+pub(super) fn tripped(w: &Window) -> String {
     let Some(figure) = w.exceeded else {
-        return ("figures", String::new(), String::new());
+        return "no figure exceeded".into();
     };
-    let (m, p) = (&w.measured, &w.predicted);
-    let (valve, model) = match figure {
-        Figure::Reversals => (m.reversals.to_string(), p.reversals.to_string()),
-        Figure::Travel => (
-            format!("{:.2} %", m.travel_pct),
-            format!("{:.2} %", p.travel_pct),
-        ),
-        Figure::Overshoot => (
-            format!("{:.2} %", m.overshoot_pct),
-            format!("{:.2} %", p.overshoot_pct),
-        ),
-        Figure::Miss => (
-            format!("{:.2} %", m.miss_pct),
-            format!("{:.2} %", p.miss_pct),
-        ),
-    };
-    (figure.name(), valve, model)
+    let e = w.evidence_of(figure);
+    format!(
+        "{} beyond its model's in {} of {} holds, by {:.2} % on average",
+        figure.name(),
+        e.exceeding,
+        e.holds,
+        e.by_pct,
+    )
 }

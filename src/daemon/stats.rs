@@ -485,9 +485,13 @@ fn write_compensation(
     indent: &str,
     c: &CompensationReport,
 ) -> fmt::Result {
-    let state = match c.switched_off_s {
-        Some(t) => format!("switched off by its guard at {t:.1} s"),
-        None => "on".into(),
+    let state = match (c.switched_off_s, &c.tripping) {
+        (Some(t), Some(w)) => format!(
+            "switched off by its guard at {t:.1} s ({})",
+            super::compensation::tripped(w)
+        ),
+        (Some(t), None) => format!("switched off by its guard at {t:.1} s"),
+        (None, _) => "on".into(),
     };
     let last = c.last.map_or(String::new(), |w| {
         format!(

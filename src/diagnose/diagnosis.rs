@@ -77,7 +77,8 @@ pub struct Figures {
     /// converted to the band it means in this recording ([`size::friction_band`]); 0 without
     /// either; NaN (`null` in JSON) when the recording shows a crossing time but not its band.
     pub friction_band_pct: f64,
-    /// Stroke-speed limit opening and closing at half travel, %/s.
+    /// Stroke-speed limit opening and closing at half travel, %/s; NaN (`null` in JSON) when
+    /// no move of the recording asked the valve for it (the model's speed is not determined).
     pub opening_speed_pct_per_s: f64,
     pub closing_speed_pct_per_s: f64,
 }

@@ -210,7 +210,6 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     } else {
         final_spec
     };
-    let figures = figures(&final_spec, data.facts, rec.op);
     // A valve found slow already has its speed limit among the findings.
     let speed_found =
         (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
@@ -219,6 +218,10 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
         notes.push(slow);
     }
     let sim_after = scorer.simulate(&final_spec);
+    let mut final_spec = final_spec;
+    final_spec.stroke_speed_undetermined =
+        !speeds::stroke_speed_shown(&final_spec, rec.op, &sim_after, rec.dt);
+    let figures = figures(&final_spec, data.facts, rec.op);
     let residual_after: Vec<f64> = rec.vp.iter().zip(&sim_after).map(|(m, s)| m - s).collect();
     let windows_after = locate::windows(rec, &residual_after, data.sigma);
     let held = scorer.held_mask();
@@ -300,11 +303,18 @@ fn worth_maintenance(
 /// The figures of the final model `spec` (see [`Figures`]).
 fn figures(spec: &ModelSpec, facts: &facts::Facts, op: &[f64]) -> Figures {
     use composed::Knob;
+    let speed = |k: Knob| {
+        if spec.stroke_speed_undetermined {
+            f64::NAN
+        } else {
+            composed::get(spec, k) / composed::half_open(spec)
+        }
+    };
     Figures {
         dead_time_s: composed::get(spec, Knob::DeadTime),
         friction_band_pct: size::friction_band(spec, facts, op),
-        opening_speed_pct_per_s: composed::get(spec, Knob::Slew) / composed::half_open(spec),
-        closing_speed_pct_per_s: composed::get(spec, Knob::ClosingSlew) / composed::half_open(spec),
+        opening_speed_pct_per_s: speed(Knob::Slew),
+        closing_speed_pct_per_s: speed(Knob::ClosingSlew),
     }
 }
 

@@ -1,10 +1,13 @@
 //! How fast V_P moves: its fastest opening and closing speeds, with the noise of the sensor
 //! taken out, for the facts diagnosis checks its speed limits against.
 //!
-//! Not here: how fast V_P closes in on where it settles (`facts::approach`), the speed a model
-//! is given (`candidates`).
+//! Also whether a log shows a model's stroke speed at all ([`stroke_speed_shown`]). Not here:
+//! how fast V_P closes in on where it settles (`facts::approach`), the speed a model is given
+//! (`candidates`).
 
 use crate::metrics::stats::quantile;
+use crate::model::composed::{self, Knob};
+use crate::model::{ModelKind, ModelSpec};
 
 /// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
 /// taken out: for a window of h samples, the speed is the mean of the h/2 differences of V_P
@@ -48,6 +51,34 @@ pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64
     best
 }
 
+/// Whether the log shows the stroke speed of the pin-cart II `spec`, simulated as `sim` on the
+/// log's `op` at `dt`: some sample asks the model's positioner, opening or closing, for at least
+/// its speed limit (its gain times the error between the delayed, calibrated O_P, less half an
+/// input deadband, and the simulated position). A log whose moves never ask for it (small
+/// steps on a healthy valve) fits any limit above what they ask alike, so the fitted limit says
+/// nothing about the valve. True for a spec without a pin-cart II core (nothing to show).
+pub(super) fn stroke_speed_shown(spec: &ModelSpec, op: &[f64], sim: &[f64], dt: f64) -> bool {
+    if spec.model != ModelKind::Pincart2 || spec.pincart2.is_none() {
+        return true;
+    }
+    let get = |k: Knob| composed::get(spec, k);
+    let e = &spec.effects;
+    let delay = (spec.dead_time_s / dt).round() as usize;
+    let (mut open, mut close) = (0.0f64, 0.0f64);
+    for (k, &x) in sim.iter().enumerate().skip(delay) {
+        let u = e.calibration_gain * op[k - delay] + e.calibration_offset_pct;
+        let err = u - x;
+        let asked = (err.abs() - e.deadband_pct / 2.0).max(0.0);
+        if err > 0.0 {
+            open = open.max(asked);
+        } else {
+            close = close.max(asked);
+        }
+    }
+    let gain = get(Knob::Gain);
+    gain * open >= get(Knob::Slew) || gain * close >= get(Knob::ClosingSlew)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,5 +99,32 @@ mod tests {
             assert!((open - (2.0 - allowance(measured))).abs() < 1e-9, "{open}");
             assert_eq!(close, 0.0);
         }
+    }
+
+    #[test]
+    fn small_steps_do_not_show_a_stroke_speed_and_a_large_one_does() {
+        // Pin-cart II at 10 /s up to 60 %/s: steps of 2 % ask for 20 %/s at most, one of 10 %
+        // for 100 %/s.
+        let spec = crate::model::bundled(ModelKind::Pincart2);
+        let spec = ModelSpec {
+            pincart2: spec.pincart2.map(|p| crate::model::PinCart2Params {
+                p_gain_per_s: 10.0,
+                dy_max_pct_per_s: 60.0,
+                ..p
+            }),
+            ..spec
+        };
+        let dt = 0.01;
+        let shown = |size: f64| {
+            let op: Vec<f64> = (0..3000)
+                .map(|k| 50.0 + if (k / 500) % 2 == 1 { size } else { 0.0 })
+                .collect();
+            let sim = crate::model::Valve::new(&spec, dt)
+                .unwrap()
+                .simulate(&op, 50.0);
+            stroke_speed_shown(&spec, &op, &sim, dt)
+        };
+        assert!(!shown(2.0));
+        assert!(shown(10.0));
     }
 }

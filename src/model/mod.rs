@@ -186,6 +186,12 @@ pub struct ModelSpec {
     /// Dead time T_d in seconds (>= 0); must be 0 for `modelless`.
     #[serde(default)]
     pub dead_time_s: f64,
+    /// The stroke speed (`dy_max_pct_per_s`, and a closing one) is not determined: no move of
+    /// the log the model was identified from asked the valve for it, so any limit above what
+    /// they asked fits alike. Simulations step the number written; a compensator does not use
+    /// it. Written only when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub stroke_speed_undetermined: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fopdt: Option<FopdtParams>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -242,6 +248,7 @@ impl ModelSpec {
         ModelSpec {
             model: kind,
             dead_time_s,
+            stroke_speed_undetermined: false,
             fopdt: None,
             stiction: None,
             pincart1: None,

@@ -53,11 +53,18 @@ pub fn figures(f: &Figures) -> String {
     } else {
         "not told by these steps (see the crossing time)".into()
     };
+    let speed = if f.opening_speed_pct_per_s.is_finite() {
+        format!(
+            "stroke speed at half travel {} %/s opening and {} %/s closing",
+            num(f.opening_speed_pct_per_s),
+            num(f.closing_speed_pct_per_s)
+        )
+    } else {
+        "stroke speed not determined (no move of the recording asked for it)".into()
+    };
     format!(
-        "dead time {} s, friction band {band}, stroke speed at half travel {} %/s opening and {} %/s closing",
-        num(f.dead_time_s),
-        num(f.opening_speed_pct_per_s),
-        num(f.closing_speed_pct_per_s)
+        "dead time {} s, friction band {band}, {speed}",
+        num(f.dead_time_s)
     )
 }
 
