@@ -34,17 +34,19 @@ use crate::model::ModelSpec;
 
 /// How far the composed model's reading of each size strays from the valve's own value, as
 /// the natural log of their ratio: the 90th percentile of |ln(reported / true)| over the
-/// findings of a labelled effect on the blind bench (`cargo bench --bench diagnose_blind`,
-/// seed 1: 42 digital valves intact and as logged, every third; 64 physical valves as
-/// logged, every fourth), rounded up. Sizes not listed (the crossing time quoted when no
-/// band can be told) had too few findings to measure it.
+/// findings of a labelled effect on the blind bench (`cargo bench --bench diagnose_blind`),
+/// rounded up. Measured on seed 1 (42 digital valves intact and as logged, every third; 64
+/// physical valves as logged, every fourth), checked on seed 2 (76 valves of both families as
+/// logged, every fifth), where the deadband, the minimum speed and the dead time strayed
+/// further: those are the 90th percentiles of both seeds. Sizes not listed (the crossing time
+/// quoted when no band can be told) had too few findings to measure it.
 const MODEL_SPREAD: [(&str, f64); 11] = [
-    ("dead_time_s", 0.03),
-    ("deadband_pct", 0.10),
+    ("dead_time_s", 0.05),
+    ("deadband_pct", 0.40),
     ("friction_band_pct", 0.90),
     ("lattice_pct", 0.01),
-    ("min_speed_pct_per_s", 0.05),
-    ("open_vs_closed", 0.34),
+    ("min_speed_pct_per_s", 0.30),
+    ("open_vs_closed", 0.35),
     ("reading_error_pct", 0.08),
     ("slip_pct", 0.38),
     ("speed_ratio", 1.03),
