@@ -75,6 +75,25 @@ fn esc(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
+/// A sentence for an HTML page: escaped, with each span between backticks (a command, a
+/// config key) set as code rather than shown with its backticks. An unpaired backtick stays.
+fn prose(s: &str) -> String {
+    let parts: Vec<&str> = s.split('`').collect();
+    let mut h = String::new();
+    for (i, part) in parts.iter().enumerate() {
+        match (i % 2 == 1, i + 1 < parts.len() || i % 2 == 0) {
+            (true, true) => {
+                let _ = write!(h, "<code>{}</code>", esc(part));
+            }
+            (true, false) => {
+                let _ = write!(h, "`{}", esc(part));
+            }
+            _ => h.push_str(&esc(part)),
+        }
+    }
+    h
+}
+
 /// A whole HTML page titled `heading` (also its first heading) around `body`.
 fn page(heading: &str, body: &str) -> String {
     let mut h = String::new();
@@ -108,4 +127,19 @@ fn row(name: &str, s: &Scores) -> String {
         pct(r2),
         pct(rel)
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::prose;
+
+    #[test]
+    fn prose_sets_backticked_spans_as_code_and_escapes_the_rest() {
+        assert_eq!(
+            prose("run `[source] kind = \"ramp\"` & see <here>"),
+            "run <code>[source] kind = \"ramp\"</code> &amp; see &lt;here&gt;"
+        );
+        assert_eq!(prose("a `b` c `d"), "a <code>b</code> c `d");
+        assert_eq!(prose("plain"), "plain");
+    }
 }

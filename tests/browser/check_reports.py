@@ -6,7 +6,8 @@ values that did not show, a static chart without lines, an SVG chart's text smal
 or overlapping other text (an axis title over its ticks), and what each page must say at first
 sight: identify's best model in words and its first chart opening with the measured V_P, O_P and
 the best model only (the others one click away, none drawn twice), diagnose's first chart
-opening zoomed on a mismatch where the recording is long, the fleet's ranking rule and rows
+opening zoomed on a mismatch where the recording is long and no sentence shown with raw
+Markdown backticks, the fleet's ranking rule and rows
 coloured by severity, none taller than six lines.
 
     python3 tests/browser/check_reports.py [--screenshots DIR] --page NAME PATH MIN_CHARTS ...
@@ -90,6 +91,11 @@ def check_first_sight(page, name, problems, where):
         if len(set(names)) != len(names) or same:
             problems.append(f"{where}: series drawn twice in the first chart: {names} {same}")
     if name in ("diagnose", "fleet-valve"):
+        # Commands and config keys in the sentences are set as code, never shown with their
+        # Markdown backticks.
+        raw = page.page.evaluate("document.body.innerText.split('\\n').filter(l => l.includes('`'))")
+        if raw:
+            problems.append(f"{where}: text shown with raw backticks: {raw[0][:160]!r}")
         zoom, (lo, hi), (dlo, dhi) = page.page.evaluate("""() => {
           const el = document.querySelector('div.vb-chart'), u = window.vbCharts[0], x = u.data[0];
           return [el.dataset.zoom0 !== undefined, [u.scales.x.min, u.scales.x.max], [x[0], x[x.length - 1]]];

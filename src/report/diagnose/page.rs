@@ -13,7 +13,7 @@ use super::super::advice::cards;
 use super::super::chart::{Dataset, View};
 use super::super::plot::{self, Series, AFTER, BEFORE, EXTRA, MEASURED};
 use super::super::verdict::plain_traces;
-use super::super::{esc, page, row};
+use super::super::{esc, page, prose, row};
 use super::{
     advice, context, evidence, figures, measure, model_verdict, note, params_html, trace, verdict,
 };
@@ -28,7 +28,7 @@ pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
     let mut h = String::new();
     let list = advice(d);
     if list.is_empty() {
-        let _ = write!(h, "<p class=\"verdict\">{}</p>", esc(&verdict(d)));
+        let _ = write!(h, "<p class=\"verdict\">{}</p>", prose(&verdict(d)));
     } else {
         h.push_str(&cards(&list, "#finding-"));
         let traces = plain_traces(d);
@@ -36,7 +36,7 @@ pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
             let _ = write!(
                 h,
                 "<p>Too small to act on: {}.</p>",
-                esc(&traces.join("; "))
+                prose(&traces.join("; "))
             );
         }
     }
@@ -49,7 +49,7 @@ pub fn html(title: &str, rec: &RecordingView, d: &Diagnosis) -> String {
         esc(&figures(&d.figures))
     );
     for n in &d.notes {
-        let _ = write!(h, "<p><i>Note: {}</i></p>", esc(&note(n)));
+        let _ = write!(h, "<p><i>Note: {}</i></p>", prose(&note(n)));
     }
     findings_html(&mut h, d);
     curves_html(&mut h, rec, d);
@@ -74,7 +74,7 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
     let _ = write!(
         h,
         "<h2>Findings</h2><p>For the modeller: {}</p>",
-        esc(&model_verdict(d))
+        prose(&model_verdict(d))
     );
     for f in &d.findings {
         let alternatives = if f.alternatives.is_empty() {
@@ -89,7 +89,7 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
             f.effect.name(),
             esc(crate::vocabulary::words(f.effect).plain),
             esc(&f.size.words()),
-            esc(&evidence(f)),
+            prose(&evidence(f)),
             params_html(f),
             esc(&measure(&f.measure)),
             f.delta_bic
@@ -98,7 +98,7 @@ fn findings_html(h: &mut String, d: &Diagnosis) {
     if !d.traces.is_empty() {
         h.push_str("<h2>Traces (not worth maintenance)</h2><ul>");
         for t in &d.traces {
-            let _ = write!(h, "<li>{}</li>", esc(&trace(t)));
+            let _ = write!(h, "<li>{}</li>", prose(&trace(t)));
         }
         h.push_str("</ul>");
     }
