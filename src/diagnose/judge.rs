@@ -112,9 +112,6 @@ pub(crate) struct Judge<'a> {
     pub cur: Errors,
     /// Correlation length of the current residual, samples.
     pub corr_len: f64,
-    /// Slips of V_P the current model does not make ([`facts::slips`] against
-    /// [`Judge::current_sim`]).
-    pub missed_slips: usize,
 }
 
 impl Judge<'_> {
@@ -155,7 +152,7 @@ impl Judge<'_> {
             && plausible(effect, &spec, self.facts)
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
             && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
-            && (effect != Effect::Stiction || self.missed_slips >= SLIPS_SEEN);
+            && (effect != Effect::Stiction || self.slips_seen());
         let material = plausible
             && size.worth >= tuning.materiality
             && heldout_share >= tuning.min_heldout_share;
@@ -173,6 +170,13 @@ impl Judge<'_> {
             plausible,
             material,
         }
+    }
+
+    /// Whether the recording shows the jumps of stick-slip: at least [`SLIPS_SEEN`] slips of
+    /// V_P ([`facts::slips`]) the current model does not make.
+    fn slips_seen(&self) -> bool {
+        let slips = facts::slips(self.current_sim, self.scorer.vp, &self.facts.slip_scale);
+        slips.len() >= SLIPS_SEEN
     }
 
     /// Whether the recording shows a slowdown of the open valve worth naming, beyond what the

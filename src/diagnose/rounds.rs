@@ -24,7 +24,7 @@ use serde_json::{Map, Value};
 use super::candidates::{self, MAX_DEAD_TIME_S, MAX_WINDUP_PCT};
 use super::diagnosis::{Finding, Note, Support, Trace};
 use super::evidence::Evidence;
-use super::facts::{self, Facts};
+use super::facts::Facts;
 use super::judge::{bic_change, Judge, Trial};
 use super::locate::Window;
 use super::measure::Measure;
@@ -266,12 +266,6 @@ impl<'a> Search<'a> {
             current_sim: &current_sim,
             cur: self.cur,
             corr_len: self.corr_len,
-            missed_slips: facts::slips(
-                &current_sim,
-                self.data.scorer.vp,
-                &self.data.facts.slip_scale,
-            )
-            .len(),
         };
         jobs.par_iter()
             .map(|job| {
