@@ -54,12 +54,6 @@ const MIN_SLOWDOWN: f64 = 0.6;
 /// answering low in its travel than high in it for a slowdown to be named (see
 /// [`Judge::slowdown_seen`]): the upper third of the openings visited 15 % slower.
 const SLOWDOWN_SEEN: f64 = 1.15;
-/// Fewest slips of V_P the current model does not make ([`facts::slips`], over the whole
-/// recording) for stiction to be named by the free-run error: stick-slip sticks and then
-/// jumps, while a valve in a deadband (a positioner's tolerance band, a dead zone on its
-/// input) rests anywhere within the band around its target and never jumps. A stickband
-/// fitted to a recording without jumps is a dead zone, whatever jump it was given.
-const SLIPS_SEEN: usize = 10;
 
 /// A refitted candidate and how it did on the held-out blocks.
 #[derive(Debug, Clone)]
@@ -151,8 +145,7 @@ impl Judge<'_> {
         let plausible = !pinned(own, &spec)
             && plausible(effect, &spec, self.facts)
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
-            && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
-            && (effect != Effect::Stiction || self.slips_seen());
+            && (effect != Effect::Saturation || self.stop_seen(&spec, ya));
         let material = plausible
             && size.worth >= tuning.materiality
             && heldout_share >= tuning.min_heldout_share;
@@ -170,13 +163,6 @@ impl Judge<'_> {
             plausible,
             material,
         }
-    }
-
-    /// Whether the recording shows the jumps of stick-slip: at least [`SLIPS_SEEN`] slips of
-    /// V_P ([`facts::slips`]) the current model does not make.
-    fn slips_seen(&self) -> bool {
-        let slips = facts::slips(self.current_sim, self.scorer.vp, &self.facts.slip_scale);
-        slips.len() >= SLIPS_SEEN
     }
 
     /// Whether the recording shows a slowdown of the open valve worth naming, beyond what the
