@@ -9,7 +9,7 @@
 //! more by `identify` on its random steps. Then every scenario runs 10 minutes with and without the
 //! compensator of that model (default `[valve.compensation]` settings), for several seeds:
 //! the paper's level loop, the paper's random steps, and small steps. Figures per run:
-//! `valve_bridge::compensate::trial::Figures`.
+//! `valve_bridge::compensation_trial::Figures`.
 //!
 //! Then foreign valves over Modbus ([`modbus`]): physical valves with physics the model
 //! `diagnose` fits does not have, each a unit of sim-device, logging 200 s of their own small
@@ -31,8 +31,8 @@ use std::time::Instant;
 #[path = "compensation/modbus.rs"]
 mod modbus;
 
-use valve_bridge::compensate::trial::{self, Figures, Run, Scenario};
 use valve_bridge::compensate::{CompensationConfig, Compensator};
+use valve_bridge::compensation_trial::{self as trial, Figures, Run, Scenario};
 use valve_bridge::diagnose::{self, Effect};
 use valve_bridge::fit::{self, Options};
 use valve_bridge::model::{bundled, ModelKind, ModelSpec};

@@ -25,7 +25,6 @@ use valve_bridge::daemon::config::{DiagnosisConfig, HealthConfig};
 use valve_bridge::daemon::{self, Config, RunOptions};
 use valve_bridge::metrics::stats::median;
 use valve_bridge::model::{bundled, ModelKind};
-use valve_bridge::report;
 use valve_bridge::synth::{self, Excitation};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -131,7 +130,7 @@ fn timed(what: &str, config: Config, secs: f64) -> Result<f64, Box<dyn std::erro
             virtual_clock: false,
             progress: false,
             require_device: false,
-            analysis: report::live::analysis(),
+            analysis: valve_bridge::live::analysis(),
         },
     )?
     .finish()?;
@@ -161,7 +160,7 @@ fn busy_diagnosis(stop: Arc<AtomicBool>) -> Result<JoinHandle<Result<usize, Stri
     let spec = bundled(ModelKind::Pincart2);
     let rec = synth::generate(&spec, Excitation::RandomSteps, 300.0, 0.01, 0.05, 7)
         .map_err(|e| e.to_string())?;
-    let diagnose = report::live::analysis()
+    let diagnose = valve_bridge::live::analysis()
         .diagnose
         .ok_or("the analysis layer has no diagnosis")?;
     Ok(std::thread::spawn(move || {

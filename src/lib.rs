@@ -1,140 +1,31 @@
 //! valve-bridge: run, emulate, log and identify pneumatic control valves.
 //!
-//! The library holds everything; the `valve-bridge` binary is a thin command-line layer over it.
-//! Data runs one way: a source of wanted openings (O_P) drives a valve (emulated or real), the
-//! loop logs each sample as a recording, and the analysis side reads recordings back to fit and
-//! diagnose the valve models of the pin-cart paper (Bram et al.).
+//! The workspace's crates under one name, for the binaries, the tests, the Python module and
+//! users: data runs one way, and the crates are layered the same way (the compiler keeps the
+//! order; no crate uses one above it):
 //!
-//! - [`model`]: every valve model, one `step` each, with TOML parameter files.
-//! - [`recording`]: the CSV recording format (read with helpful errors, write, column mapping).
-//! - [`compensate`]: the identified valve's backlash, deadband and calibration answered in the
-//!   set-point it is sent (the daemon's `[valve.compensation]`, the compensation bench).
-//! - [`daemon`]: `valve-bridge run`, the 100 Hz valve loop (sources, valve backends, CSV log).
-//! - [`modbus`]: register maps, the serial bus budget, the Modbus valve client and register bank.
-//! - [`net`]: TCP servers that stay up (accept errors retried, connections capped).
-//! - [`priority`]: thread priorities (the loop's real-time priority, the lowest for analysis).
-//! - [`fit`]: identification: fit every model by simulation error, Table 1/2, step delays.
-//! - [`diagnose`]: locate model mismatch, name the missing physics, add it, prove it on held-out data.
-//! - [`fleet`]: many recordings diagnosed in parallel, summed up and ranked for maintenance.
-//! - [`response`]: a response test's log read for what the valve did (dead time, T63, T86,
-//!   overshoot, resolution, dead band); the daemon's [`daemon::response`] runs the test.
-//! - [`report`]: self-contained HTML reports with SVG charts.
-//! - [`vocabulary`]: each effect diagnosis names in plain words (what it does to the valve with
-//!   its size, to control, and what to do), with its severity and priority: one table for the
-//!   reports, the CLI, the fleet and the daemon's live page.
-//! - [`signal`]: time-only O_P generators (random steps, steps, ramp, sine, PRBS, replay, constant).
-//! - [`synth`]: synthetic recordings (random steps, small steps, ramps, a mix, or a closed level
-//!   loop), and physical valves with one named effect, for demos, tests and benchmarks.
-//! - [`metrics`]: the paper's Table 1 metrics and the zero-phase Butterworth filter.
+//! - `vb-core` ([`model`], [`recording`], [`compensate`], [`response_plan`], [`signal`],
+//!   [`metrics`], [`vocabulary`], [`human`], [`toml_file`], [`priority`]): the valve models, the
+//!   recordings and log format, the compensator, metrics and plain words.
+//! - `vb-modbus` ([`modbus`], [`net`]): register maps, the valve client and its wire, servers.
+//! - `vb-daemon` ([`daemon`]): `valve-bridge run`, the 100 Hz valve loop (sources, valve
+//!   backends, log, HIL, health, live page). It links none of the analysis.
+//! - `vb-analysis` ([`fit`], [`diagnose`], [`synth`], [`response`], [`compensation_trial`]):
+//!   identification, diagnosis, synthetic valves, the response test's figures.
+//! - `vb-report` ([`report`], [`fleet`]): HTML pages with charts, verdicts in words, the fleet.
 //!
-//! `fit`, `diagnose`, `fleet`, `response` and `report` are the `analysis` feature (on by default); without
-//! it the library is the daemon's runtime alone, and the daemon refuses `[diagnosis]`
-//! ([`daemon::DaemonError::NoDiagnosis`]).
+//! [`live`] is where the daemon and the analysis meet: the daemon's live diagnosis.
 
-pub mod compensate;
-pub mod daemon;
-#[cfg(feature = "analysis")]
-pub mod diagnose;
-#[cfg(feature = "analysis")]
-pub mod fit;
-#[cfg(feature = "analysis")]
-pub mod fleet;
-pub mod human;
-pub mod metrics;
-pub mod modbus;
-pub mod model;
-pub mod net;
-pub mod priority;
-pub mod recording;
-#[cfg(feature = "analysis")]
-pub mod report;
-#[cfg(feature = "analysis")]
-pub mod response;
-pub mod signal;
-pub mod synth;
-pub mod toml_file;
-pub mod vocabulary;
+pub use vb_analysis::{compensation_trial, diagnose, fit, response, synth};
+pub use vb_core::logging::{error_line, init_tracing, LossyStderr};
+pub use vb_core::{
+    compensate, human, metrics, model, priority, recording, response_plan, signal, toml_file,
+    vocabulary,
+};
+pub use vb_daemon as daemon;
+pub use vb_modbus as modbus;
+pub use vb_modbus::net;
+pub use vb_report as report;
+pub use vb_report::fleet;
 
-#[cfg(test)]
-pub(crate) mod testkit;
-
-/// The log filter when `RUST_LOG` is not set: `info`, except tokio-modbus's own per-frame
-/// decoding warnings (several multi-line entries per bad reply), which the Modbus client already
-/// reports once per fault in its own words.
-const DEFAULT_LOG_FILTER: &str = "info,tokio_modbus=error";
-
-/// Sends `tracing` logs to stderr, coloured only on a terminal; `RUST_LOG` overrides the default
-/// filter (`info`, tokio-modbus at `error`). Used by both binaries (`valve-bridge`, `sim-device`).
-/// A line stderr cannot take (a full disk, a closed pipe) is dropped ([`LossyStderr`]): logging
-/// never stops the daemon.
-pub fn init_tracing() {
-    use std::io::IsTerminal;
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG_FILTER));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(|| LossyStderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_target(false)
-        .compact()
-        .init();
-}
-
-/// Standard error that drops what it cannot write. tracing-subscriber reports a failed write
-/// with `eprintln!`, which panics when stderr itself is the problem (`2>/dev/full`, a closed
-/// pipe): on the loop thread that would skip the valve's stop action.
-#[derive(Debug, Clone, Copy)]
-pub struct LossyStderr;
-
-impl std::io::Write for LossyStderr {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        // Dropped, not retried: a log line is worth less than the loop's next cycle.
-        let _lost = std::io::stderr().write_all(buf);
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        let _lost = std::io::stderr().flush();
-        Ok(())
-    }
-}
-
-/// An error and its causes on one line, `what: cause: cause`, for both binaries. A cause whose
-/// text the previous message already contains is left out: many errors print their source in
-/// their own message (`cannot read x.toml: No such file or directory (os error 2)`), and the
-/// source would otherwise appear twice.
-pub fn error_line(err: &anyhow::Error) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    for cause in err.chain().map(|c| c.to_string()) {
-        let repeated = parts.last().is_some_and(|last| last.contains(&cause));
-        if !repeated && !cause.is_empty() {
-            parts.push(cause);
-        }
-    }
-    parts.join(": ").replace('\n', " ")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[derive(Debug, thiserror::Error)]
-    #[error("x.toml: cannot read: {source}")]
-    struct Outer {
-        #[source]
-        source: std::io::Error,
-    }
-
-    #[test]
-    fn error_line_prints_each_cause_once() {
-        let io = std::io::Error::from_raw_os_error(2);
-        let text = io.to_string();
-        let e = anyhow::Error::new(Outer { source: io });
-        assert_eq!(error_line(&e), format!("x.toml: cannot read: {text}"));
-        assert_eq!(text.matches("os error 2").count(), 1);
-        // A context that does not repeat its cause keeps it.
-        let e =
-            anyhow::Error::new(std::io::Error::from_raw_os_error(2)).context("cannot open port");
-        assert_eq!(error_line(&e), format!("cannot open port: {text}"));
-    }
-}
+pub mod live;

@@ -3,7 +3,6 @@
 //! Each subcommand lives in `src/cli/<name>.rs` with its arguments and a `run` function that
 //! calls the library. Errors are printed as one line (with their causes) and exit code 1; no
 //! backtrace. `RUST_LOG` sets the log level (default `info`, see `valve_bridge::init_tracing`).
-//! The offline analysis commands exist only with the `analysis` feature (on by default).
 
 mod cli;
 
@@ -23,13 +22,11 @@ enum Command {
     Run(cli::run::Args),
     /// Read every register of a config's map once from the device (writes only with --write-test).
     Probe(cli::probe::Args),
-    #[cfg(feature = "analysis")]
     #[command(flatten)]
     Analysis(Analysis),
 }
 
-/// The offline analysis commands (the `analysis` feature).
-#[cfg(feature = "analysis")]
+/// The offline analysis commands.
 #[derive(Subcommand)]
 enum Analysis {
     /// Run a valve model over the O_P of a recording and score it against the measured V_P.
@@ -49,7 +46,6 @@ enum Analysis {
     ResponseTest(cli::response_test::Args),
 }
 
-#[cfg(feature = "analysis")]
 impl Analysis {
     fn run(self) -> anyhow::Result<()> {
         match self {
@@ -69,7 +65,6 @@ fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Run(a) => cli::run::run(a),
         Command::Probe(a) => cli::probe::run(a),
-        #[cfg(feature = "analysis")]
         Command::Analysis(a) => a.run(),
     };
     cli::report(result)

@@ -17,8 +17,8 @@
 //!   sequence within 0.15 % of the target with the guard on, and no random step more than
 //!   0.05 % past it.
 
-use valve_bridge::compensate::trial::{self, Figures, Scenario};
 use valve_bridge::compensate::{CompensationConfig, Compensator};
+use valve_bridge::compensation_trial::{self as trial, Figures, Scenario};
 use valve_bridge::diagnose::{self, Effect};
 use valve_bridge::model::ModelSpec;
 use valve_bridge::synth::{self, physical, Excitation};

@@ -30,7 +30,7 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
-use valve_bridge::compensate::trial::{self, TRAVEL_DEADBAND_PCT};
+use valve_bridge::compensation_trial::{self as trial, TRAVEL_DEADBAND_PCT};
 use valve_bridge::diagnose::Effect;
 use valve_bridge::metrics;
 use valve_bridge::model::{ModelSpec, Valve};

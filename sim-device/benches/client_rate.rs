@@ -13,9 +13,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use common::{percentile, Sim};
-use valve_bridge::modbus::client::{Link, ModbusValve};
-use valve_bridge::modbus::link::TcpLink;
-use valve_bridge::modbus::map::RegisterMap;
+use vb_modbus::client::{Link, ModbusValve};
+use vb_modbus::link::TcpLink;
+use vb_modbus::map::RegisterMap;
 
 fn main() {
     let secs: f64 = std::env::args()

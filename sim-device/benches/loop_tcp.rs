@@ -5,7 +5,7 @@
 //! sweep adds about 3 s per rate).
 //!
 //! It starts sim-device (`--tcp 127.0.0.1:0` with the map of `config/sim-device-tcp.toml`) and
-//! runs the real loop through the library, as `valve-bridge run` does (`daemon::start`, real
+//! runs the real loop through the library, as `valve-bridge run` does (`vb_daemon::start`, real
 //! clock, normal priority, CSV log in a temporary directory), with that config: `[valve] kind =
 //! "modbus-tcp"`, FC 23 (one transaction per cycle), random steps as the source.
 //!
@@ -29,9 +29,9 @@ use std::error::Error;
 use std::path::{Path, PathBuf};
 
 use common::{percentile, Sim};
-use valve_bridge::daemon::config::ValveSpec;
-use valve_bridge::daemon::{self, Config, RunOptions, ValveSummary};
-use valve_bridge::recording::log_format::Status;
+use vb_core::recording::log_format::Status;
+use vb_daemon::config::ValveSpec;
+use vb_daemon::{Config, RunOptions, ValveSummary};
 
 /// The shipped daemon config for sim-device over TCP.
 const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/sim-device-tcp.toml");
@@ -164,7 +164,7 @@ fn config(addr: &str, rate_hz: f64, shipped_deadline: bool) -> Result<Config, Bo
 /// Runs the loop for `secs` on the real clock, logging to a temporary directory.
 fn run(config: Config, secs: f64) -> Result<Run, Box<dyn Error>> {
     let dir = tempfile::tempdir()?;
-    let summary = daemon::start(
+    let summary = vb_daemon::start(
         config,
         RunOptions {
             duration_s: Some(secs),
@@ -173,7 +173,7 @@ fn run(config: Config, secs: f64) -> Result<Run, Box<dyn Error>> {
             progress: false,
             require_device: true,
             // The config has no [health] or [diagnosis]: nothing runs beside the loop.
-            analysis: daemon::Analysis::default(),
+            analysis: vb_daemon::Analysis::default(),
         },
     )?
     .finish()?

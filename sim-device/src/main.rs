@@ -10,7 +10,7 @@
 //! (`--tcp ADDR`), on a pseudo-terminal it opens itself (`--pty`) or on a serial device
 //! (`--serial PATH`). Its valve is a model from `config/models/` (pin-cart II by default) stepped
 //! at 100 Hz in real time from the last accepted set-point, optionally wearing over hours (a
-//! growing dead time or friction band, the daemon's [`valve_bridge::model::drift`]). Repeated
+//! growing dead time or friction band, the daemon's [`vb_core::model::drift`]). Repeated
 //! `--unit ID=MODEL[,KEY=VALUE...]` serve several valves at their own addresses on the same
 //! port, each with its own model and registers ([`units`]): on RTU a request to an address no
 //! unit has gets no reply, as on a real bus; on TCP, with several units, a request to a unit id
@@ -46,13 +46,13 @@ use clap::Parser;
 use serde::Deserialize;
 use tokio::net::TcpListener;
 use tokio_serial::{SerialPort, SerialStream};
-use valve_bridge::modbus::link::{Parity, RtuLink};
-use valve_bridge::modbus::map::{RegisterKeys, RegisterMap};
-use valve_bridge::modbus::profile::{self, Profile};
-use valve_bridge::modbus::serial;
-use valve_bridge::model::DriftSpec;
-use valve_bridge::net::{Health, Limits};
-use valve_bridge::toml_file;
+use vb_core::model::DriftSpec;
+use vb_core::toml_file;
+use vb_modbus::link::{Parity, RtuLink};
+use vb_modbus::map::{RegisterKeys, RegisterMap};
+use vb_modbus::net::{Health, Limits};
+use vb_modbus::profile::{self, Profile};
+use vb_modbus::serial;
 
 use faults::{FaultConfig, Faults};
 use rtu::{LineSpeed, RtuDevice};
@@ -233,7 +233,7 @@ fn shipped_profile(name: &str) -> anyhow::Result<Profile> {
 }
 
 fn main() -> std::process::ExitCode {
-    valve_bridge::init_tracing();
+    vb_core::logging::init_tracing();
     let result = tokio::runtime::Runtime::new()
         .context("cannot start the async runtime")
         .and_then(|rt| rt.block_on(run(Args::parse())));
@@ -244,7 +244,7 @@ fn main() -> std::process::ExitCode {
             let _lost = writeln!(
                 std::io::stderr(),
                 "sim-device: error: {}",
-                valve_bridge::error_line(&e)
+                vb_core::logging::error_line(&e)
             );
             std::process::ExitCode::FAILURE
         }

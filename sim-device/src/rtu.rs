@@ -19,8 +19,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_modbus::bytes::{Bytes, BytesMut};
 use tokio_modbus::{ExceptionCode, Request};
 use tokio_serial::SerialStream;
-use valve_bridge::modbus::server::response_pdu;
-use valve_bridge::modbus::tcp_server::{garble_pdu, Garble};
+use vb_modbus::server::response_pdu;
+use vb_modbus::tcp_server::{garble_pdu, Garble};
 
 use crate::faults::{Action, Decision, Faults};
 use crate::units::Banks;
@@ -175,8 +175,8 @@ mod tests {
     use super::*;
     use crate::faults::FaultConfig;
     use crate::units::{parse_unit, Defaults, Served, Unit};
-    use valve_bridge::modbus::map::RegisterMap;
-    use valve_bridge::model::DriftSpec;
+    use vb_core::model::DriftSpec;
+    use vb_modbus::map::RegisterMap;
 
     /// A device with units at `ids`, every position at 50 %.
     fn device_at(ids: &[u8], faults: FaultConfig) -> RtuDevice {

@@ -15,8 +15,8 @@ use std::time::Duration;
 
 use tokio::net::TcpListener;
 use tokio_modbus::{ExceptionCode, Request};
-use valve_bridge::modbus::tcp_server::{self, Garble, Reply, Respond};
-use valve_bridge::net::{Health, Limits};
+use vb_modbus::net::{Health, Limits};
+use vb_modbus::tcp_server::{self, Garble, Reply, Respond};
 
 use crate::faults::{Action, Decision, Faults};
 use crate::units::Banks;

@@ -20,10 +20,10 @@ use anyhow::{bail, Context as _};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use valve_bridge::modbus::map::{RegisterMap, Table};
-use valve_bridge::modbus::profile::Profile;
-use valve_bridge::modbus::server::{OutOfRange, RegisterBank};
-use valve_bridge::model::{self, Drift, DriftSpec, ModelKind, ModelSpec, Valve};
+use vb_core::model::{self, Drift, DriftSpec, ModelKind, ModelSpec, Valve};
+use vb_modbus::map::{RegisterMap, Table};
+use vb_modbus::profile::Profile;
+use vb_modbus::server::{OutOfRange, RegisterBank};
 
 /// The model's step, 10 ms (100 Hz).
 pub(crate) const MODEL_DT: f64 = model::DEFAULT_SAMPLE_PERIOD_S;

@@ -7,9 +7,9 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::{free_port, Sim};
-use valve_bridge::modbus::client::{Fault, Link, ModbusValve, Reading, ReplyError, Timeout};
-use valve_bridge::modbus::link::{RtuLink, TcpLink};
-use valve_bridge::modbus::map::{RegisterMap, StatusRegister, Table};
+use vb_modbus::client::{Fault, Link, ModbusValve, Reading, ReplyError, Timeout};
+use vb_modbus::link::{RtuLink, TcpLink};
+use vb_modbus::map::{RegisterMap, StatusRegister, Table};
 
 fn tcp(addr: &str, timeout_ms: f64) -> Link {
     Link::Tcp(TcpLink {

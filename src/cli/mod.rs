@@ -22,23 +22,15 @@ macro_rules! errln {
     }};
 }
 
-#[cfg(feature = "analysis")]
 pub(crate) mod demo;
-#[cfg(feature = "analysis")]
 pub(crate) mod diagnose;
-#[cfg(feature = "analysis")]
 pub(crate) mod fleet;
-#[cfg(feature = "analysis")]
 pub(crate) mod identify;
-#[cfg(feature = "analysis")]
 pub(crate) mod input;
 pub(crate) mod probe;
-#[cfg(feature = "analysis")]
 pub(crate) mod response_test;
 pub(crate) mod run;
-#[cfg(feature = "analysis")]
 pub(crate) mod simulate;
-#[cfg(feature = "analysis")]
 pub(crate) mod steps;
 
 use std::io::Write;
@@ -56,7 +48,6 @@ pub(crate) fn write_stdout(args: std::fmt::Arguments) -> Result<(), StdoutError>
 
 /// A progress bar of `len` units drawn with `template` (indicatif syntax), only when stderr is
 /// a terminal: piped output and logs stay clean.
-#[cfg(feature = "analysis")]
 pub(crate) fn progress_bar(len: u64, template: &str) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
     std::io::stderr().is_terminal().then(|| {

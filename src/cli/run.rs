@@ -4,15 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use valve_bridge::daemon::{self, Config, RunOptions};
-#[cfg(feature = "analysis")]
-use valve_bridge::report::live::analysis;
-
-/// Without the `analysis` feature the loop runs alone: no health plot, and `[diagnosis]` is
-/// refused at start (`DaemonError::NoDiagnosis`).
-#[cfg(not(feature = "analysis"))]
-fn analysis() -> daemon::Analysis {
-    daemon::Analysis::default()
-}
+use valve_bridge::live::analysis;
 
 /// Arguments of `valve-bridge run`.
 #[derive(clap::Args)]

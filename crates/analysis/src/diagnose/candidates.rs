@@ -1,0 +1,303 @@
+//! Candidates: for each effect of the vocabulary, which knobs of the composed valve it frees,
+//! in which boxes, from which starts; and the refit jobs of a round built from them.
+//!
+//! An effect that is already in the model, or that the data cannot identify (saturation when
+//! V_P never stops short of O_P), has no candidate; nor has quantization, which is named from
+//! the sensor lattice itself.
+//! Every candidate also refits the positioner gain, the dead time and (while it is a healthy
+//! one) the stroke-speed limit, so an effect is judged against the best the rest of the model
+//! can do, not against a model fitted without it.
+//!
+//! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
+
+use super::facts::Facts;
+use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
+use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
+use vb_core::model::ModelSpec;
+
+/// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).
+const SLOWEST_PCT_PER_S: f64 = 0.05;
+/// Longest dead time a diagnosis fits, s.
+pub(super) const MAX_DEAD_TIME_S: f64 = 3.0;
+/// Largest wind-up past a travel stop, % of travel: a drive can wind from a stop low in the
+/// travel all the way to its supply.
+pub(super) const MAX_WINDUP_PCT: f64 = 100.0;
+
+/// One effect to refit, from several starts (the knobs and boxes are the same in all).
+#[derive(Debug, Clone)]
+pub(crate) struct Job {
+    pub effect: Effect,
+    pub starts: Vec<Vec<Free>>,
+    /// How many knobs, first in each start, are the effect's own (the rest are the model's
+    /// gain, dead time and stroke speed, refitted with it).
+    pub own: usize,
+}
+
+/// The refit jobs of a round: every effect in `effects` with its variants, each from spread
+/// starts, with the gain and dead time freed too. `td_max` bounds the dead time of effects
+/// other than `dead_time` (the baseline's, until a dead time was found).
+pub(crate) fn jobs(
+    effects: &[Effect],
+    current: &ModelSpec,
+    facts: &Facts,
+    dt: f64,
+    td_max: f64,
+) -> Vec<Job> {
+    let mut jobs: Vec<Job> = Vec::new();
+    let td = composed::get(current, Knob::DeadTime);
+    for &effect in effects {
+        for variant in variants(effect, current, facts, td_max) {
+            let own = variant.len();
+            let td_hi = if effect == Effect::DeadTime {
+                MAX_DEAD_TIME_S
+            } else {
+                td_max.max(td)
+            };
+            for mut free in spread_starts(variant) {
+                let rest = rest_of_model(current, dt, td_hi, &free);
+                free.extend(rest);
+                // Variants that differ only in their own start share the spread starts.
+                let same_box = |starts: &[Vec<Free>]| {
+                    starts[0].len() == free.len()
+                        && starts[0].iter().zip(&free).all(|(a, b)| a.same_box(b))
+                };
+                match jobs
+                    .iter_mut()
+                    .find(|j| j.effect == effect && same_box(&j.starts))
+                {
+                    Some(j) if j.starts.contains(&free) => {}
+                    Some(j) => j.starts.push(free),
+                    None => jobs.push(Job {
+                        effect,
+                        starts: vec![free],
+                        own,
+                    }),
+                }
+            }
+        }
+    }
+    jobs
+}
+
+/// The model's own knobs a candidate refits with those of its effect (`own`): the positioner
+/// gain, the dead time up to `td_hi` and, while it is a healthy one, the stroke-speed limit;
+/// those `own` frees already are left out.
+pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free]) -> Vec<Free> {
+    let mut rest = vec![free_gain(spec, dt)];
+    if !own.iter().any(|f| f.knob == Knob::DeadTime) {
+        let td = composed::get(spec, Knob::DeadTime);
+        rest.push(Free::new(Knob::DeadTime, 0.0, td_hi.max(td), td));
+    }
+    rest.extend(healthy_slew(spec, own));
+    rest
+}
+
+/// The stroke-speed limit of `spec` free within a healthy positioner's range, when it lies
+/// there and `free` does not free it already: the baseline fitted it next to a missing effect
+/// (a dead time too short, no travel stop), where it may have settled on a compromise that
+/// only the effect's refit can undo.
+fn healthy_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
+    let slew = composed::get(spec, Knob::Slew);
+    let taken = free
+        .iter()
+        .any(|f| matches!(f.knob, Knob::Slew | Knob::ClosingSlew));
+    let healthy = (NOMINAL_MIN_SLEW_PCT_PER_S..=FASTEST_PCT_PER_S).contains(&slew)
+        && spec.effects.closing_slew_pct_per_s == 0.0;
+    (healthy && !taken).then(|| {
+        Free::new(
+            Knob::Slew,
+            NOMINAL_MIN_SLEW_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            slew,
+        )
+    })
+}
+
+/// The variants to try for `effect` on top of `spec`, or none when it is already there or the
+/// data cannot identify it.
+pub(crate) fn variants(
+    effect: Effect,
+    spec: &ModelSpec,
+    facts: &Facts,
+    td_max: f64,
+) -> Vec<Vec<Free>> {
+    let get = |k| composed::get(spec, k);
+    let f = Free::new;
+    let slew = get(Knob::Slew);
+    let speed = facts.open_speed.max(facts.close_speed).max(0.5);
+    match effect {
+        Effect::DeadTime if td_max < MAX_DEAD_TIME_S => vec![vec![f(
+            Knob::DeadTime,
+            0.0,
+            MAX_DEAD_TIME_S,
+            get(Knob::DeadTime).max(0.3),
+        )]],
+        // Lost motion either as pin-cart II's crossing time (eq. 7) or as a friction band the
+        // positioner crosses at its own speed (the lost time then depends on the move); the
+        // error surface of either has many valleys, so each starts from several sizes.
+        Effect::Backlash if get(Knob::Crossing) == 0.0 && get(Knob::FrictionBand) == 0.0 => vec![
+            vec![f(Knob::Crossing, 0.02, 5.0, 0.2)],
+            vec![f(Knob::Crossing, 0.02, 5.0, 0.8)],
+            vec![f(Knob::FrictionBand, 0.05, 20.0, 0.3)],
+            vec![f(Knob::FrictionBand, 0.05, 20.0, 1.0)],
+            vec![f(Knob::FrictionBand, 0.05, 20.0, 3.0)],
+        ],
+        Effect::StateDependentDelay
+            if get(Knob::Slowdown) == 0.0 && get(Knob::CrossingSlope) == 0.0 =>
+        {
+            slowdown_variants(spec)
+        }
+        Effect::SlewRate
+            if slew >= NOMINAL_MIN_SLEW_PCT_PER_S && spec.effects.closing_slew_pct_per_s == 0.0 =>
+        {
+            vec![vec![f(
+                Knob::Slew,
+                SLOWEST_PCT_PER_S,
+                slew.min(FASTEST_PCT_PER_S),
+                speed.min(slew),
+            )]]
+        }
+        Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => vec![vec![
+            f(
+                Knob::Slew,
+                SLOWEST_PCT_PER_S,
+                FASTEST_PCT_PER_S,
+                facts.open_speed.max(0.5),
+            ),
+            f(
+                Knob::ClosingSlew,
+                SLOWEST_PCT_PER_S,
+                FASTEST_PCT_PER_S,
+                facts.close_speed.max(0.5),
+            ),
+        ]],
+        // A positioner's creep floor can be as fast as a slow stroke: up to the slew limit.
+        Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => vec![vec![f(
+            Knob::MinSpeed,
+            0.05,
+            slew.clamp(1.0, 100.0),
+            1.0_f64.min(slew),
+        )]],
+        // Stick-slip either on the valve's input (Choudhury) or inside the positioner loop
+        // (breakaway: sticks when slow, slips past the target, hunts).
+        Effect::Stiction if get(Knob::Stickband) == 0.0 && get(Knob::Breakaway) == 0.0 => vec![
+            vec![
+                f(Knob::Stickband, 0.05, 10.0, 0.5),
+                f(Knob::JumpFraction, 0.0, 1.0, 0.5),
+            ],
+            vec![
+                f(Knob::Stickband, 0.05, 10.0, 2.0),
+                f(Knob::JumpFraction, 0.0, 1.0, 0.5),
+            ],
+            vec![f(Knob::Breakaway, 0.05, 10.0, 0.5)],
+        ],
+        // A band either on the input (the target moves only once O_P leaves it; the valve
+        // then closes in on it ever more slowly) or in the positioner (no action inside it,
+        // full action outside: the valve arrives still moving and stops at once).
+        Effect::Deadband if get(Knob::Deadband) == 0.0 && get(Knob::PositionerDeadband) == 0.0 => {
+            vec![
+                vec![f(Knob::Deadband, 0.02, 10.0, 0.5)],
+                vec![f(Knob::PositionerDeadband, 0.02, 10.0, 0.5)],
+            ]
+        }
+        Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
+            travel_limits(facts)
+        }
+        // The sensor lattice is named from its evidence, not refitted (see `rounds`).
+        Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
+            let (g, o) = steady_gain_offset(facts);
+            vec![vec![
+                f(Knob::CalGain, 0.7, 1.3, g),
+                f(Knob::CalOffset, -15.0, 15.0, o),
+            ]]
+        }
+        _ => vec![],
+    }
+}
+
+/// An opening-dependent slowdown, and (with a crossing time) a crossing time that grows with
+/// opening. The slowdown lowers the stroke speed with opening too, so the speed limit (at the
+/// closed end, where the valve is fastest) is refitted with it. Until a slow stroke has been
+/// found on its own, that limit stays a healthy one: a valve that is slow even when closed is
+/// `slew_rate`, judged on its own.
+fn slowdown_variants(spec: &ModelSpec) -> Vec<Vec<Free>> {
+    let f = Free::new;
+    let slew = composed::get(spec, Knob::Slew);
+    let limit = if slew >= NOMINAL_MIN_SLEW_PCT_PER_S {
+        f(
+            Knob::Slew,
+            NOMINAL_MIN_SLEW_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            slew.min(FASTEST_PCT_PER_S),
+        )
+    } else {
+        f(
+            Knob::Slew,
+            SLOWEST_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            (1.5 * slew).min(FASTEST_PCT_PER_S),
+        )
+    };
+    let mut v = vec![vec![f(Knob::Slowdown, 0.0, 20.0, 1.0), limit]];
+    let c = composed::get(spec, Knob::Crossing);
+    if c > 0.0 {
+        v.push(vec![
+            f(Knob::Crossing, 0.0, 5.0, c * 0.5),
+            f(Knob::CrossingSlope, -c / 100.0, 0.05, c / 100.0),
+        ]);
+    }
+    v
+}
+
+/// The travel stops to fit, in a box of ±2 % around where the recording shows them, each
+/// with the drive's wind-up past it: each stop the recording shows on its own and, when it
+/// shows both, both together (an offset sensor can make V_P look held at the bottom when the
+/// stop is only at the top).
+fn travel_limits(facts: &Facts) -> Vec<Vec<Free>> {
+    let high = facts.stop_high_pct.map(|hi| {
+        Free::new(
+            Knob::TravelMax,
+            (hi - 2.0).max(1.0),
+            (hi + 2.0).min(100.0),
+            hi,
+        )
+    });
+    let low = facts.stop_low_pct.map(|lo| {
+        Free::new(
+            Knob::TravelMin,
+            (lo - 2.0).max(0.0),
+            (lo + 2.0).min(99.0),
+            lo,
+        )
+    });
+    let mut sets: Vec<Vec<Free>> = [high, low].into_iter().flatten().map(|f| vec![f]).collect();
+    if let (Some(h), Some(l)) = (high, low) {
+        sets.push(vec![h, l]);
+    }
+    // The drive winds up past the stop while O_P asks for more, and must come back first.
+    for set in &mut sets {
+        set.push(Free::new(Knob::Windup, 0.0, MAX_WINDUP_PCT, 20.0));
+    }
+    sets
+}
+
+/// Least-squares line through the settled holds: V_P = g O_P + o (1, 0 with too few holds).
+fn steady_gain_offset(facts: &Facts) -> (f64, f64) {
+    let h = &facts.holds;
+    if h.len() < 3 {
+        return (1.0, 0.0);
+    }
+    let n = h.len() as f64;
+    let mx = h.iter().map(|x| x.op_pct).sum::<f64>() / n;
+    let my = h.iter().map(|x| x.vp_pct).sum::<f64>() / n;
+    let sxx: f64 = h.iter().map(|x| (x.op_pct - mx).powi(2)).sum();
+    if sxx < 1.0 {
+        return (1.0, my - mx);
+    }
+    let g = h
+        .iter()
+        .map(|x| (x.op_pct - mx) * (x.vp_pct - my))
+        .sum::<f64>()
+        / sxx;
+    (g.clamp(0.7, 1.3), my - g.clamp(0.7, 1.3) * mx)
+}

@@ -1,0 +1,512 @@
+//! Judge: whether a refitted effect belongs in the model, decided on held-out blocks it was
+//! never fitted to, by the thresholds of a [`Tuning`].
+//!
+//! A refitted candidate is kept only if all of these hold:
+//! - **More than chance, where it matters.** Per held-out block, the drop in squared error is
+//!   tested against measurement noise: with noise σ the drop has a standard deviation of
+//!   2σ √Σ(y_before − y_after)² when nothing real changed. An effect that exists helps
+//!   significantly (z > 2) wherever the recording excites it, in at least two blocks, and what
+//!   it costs elsewhere is small next to what it gains (the blocks hurt lose less than a
+//!   quarter of what the blocks helped gain); one fitted to chance helps some blocks about as
+//!   much as it hurts others.
+//! - **A real share** of the held-out error above the noise floor is removed (10 %).
+//! - **BIC agrees**, counting independent samples (the residual's correlation length).
+//! - **It is plausible**: it agrees with what the recording shows directly ([`plausible`]: a
+//!   speed limit must be reached by the measured V_P, ...), and its fitted value is not pinned
+//!   at the edge of its box (then it stands in for something else rather than measuring
+//!   itself).
+//! - **It is material**: its size in engineering units ([`super::size`]) is worth maintenance,
+//!   and it removes a real share of the whole held-out error.
+//!
+//! A candidate that passes all but the last is a *trace* (reported, never a finding).
+//!
+//! Not here: what is refitted ([`super::candidates`]) or what is said about it
+//! ([`super::evidence`]).
+
+use super::facts::{self, Facts};
+use super::refit::Free;
+use super::scorer::{Errors, Scorer};
+use super::size::{self, Size};
+use super::tuning::Tuning;
+use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
+use vb_core::model::ModelSpec;
+
+/// Smallest crossing time at half travel that is lost motion rather than stem dynamics, s: a
+/// healthy positioner swings its pressure across a healthy stem's tenth of a percent of band
+/// in a few hundredths of a second, even at a low gain; a crossing that short is more often a
+/// slow stroke or stem dynamics taken up at the reversals than a worn valve.
+const MIN_CROSSING_S: f64 = 0.1;
+/// Largest band of errors a minimum speed may cover, %: a floor over several % is a
+/// constant-speed valve.
+const MAX_SPEED_BAND_PCT: f64 = 5.0;
+/// Share of a fitted minimum speed the valve must keep in the tails of its steps, where a
+/// proportional positioner would have slowed to a quarter of it or less.
+const MIN_FLOOR_SHOWN: f64 = 0.7;
+/// How much faster than a minimum speed the valve must be seen moving for the floor to be told
+/// from a slew limit.
+const FASTER_THAN_FLOOR: f64 = 1.5;
+/// Fewest samples of step tails (see [`Facts::approach`]) a recording must have for a
+/// minimum speed to be named at all.
+const MIN_TAIL_SAMPLES: usize = 30;
+/// Smallest opening-dependent slowdown [`Judge::slowdown_seen`] checks against the recording.
+const MIN_SLOWDOWN: f64 = 0.6;
+/// How many times faster than the current model makes it the recording must show the valve
+/// answering low in its travel than high in it for a slowdown to be named (see
+/// [`Judge::slowdown_seen`]): the upper third of the openings visited 15 % slower.
+const SLOWDOWN_SEEN: f64 = 1.15;
+
+/// A refitted candidate and how it did on the held-out blocks.
+#[derive(Debug, Clone)]
+pub(crate) struct Trial {
+    pub effect: Effect,
+    pub spec: ModelSpec,
+    pub errors: Errors,
+    pub free: Vec<Free>,
+    /// Held-out blocks helped beyond noise (z > 2); 0 when the blocks hurt lose over a quarter
+    /// of what those gain.
+    pub t_stat: f64,
+    pub excess_share: f64,
+    /// Share of the whole held-out error it removes.
+    pub heldout_share: f64,
+    pub delta_bic: f64,
+    /// Its size in engineering units (interval not yet computed).
+    pub size: Size,
+    /// It explains the recording beyond chance.
+    pub significant: bool,
+    /// Not pinned at the edge of its box, and agrees with what the recording shows.
+    pub plausible: bool,
+    /// Plausible, and large enough to be worth maintenance.
+    pub material: bool,
+}
+
+impl Trial {
+    /// Whether the candidate passes every test.
+    pub(super) fn passes(&self) -> bool {
+        self.material && self.significant
+    }
+
+    /// Whether it is a trace: real and plausible, but not worth maintenance.
+    pub(super) fn trace(&self) -> bool {
+        self.significant && self.plausible && !self.material
+    }
+}
+
+/// What a round judges against: the model so far and the recording's noise.
+pub(crate) struct Judge<'a> {
+    pub scorer: &'a Scorer<'a>,
+    pub facts: &'a Facts,
+    pub tuning: &'a Tuning,
+    /// Noise floor of V_P, %.
+    pub sigma: f64,
+    /// What noise alone leaves on the held-out blocks, %².
+    pub held_noise: f64,
+    /// The model so far, simulated over the whole recording ([`Scorer::simulate`]), and its
+    /// errors.
+    pub current_sim: &'a [f64],
+    pub cur: Errors,
+    /// Correlation length of the current residual, samples.
+    pub corr_len: f64,
+}
+
+impl Judge<'_> {
+    /// Scores a refitted candidate (`spec`, whose `free` knobs were refitted, the first `own`
+    /// of them the effect's) against the current model.
+    pub(super) fn judge(
+        &self,
+        effect: Effect,
+        spec: ModelSpec,
+        errors: Errors,
+        free: Vec<Free>,
+        own: usize,
+    ) -> Trial {
+        let tuning = self.tuning;
+        let ya = self.current_sim;
+        let yb = self.scorer.simulate(&spec);
+        let blocks = self.scorer.paired(ya, &yb);
+        let t_stat = blocks_helped(&blocks, self.sigma, tuning.block_z);
+        let excess = (self.cur.held - self.held_noise).max(1e-12);
+        let excess_share = (self.cur.held - errors.held) / excess.max(0.05 * self.cur.held);
+        let heldout_share = (self.cur.held - errors.held) / self.cur.held.max(1e-12);
+        let own = &free[..own.min(free.len())];
+        let k_new = own
+            .iter()
+            .filter(|f| f.knob != Knob::Gain && f.knob != Knob::DeadTime)
+            .count()
+            .max(1);
+        let delta_bic = bic_change(
+            &self.cur,
+            &errors,
+            k_new,
+            self.scorer.n_scored(),
+            self.corr_len,
+        );
+        let size = size::size(effect, &spec, self.facts, self.scorer.op, tuning);
+        let significant = beyond_chance(t_stat, excess_share, delta_bic, tuning);
+        let plausible = !pinned(own, &spec)
+            && plausible(effect, &spec, self.facts)
+            && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
+            && (effect != Effect::Saturation || self.stop_seen(&spec, ya));
+        let material = plausible
+            && size.worth >= tuning.materiality
+            && heldout_share >= tuning.min_heldout_share;
+        Trial {
+            effect,
+            spec,
+            errors,
+            free,
+            t_stat,
+            excess_share,
+            heldout_share,
+            delta_bic,
+            size,
+            significant,
+            plausible,
+            material,
+        }
+    }
+
+    /// Whether the recording shows a slowdown of the open valve worth naming, beyond what the
+    /// current model (simulated as `ya`) already makes of the openings visited: the rate at
+    /// which V_P answers O_P low in its travel over the rate high in it
+    /// ([`facts::speed_ratio`]) must be at least [`SLOWDOWN_SEEN`] times what the same
+    /// statistic is on the current model. A slowdown fitted to take up an error of something
+    /// else (stem dynamics, a small asymmetry, a slowdown too small to matter) is stretched
+    /// well beyond what the valve shows there. Where either ratio cannot be measured (too few
+    /// moves in a third of the travel) it says nothing against; nor when the candidate names a
+    /// crossing time that grows with opening rather than a slowdown.
+    fn slowdown_seen(&self, spec: &ModelSpec, ya: &[f64]) -> bool {
+        if composed::get(spec, Knob::Slowdown) < MIN_SLOWDOWN {
+            return true;
+        }
+        let (dt, span) = (self.scorer.dt, self.facts.vp_span_pct);
+        let current = facts::speed_ratio(self.scorer.op, ya, dt, 0.0, span);
+        tracing::debug!(
+            recording = ?self.facts.speed_ratio,
+            ?current,
+            "answer rate low over high in travel"
+        );
+        match (self.facts.speed_ratio, current) {
+            (Some(seen), Some(cur)) => seen >= SLOWDOWN_SEEN * cur,
+            _ => true,
+        }
+    }
+
+    /// Whether the recording shows each travel stop of `spec` holding the valve where the
+    /// current model (simulated as `ya`) goes on ([`facts::held_at_stop`] for
+    /// [`facts::STOP_ASKED_S`] or more). A valve whose deadband or friction already keeps it
+    /// short of where O_P asks at the top of its travel shows no stop there, and a stop fitted
+    /// at the highest reading it reached only takes up a small error of something else.
+    fn stop_seen(&self, spec: &ModelSpec, ya: &[f64]) -> bool {
+        let sensor = (self.facts.noise_pct, self.facts.lattice_pct);
+        let seen = |level: f64, high: bool| {
+            let held = facts::held_at_stop(self.scorer.vp, ya, level, high, sensor);
+            held as f64 * self.scorer.dt >= facts::STOP_ASKED_S
+        };
+        let (lo, hi) = (spec.travel.min_pct, spec.travel.max_pct);
+        (hi >= 100.0 || seen(hi, true)) && (lo <= 0.0 || seen(lo, false))
+    }
+}
+
+/// Whether a candidate that helped `t_stat` held-out blocks beyond noise, removed
+/// `excess_share` of the error above the noise floor and changed BIC by `delta_bic` explains
+/// the recording beyond chance.
+fn beyond_chance(t_stat: f64, excess_share: f64, delta_bic: f64, tuning: &Tuning) -> bool {
+    t_stat >= tuning.min_blocks
+        && excess_share >= tuning.min_excess_share
+        && delta_bic < tuning.max_delta_bic
+}
+
+/// The number of held-out blocks an effect helped beyond noise (z > `z`), or 0 when the blocks
+/// it hurt (z < -`z`) lose more than a quarter of what the helped ones gain. `blocks` holds,
+/// per block, the drop in squared error and the squared difference of the two simulations.
+pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64, z_min: f64) -> f64 {
+    let z = |(drop, diff2): (f64, f64)| drop / (2.0 * sigma.max(1e-6) * diff2.sqrt() + 1e-12);
+    let (mut better, mut helped, mut hurt) = (0usize, 0.0, 0.0);
+    for &p in blocks {
+        if z(p) > z_min {
+            better += 1;
+            helped += p.0;
+        } else if z(p) < -z_min {
+            hurt -= p.0;
+        }
+    }
+    if hurt * 4.0 <= helped {
+        better as f64
+    } else {
+        0.0
+    }
+}
+
+/// Whether a fitted knob sits at the edge of its box, where the effect stands in for something
+/// else rather than measuring itself: at its lower bound (within 2 % of it, or of the box when
+/// that is narrower), or within the top
+/// 2 % of the box on its own scale. The gain and dead time are left out (they are refitted with
+/// every effect and may rest on a bound), and so are the jump fraction (a jump as large as the
+/// stickband is Choudhury's classic case) and the wind-up at a stop (none is a plain stop).
+fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
+    free.iter().any(|f| {
+        let v = composed::get(spec, f.knob);
+        // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
+        // of 74-78 % is not pinned at 75 %.
+        let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs().min(f.def.hi - f.def.lo);
+        let at_high = f.def.to_unit(v) > 0.98;
+        !matches!(
+            f.knob,
+            Knob::Gain | Knob::DeadTime | Knob::JumpFraction | Knob::Windup
+        ) && (at_low || at_high)
+    })
+}
+
+/// BIC change from `cur` to `new` with `k_new` more parameters, on every scored sample (fit
+/// and held-out blocks: an effect the fit blocks barely exercise, such as a travel stop O_P
+/// asks to pass in a few blocks, is still charged for its parameters and credited for what it
+/// explains), counting independent samples (`n_scored` over the residual's correlation length,
+/// at least 10), not raw ones.
+pub(crate) fn bic_change(
+    cur: &Errors,
+    new: &Errors,
+    k_new: usize,
+    n_scored: usize,
+    corr_len: f64,
+) -> f64 {
+    let n_eff = (n_scored as f64 / corr_len).max(10.0);
+    n_eff * ((new.fit + new.held) / (cur.fit + cur.held)).ln() + k_new as f64 * n_eff.ln()
+}
+
+/// Whether a fitted effect agrees with what the recording shows directly, whatever its size (a
+/// speed limit must be reached by the measured V_P; opening and closing speeds must differ
+/// the same way as the fit says; a minimum speed must show in the tails of steps).
+pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool {
+    let g = |k| composed::get(spec, k);
+    match effect {
+        // A crossing time this short is more often stem dynamics taken up at the reversals.
+        Effect::Backlash => {
+            g(Knob::FrictionBand) > 0.0
+                || g(Knob::Crossing) * composed::half_open(spec) >= MIN_CROSSING_S
+        }
+        // A slew limit even where the valve is fastest (closed), that V_P reaches and holds:
+        // the short bursts of a proportional positioner answering small errors do not show one.
+        Effect::SlewRate => facts.held_speed >= 0.7 * g(Knob::Slew) / composed::half_open(spec),
+        Effect::Asymmetry => {
+            let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
+            let (oa, ob) = (facts.open_speed, facts.close_speed);
+            let seen = oa.max(ob) / oa.min(ob).max(1e-9) >= 1.2 && (a > b) == (oa > ob);
+            seen && a.min(b) < 0.8 * FASTEST_PCT_PER_S && oa.min(ob) >= 0.5 * a.min(b)
+        }
+        // The floor takes over from proportional action below an error of dy_min / P_k, but
+        // only for small errors: a floor over several % is a constant-speed valve.
+        // Where the recording shows the tails of steps well inside that band (beyond the
+        // noise), V_P must still move at about the floor there, not slow down in proportion.
+        // A recording without step tails (a valve in closed loop answering a noisy controller
+        // output) cannot tell a floor from a rate limit or a filter: none is named there; nor
+        // can one where the valve never moves clearly faster than the floor (a valve that
+        // always moves at one speed is slew-limited, as far as any recording shows).
+        Effect::MinSpeed => {
+            let floor = g(Knob::MinSpeed);
+            let band = floor / g(Knob::Gain);
+            let lo = (2.5 * facts.noise_pct).max(band / 8.0);
+            let kept = match facts.approach_speed(lo, 2.0 * lo) {
+                Some(speed) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * floor,
+                _ => facts.approach.len() >= MIN_TAIL_SAMPLES,
+            };
+            let faster = facts.open_speed.max(facts.close_speed) >= FASTER_THAN_FLOOR * floor;
+            floor >= 0.1 && band <= MAX_SPEED_BAND_PCT && kept && faster
+        }
+        // Stick-slip is sized by its slip (a stickband without a jump is a deadband on the
+        // input, and weighs nothing as stick-slip).
+        Effect::Stiction
+        | Effect::DeadTime
+        | Effect::StateDependentDelay
+        | Effect::Deadband
+        | Effect::Saturation
+        | Effect::Quantization
+        | Effect::Calibration => true,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vb_core::model::{bundled, ModelKind};
+
+    fn errors(fit: f64) -> Errors {
+        Errors { fit, held: fit }
+    }
+
+    #[test]
+    fn blocks_helped_counts_significant_drops_unless_others_lose_too_much() {
+        // sigma 0.1, simulations 1 %² apart per block: a drop of 0.2 %² is z = 1.
+        let sigma = 0.1;
+        assert_eq!(
+            blocks_helped(&[(0.5, 1.0), (0.5, 1.0), (0.1, 1.0)], sigma, 2.0),
+            2.0
+        );
+        // One block hurt (z < -2) by more than a quarter of what two gained: chance.
+        let hurt =
+            |drop, diff2| blocks_helped(&[(0.5, 1.0), (0.5, 1.0), (drop, diff2)], sigma, 2.0);
+        assert_eq!(hurt(-0.5, 1.0), 0.0);
+        // Hurt significantly but by less: still two; hurt by more, within noise: two.
+        assert_eq!(hurt(-0.2, 0.01), 2.0);
+        assert_eq!(hurt(-0.3, 1.0), 2.0);
+        // Identical simulations change nothing.
+        assert_eq!(blocks_helped(&[(0.0, 0.0); 4], sigma, 2.0), 0.0);
+    }
+
+    #[test]
+    fn bic_charges_each_parameter_and_counts_independent_samples() {
+        // No improvement: the penalty alone, k ln(n_eff).
+        let d = bic_change(&errors(100.0), &errors(100.0), 2, 10000, 10.0);
+        assert!((d - 2.0 * 1000f64.ln()).abs() < 1e-9);
+        // Halving the error on 1000 independent samples beats one parameter by far.
+        let d = bic_change(&errors(100.0), &errors(50.0), 1, 10000, 10.0);
+        assert!(d < -600.0, "{d}");
+        // The same halving on a residual correlated over 1000 samples counts 10 samples.
+        let d = bic_change(&errors(100.0), &errors(50.0), 1, 10000, 1000.0);
+        assert!((d - (10.0 * 0.5f64.ln() + 10f64.ln())).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_knob_is_pinned_at_the_edges_of_its_box_only() {
+        let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        let at = |knob, v| {
+            let mut s = base.clone();
+            composed::set(&mut s, knob, v);
+            s
+        };
+        // A travel stop in a box of 74-78 %: pinned at 74.05 %, not at 75 %.
+        let stop = [Free::new(Knob::TravelMax, 74.0, 78.0, 76.0)];
+        assert!(pinned(&stop, &at(Knob::TravelMax, 74.05)));
+        assert!(!pinned(&stop, &at(Knob::TravelMax, 75.0)));
+        assert!(pinned(&stop, &at(Knob::TravelMax, 77.99)));
+        // A deadband near its small lower bound: within 2 % of it.
+        let band = [Free::new(Knob::Deadband, 0.05, 5.0, 0.5)];
+        assert!(pinned(&band, &at(Knob::Deadband, 0.0505)));
+        assert!(!pinned(&band, &at(Knob::Deadband, 0.06)));
+    }
+
+    #[test]
+    fn material_sizes_and_what_the_data_shows() {
+        // O_P: a triangle at 4 %/s turning every 5 s.
+        let op: Vec<f64> = (0..6000)
+            .map(|k| 50.0 + 4.0 * (2.5 - ((k as f64 * 0.01) % 10.0 - 5.0).abs()))
+            .collect();
+        let facts = |open: f64, close: f64| Facts {
+            steps: vec![],
+            holds: vec![],
+            open_speed: open,
+            close_speed: close,
+            held_speed: open.max(close),
+            lattice_pct: 0.0,
+            noise_pct: 0.1,
+            reversals: 0,
+            turns: (0..12).map(|i| 250 + 500 * i).collect(),
+            dt: 0.01,
+            slip_scale: super::super::facts::SlipScale::new(0.01, 0.1, 0.0),
+            stop_high_pct: None,
+            stop_low_pct: None,
+            approach: vec![],
+            op_span_pct: (20.0, 80.0),
+            vp_span_pct: (20.0, 80.0),
+            speed_ratio: None,
+        };
+        let material = |effect, spec: &ModelSpec, f: &Facts| {
+            plausible(effect, spec, f)
+                && size::size(effect, spec, f, &op, &Tuning::default()).worth >= 1.0
+        };
+        let base = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        let with = |knob, v| {
+            let mut s = base.clone();
+            composed::set(&mut s, knob, v);
+            s
+        };
+        let f = facts(30.0, 30.0);
+        assert!(material(Effect::DeadTime, &with(Knob::DeadTime, 0.3), &f));
+        assert!(!material(Effect::DeadTime, &with(Knob::DeadTime, 0.21), &f));
+        assert!(material(Effect::Deadband, &with(Knob::Deadband, 0.3), &f));
+        assert!(!material(Effect::Deadband, &with(Knob::Deadband, 0.1), &f));
+        // A slew limit of 20 %/s is material only when V_P reaches it, and holds it for 0.3 s:
+        // bursts at 20 %/s that slow within 0.3 s are a proportional positioner's.
+        assert!(material(Effect::SlewRate, &with(Knob::Slew, 20.0), &f));
+        assert!(!material(
+            Effect::SlewRate,
+            &with(Knob::Slew, 20.0),
+            &facts(5.0, 5.0)
+        ));
+        let bursts = Facts {
+            held_speed: 8.0,
+            ..facts(20.0, 20.0)
+        };
+        assert!(!material(
+            Effect::SlewRate,
+            &with(Knob::Slew, 20.0),
+            &bursts
+        ));
+        // Asymmetry must show in the measured speeds, the same way round.
+        let mut asym = with(Knob::Slew, 50.0);
+        composed::set(&mut asym, Knob::ClosingSlew, 20.0);
+        assert!(material(Effect::Asymmetry, &asym, &facts(50.0, 20.0)));
+        assert!(!material(Effect::Asymmetry, &asym, &facts(20.0, 50.0)));
+        // Lost motion: a crossing of 0.15 s at half travel after reversals at 4 %/s is a band
+        // of 0.6 %; one of 0.05 s is a healthy positioner's (or a slow stroke's taken up at the
+        // reversals); the same 0.15 s after reversals at 1 %/s is a band of 0.15 %: a trace.
+        assert!(material(Effect::Backlash, &with(Knob::Crossing, 0.15), &f));
+        let band = size::friction_band(&with(Knob::Crossing, 0.15), &f, &op);
+        assert!((band - 0.6).abs() < 0.02, "{band}");
+        assert!(!material(Effect::Backlash, &with(Knob::Crossing, 0.05), &f));
+        let slow_op: Vec<f64> = op.iter().map(|x| 50.0 + (x - 50.0) / 4.0).collect();
+        let slow = size::friction_band(&with(Knob::Crossing, 0.15), &f, &slow_op);
+        assert!((slow - 0.15).abs() < 0.01, "{slow}");
+        assert!(material(
+            Effect::Backlash,
+            &with(Knob::FrictionBand, 0.4),
+            &f
+        ));
+        assert!(!material(
+            Effect::Backlash,
+            &with(Knob::FrictionBand, 0.2),
+            &f
+        ));
+        // A stickband without a jump is not stick-slip.
+        let mut band = with(Knob::Stickband, 1.0);
+        composed::set(&mut band, Knob::JumpFraction, 0.0);
+        assert!(!material(Effect::Stiction, &band, &f));
+        composed::set(&mut band, Knob::JumpFraction, 0.5);
+        assert!(material(Effect::Stiction, &band, &f));
+        // A floor of 5 %/s with P_k 5/s: a band of 1 %. Step tails 0.25-0.5 % from rest must
+        // still move at about 5 %/s; proportional action there moves at 1.25-2.5 %/s.
+        let mut floor = with(Knob::Slew, 100.0);
+        composed::set(&mut floor, Knob::MinSpeed, 5.0);
+        composed::set(&mut floor, Knob::Gain, 5.0);
+        let tails = |speed: fn(f64) -> f64| Facts {
+            approach: (0..1000)
+                .map(|i| 0.05 + 0.002 * i as f64)
+                .map(|e| (e, speed(e)))
+                .collect(),
+            ..f.clone()
+        };
+        // Without step tails the recording cannot show a floor.
+        assert!(!material(Effect::MinSpeed, &floor, &f));
+        assert!(material(
+            Effect::MinSpeed,
+            &floor,
+            &tails(|e| (5.0 * e).max(5.0))
+        ));
+        assert!(!material(Effect::MinSpeed, &floor, &tails(|e| 5.0 * e)));
+        // A valve never seen faster than 1.5 times the floor: a slew limit as far as it shows.
+        let never_faster = Facts {
+            open_speed: 6.0,
+            close_speed: 6.0,
+            ..tails(|e| (5.0 * e).max(5.0))
+        };
+        assert!(!material(Effect::MinSpeed, &floor, &never_faster));
+    }
+
+    #[test]
+    fn chance_needs_blocks_a_share_of_the_excess_and_bic() {
+        let t = Tuning::default();
+        assert!(beyond_chance(3.0, 0.5, -50.0, &t));
+        assert!(!beyond_chance(1.0, 0.5, -50.0, &t));
+        assert!(!beyond_chance(3.0, 0.05, -50.0, &t));
+        assert!(!beyond_chance(3.0, 0.5, -5.0, &t));
+    }
+}

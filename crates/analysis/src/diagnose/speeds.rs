@@ -1,0 +1,130 @@
+//! How fast V_P moves: its fastest opening and closing speeds, with the noise of the sensor
+//! taken out, for the facts diagnosis checks its speed limits against.
+//!
+//! Also whether a log shows a model's stroke speed at all ([`stroke_speed_shown`]). Not here:
+//! how fast V_P closes in on where it settles (`facts::approach`), the speed a model is given
+//! (`candidates`).
+
+use vb_core::metrics::stats::quantile;
+use vb_core::model::composed::{self, Knob};
+use vb_core::model::{ModelKind, ModelSpec};
+
+/// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
+/// taken out: for a window of h samples, the speed is the mean of the h/2 differences of V_P
+/// over h samples that end in the window's second half (pairs with a reading missing left
+/// out; a window with fewer than half its pairs measured too), each window starting where the
+/// last ended. Every pair spans the same time, so a speed limit bounds the mean as it bounds
+/// each pair, while the noise of the mean is that of one difference over the square root of
+/// the pairs (a sensor of 0.25 % hides a 2 %/s stroke from one difference over 0.3 s, not
+/// from fifteen). Per window length, the 99.9th percentile in each direction of the speeds
+/// less what noise alone reaches in their window (2.8 sigmas of the mean of the pairs it
+/// measured, so a window with rows missing gets its wider allowance); the largest over the
+/// window lengths. Short windows see fast strokes, long ones the slow moves that noise hides
+/// in short ones.
+pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64, f64) {
+    let mut best = (0.0f64, 0.0f64);
+    for &window_s in windows_s {
+        let h = ((window_s / dt).round() as usize).max(1);
+        let pairs = (h / 2).max(1);
+        let w = h as f64 * dt;
+        let noise = |n: usize| 2.8 * sigma * std::f64::consts::SQRT_2 / (w * (n as f64).sqrt());
+        let mut up: Vec<f64> = Vec::new();
+        let mut down: Vec<f64> = Vec::new();
+        for end in (h + pairs..=vp.len()).step_by(h + pairs) {
+            let (sum, n) = (end - pairs..end)
+                .map(|k| vp[k] - vp[k - h])
+                .filter(|d| d.is_finite())
+                .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
+            if 2 * n < pairs {
+                continue;
+            }
+            let s = sum / (n as f64 * w);
+            if s > 0.0 {
+                up.push(s - noise(n));
+            } else {
+                down.push(-s - noise(n));
+            }
+        }
+        best.0 = best.0.max(quantile(&mut up, 0.999));
+        best.1 = best.1.max(quantile(&mut down, 0.999));
+    }
+    best
+}
+
+/// Whether the log shows the stroke speed of the pin-cart II `spec`, simulated as `sim` on the
+/// log's `op` at `dt`: some sample asks the model's positioner, opening or closing, for at least
+/// its speed limit (its gain times the error between the delayed, calibrated O_P, less half an
+/// input deadband, and the simulated position). A log whose moves never ask for it (small
+/// steps on a healthy valve) fits any limit above what they ask alike, so the fitted limit says
+/// nothing about the valve. True for a spec without a pin-cart II core (nothing to show).
+pub(super) fn stroke_speed_shown(spec: &ModelSpec, op: &[f64], sim: &[f64], dt: f64) -> bool {
+    if spec.model != ModelKind::Pincart2 || spec.pincart2.is_none() {
+        return true;
+    }
+    let get = |k: Knob| composed::get(spec, k);
+    let e = &spec.effects;
+    let delay = (spec.dead_time_s / dt).round() as usize;
+    let (mut open, mut close) = (0.0f64, 0.0f64);
+    for (k, &x) in sim.iter().enumerate().skip(delay) {
+        let u = e.calibration_gain * op[k - delay] + e.calibration_offset_pct;
+        let err = u - x;
+        let asked = (err.abs() - e.deadband_pct / 2.0).max(0.0);
+        if err > 0.0 {
+            open = open.max(asked);
+        } else {
+            close = close.max(asked);
+        }
+    }
+    let gain = get(Knob::Gain);
+    gain * open >= get(Knob::Slew) || gain * close >= get(Knob::ClosingSlew)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_window_with_rows_missing_gets_the_allowance_of_the_pairs_it_measured() {
+        // V_P opens at 2 %/s, read every 10 ms with every other reading missing: each 1 s
+        // window measures 25 of its 50 pairs, so the noise of its mean is that of one
+        // difference over the square root of 25, not of 50.
+        let (dt, sigma, w) = (0.01, 0.25, 1.0);
+        let allowance = |n: f64| 2.8 * sigma * std::f64::consts::SQRT_2 / (w * n.sqrt());
+        let ramp: Vec<f64> = (0..3000).map(|k| 2.0 * k as f64 * dt).collect();
+        let holed: Vec<f64> = (ramp.iter().enumerate())
+            .map(|(k, &v)| if k % 2 == 1 { f64::NAN } else { v })
+            .collect();
+        for (vp, measured) in [(ramp, 50.0), (holed, 25.0)] {
+            let (open, close) = speeds(&vp, dt, sigma, &[w]);
+            assert!((open - (2.0 - allowance(measured))).abs() < 1e-9, "{open}");
+            assert_eq!(close, 0.0);
+        }
+    }
+
+    #[test]
+    fn small_steps_do_not_show_a_stroke_speed_and_a_large_one_does() {
+        // Pin-cart II at 10 /s up to 60 %/s: steps of 2 % ask for 20 %/s at most, one of 10 %
+        // for 100 %/s.
+        let spec = vb_core::model::bundled(ModelKind::Pincart2);
+        let spec = ModelSpec {
+            pincart2: spec.pincart2.map(|p| vb_core::model::PinCart2Params {
+                p_gain_per_s: 10.0,
+                dy_max_pct_per_s: 60.0,
+                ..p
+            }),
+            ..spec
+        };
+        let dt = 0.01;
+        let shown = |size: f64| {
+            let op: Vec<f64> = (0..3000)
+                .map(|k| 50.0 + if (k / 500) % 2 == 1 { size } else { 0.0 })
+                .collect();
+            let sim = vb_core::model::Valve::new(&spec, dt)
+                .unwrap()
+                .simulate(&op, 50.0);
+            stroke_speed_shown(&spec, &op, &sim, dt)
+        };
+        assert!(!shown(2.0));
+        assert!(shown(10.0));
+    }
+}

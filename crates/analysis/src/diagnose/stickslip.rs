@@ -1,0 +1,657 @@
+//! Stick-slip judged by the character of V_P, not by its phase.
+//!
+//! A stem whose static friction exceeds its sliding friction, inside a positioner loop, sticks
+//! while the positioner's pressure builds, breaks loose, slips past the target and sticks
+//! again: a limit cycle (hunting) whose phase is set by the friction and by small
+//! disturbances, not by O_P. A simulated stick-slip valve slips at other moments than the real
+//! one, so its free-run error is no smaller (usually larger) than a smooth model's, although the
+//! smooth model is plainly wrong in character: it never slips. Free-run SSE cannot judge a limit
+//! cycle's phase, so when no effect lowers it, stick-slip is judged by a statistic that does not
+//! depend on the phase:
+//!
+//! - **Slips** ([`facts::slips`]): moves of V_P completed within 0.1 s with V_P at rest just
+//!   before and after, while the current smooth model's V_P moved less than half as much
+//!   anywhere in the half second before; at least five noise sigmas of the compared means,
+//!   one and a half sensor steps (a V_P on a lattice steps by one) and 0.1 %. Simulations are
+//!   read through a sensor like the recording's (its noise, seeded, and its lattice), so the
+//!   few slips noise alone makes count alike everywhere.
+//! - **Per piece** (every fit or held-out block cut into pieces of at least 10 s, several
+//!   stick-slip periods each), a histogram of slip sizes in octaves from the threshold (soft
+//!   binning, so a size near a bin edge does not flip bins). The distance between the measured
+//!   and a simulated V_P is the L1 distance of their histograms: slips of the wrong size or
+//!   number count, their timing inside a piece does not.
+//! - **Fit** on the fit blocks, on a grid seeded from the median size of the slips measured
+//!   there: stick-slip inside the positioner loop (pin-cart II breakaway, with the positioner
+//!   gain, which sets the hunting period) and Choudhury's stick-slip on the valve's input (jump
+//!   and stickband, with a positioner fast enough to pass a jump on as a jump). The grid point
+//!   with the smallest distance on the fit blocks wins; the free-run error only breaks ties.
+//! - **Judge** on the held-out blocks only. More than chance: the per-piece drops in distance
+//!   from the current model to the candidate lean positive (Wilcoxon's signed-rank test,
+//!   one-sided p < 0.05). Something real was missing: the current model misses at least ten
+//!   slips there. A real share of it is explained: the distance falls by at least a quarter
+//!   (with a few slips per piece, counting noise alone keeps even a perfect model's distance
+//!   near half of a slip-free model's). The candidate slips like the valve: as often within a
+//!   factor of 2.5, by the same size within a factor of 1.5. Or, when the candidate matches
+//!   only in part (it still comes closer than the current model), by number: the current
+//!   model misses at least fifteen slips a minute in the fit and in the held-out blocks alike,
+//!   of a median size worth naming; no smooth valve slips like that.
+//!
+//! Quantization (a lattice step is not a slip), sensor spikes (no level change), O_P steps and
+//! smooth moves or slewing (no rest before and after) cannot produce slips, so they cannot be
+//! taken for stick-slip. Everything here is O(n) per simulation.
+
+use rayon::prelude::*;
+
+use super::facts::{self, Facts, Slip};
+use super::measure::Measure;
+use super::scorer::Scorer;
+use super::tuning::Tuning;
+use vb_core::metrics::stats;
+use vb_core::model::composed::{self, Knob};
+use vb_core::model::ModelSpec;
+
+/// Slip-size bins: octaves from the slip threshold, the last one open-ended.
+const BINS: usize = 4;
+/// Fewest slips the current model must miss on the held-out blocks.
+const MIN_MISSED: f64 = 10.0;
+/// Shortest piece of a block the slips are counted in, s.
+const PIECE_S: f64 = 10.0;
+/// Largest one-sided p-value (signed-rank test over held-out pieces) that beats chance.
+const MAX_P: f64 = 0.05;
+/// Slips a minute the current model must miss in both the fit and the held-out blocks for
+/// stick-slip to be named by their number, when the fitted model matches them only in part:
+/// healthy valves under a noisy controller output miss a few a minute, a hunting valve tens.
+const EVIDENT_PER_MIN: f64 = 15.0;
+/// A slip at least this many times the slip threshold is evident: noise alone (five sigmas of
+/// the compared means at the threshold) practically never makes one, and the slips a healthy
+/// valve's small mismatch with its model makes lie just above the threshold. It must also be
+/// larger than a healthy stem's friction band ([`super::tuning::Worth::friction_band_pct`]), whose lost motion
+/// a stem can make up in one quick move.
+const EVIDENT_FACTOR: f64 = 1.5;
+/// Fewest evident slips the current model must miss over the whole recording, and how many
+/// times as many as the model makes (read through the same sensor), for stick-slip to be named
+/// by them even where they fall unevenly between the fit and the held-out blocks (a valve that
+/// hunts at some openings only).
+const EVIDENT_SLIPS: usize = 20;
+const EVIDENT_RATIO: f64 = 5.0;
+
+type Histogram = [f64; BINS];
+
+/// The pieces slips are counted in: every block of the scorer cut into equal pieces of at
+/// least [`PIECE_S`], so the held-out half gives many pairs to compare, each covering several
+/// stick-slip periods (neighbouring counts nearly independent).
+struct Pieces {
+    block_len: usize,
+    per_block: usize,
+    count: usize,
+    skip: usize,
+}
+
+impl Pieces {
+    fn new(scorer: &Scorer) -> Self {
+        let per_block = ((scorer.block_len as f64 * scorer.dt / PIECE_S) as usize).max(1);
+        Pieces {
+            block_len: scorer.block_len,
+            per_block,
+            count: scorer.n_blocks * per_block,
+            skip: scorer.skip,
+        }
+    }
+
+    /// The piece of sample `k` (none in the initial transient).
+    fn of(&self, k: usize) -> Option<usize> {
+        (k >= self.skip).then(|| {
+            k / self.block_len * self.per_block
+                + k % self.block_len * self.per_block / self.block_len
+        })
+    }
+
+    /// True for the pieces of held-out blocks.
+    fn held(&self, piece: usize) -> bool {
+        (piece / self.per_block) % 2 == 1
+    }
+}
+
+/// The slip histogram of every piece.
+fn histograms(slips: &[Slip], threshold: f64, pieces: &Pieces) -> Vec<Histogram> {
+    let mut out = vec![[0.0; BINS]; pieces.count];
+    let top = (BINS - 1) as f64;
+    for s in slips {
+        let x = (s.size_pct.abs() / threshold).log2().clamp(0.0, top);
+        let i = x.floor() as usize;
+        let f = x - i as f64;
+        if let Some(h) = pieces.of(s.k).and_then(|p| out.get_mut(p)) {
+            h[i] += 1.0 - f;
+            if let Some(next) = h.get_mut(i + 1) {
+                *next += f;
+            }
+        }
+    }
+    out
+}
+
+/// Per piece, the L1 distance between two sets of histograms.
+fn distances(a: &[Histogram], b: &[Histogram]) -> Vec<f64> {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()).sum())
+        .collect()
+}
+
+/// One-sided p-value of Wilcoxon's signed-rank test that the paired differences `x` lean
+/// positive: zeros are dropped, tied magnitudes share their mean rank, and the p-value is exact
+/// (the share of the 2^n sign patterns whose positive rank sum reaches the observed one).
+fn signed_rank_p(x: &[f64]) -> f64 {
+    let tie = 1e-9;
+    let mut v: Vec<f64> = x.iter().copied().filter(|d| d.abs() > tie).collect();
+    v.sort_by(|a, b| a.abs().total_cmp(&b.abs()));
+    // Twice the mean ranks, so they stay integers.
+    let n = v.len();
+    let mut rank2 = vec![0usize; n];
+    let mut i = 0;
+    while i < n {
+        let mut j = i;
+        while j + 1 < n && v[j + 1].abs() - v[i].abs() <= tie {
+            j += 1;
+        }
+        rank2[i..=j].fill(i + j + 2);
+        i = j + 1;
+    }
+    let observed: usize = v
+        .iter()
+        .zip(&rank2)
+        .filter(|(d, _)| **d > 0.0)
+        .map(|(_, r)| r)
+        .sum();
+    let total: usize = rank2.iter().sum();
+    // ways[s]: sign patterns whose positive ranks sum to s.
+    let mut ways = vec![0.0f64; total + 1];
+    ways[0] = 1.0;
+    for &r in &rank2 {
+        for s in (r..=total).rev() {
+            ways[s] += ways[s - r];
+        }
+    }
+    let all: f64 = ways.iter().sum();
+    ways[observed..].iter().sum::<f64>() / all
+}
+
+/// How a candidate's slips compare with the measured ones on the held-out half, next to the
+/// current model's.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Match {
+    /// Pieces where the model's slips are closer to the measured ones than the current
+    /// model's, and where they are farther.
+    pub better: usize,
+    pub worse: usize,
+    /// One-sided signed-rank p-value of the per-piece drops in distance.
+    pub p_value: f64,
+    /// Summed distance of the current model and of this one (in slips).
+    pub distance_before: f64,
+    pub distance_after: f64,
+    /// Number and median size (%) of the measured slips and of the model's.
+    pub measured: (usize, f64),
+    pub simulated: (usize, f64),
+}
+
+impl Match {
+    /// The held-out half: per piece, the current model's and the candidate's distances
+    /// (`before`, `after`), and the measured and the candidate's slips.
+    fn new(
+        pieces: &Pieces,
+        scorer: &Scorer,
+        (before, after): (&[f64], &[f64]),
+        (measured, simulated): (&[Slip], &[Slip]),
+    ) -> Self {
+        let held = true;
+        let drops: Vec<f64> = before
+            .iter()
+            .zip(after)
+            .enumerate()
+            .filter(|&(p, _)| pieces.held(p) == held)
+            .map(|(_, (d0, d1))| d0 - d1)
+            .collect();
+        Match {
+            better: drops.iter().filter(|g| **g > 1e-9).count(),
+            worse: drops.iter().filter(|g| **g < -1e-9).count(),
+            p_value: signed_rank_p(&drops),
+            distance_before: total(before, pieces, held),
+            distance_after: total(after, pieces, held),
+            measured: count_and_size(measured, scorer, held),
+            simulated: count_and_size(simulated, scorer, held),
+        }
+    }
+
+    /// More than chance, something real was missing, a real share of it explained, and the
+    /// candidate slips like the valve (see the module documentation).
+    pub(crate) fn slips_alike(&self) -> bool {
+        let ratio = |a: f64, b: f64| a.max(b) / a.min(b).max(f64::MIN_POSITIVE);
+        let ((nm, sm), (ns, ss)) = (self.measured, self.simulated);
+        self.p_value < MAX_P
+            && self.distance_before >= MIN_MISSED
+            && self.distance_after <= 0.75 * self.distance_before
+            && ratio(nm as f64, ns as f64) <= 2.5
+            && ratio(sm, ss) <= 1.5
+    }
+}
+
+/// A stick-slip candidate and how its slips compare with the measured ones.
+pub(crate) struct Candidate {
+    pub spec: ModelSpec,
+    /// The knobs the fit set.
+    pub knobs: Vec<Knob>,
+    /// The comparison on the held-out blocks.
+    pub held: Match,
+    /// Slips of the measured V_P, and of the current model's and the candidate's simulated
+    /// V_P read by a sensor like the recording's, whole recording.
+    pub slips_measured: Vec<Slip>,
+    pub slips_before: Vec<Slip>,
+    pub slips_after: Vec<Slip>,
+    /// Named by the number of slips the current model misses rather than by the match.
+    pub by_count: bool,
+    /// Summed histogram distance over every piece of the recording, before and after.
+    pub distance_all: (f64, f64),
+}
+
+impl Candidate {
+    /// Slips like the valve on the held-out blocks (or are far too many for a smooth valve),
+    /// big enough to matter (0.1 %), and bring the slip histograms closer to the measured ones.
+    pub(crate) fn passes(&self) -> bool {
+        let size = [Knob::Breakaway, Knob::Stickband]
+            .iter()
+            .map(|&k| composed::get(&self.spec, k))
+            .fold(0.0, f64::max);
+        let Measure::SlipDistance { before, after, .. } = self.distance() else {
+            return false;
+        };
+        (self.held.slips_alike() || self.by_count) && size >= 0.1 && after < before
+    }
+
+    /// The measure it improves ([`Measure::SlipDistance`]): on the held-out pieces when it
+    /// does there, else over the whole recording (a valve that hunts at some openings only
+    /// may slip mostly in the fit blocks).
+    pub(crate) fn distance(&self) -> Measure {
+        let (before, after) = (self.held.distance_before, self.held.distance_after);
+        if after < before {
+            Measure::SlipDistance {
+                heldout: true,
+                before,
+                after,
+            }
+        } else {
+            Measure::SlipDistance {
+                heldout: false,
+                before: self.distance_all.0,
+                after: self.distance_all.1,
+            }
+        }
+    }
+
+    /// Median size of the measured slips, %, with its 90 % interval over resamples of the
+    /// scorer's blocks (a block bootstrap).
+    pub(crate) fn slip_size(&self, scorer: &Scorer) -> (f64, f64, f64) {
+        use rand::{Rng, SeedableRng};
+        let mut per_block: Vec<Vec<f64>> = vec![Vec::new(); scorer.n_blocks];
+        for s in &self.slips_measured {
+            if let Some(b) = per_block.get_mut(s.k / scorer.block_len) {
+                b.push(s.size_pct.abs());
+            }
+        }
+        let mut all: Vec<f64> = per_block.concat();
+        let median = stats::quantile(&mut all, 0.5);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x511b5);
+        let n = per_block.len();
+        let mut medians: Vec<f64> = (0..400)
+            .filter_map(|_| {
+                let mut x: Vec<f64> = (0..n)
+                    .flat_map(|_| per_block[rng.gen_range(0..n)].iter().copied())
+                    .collect();
+                (!x.is_empty()).then(|| stats::quantile(&mut x, 0.5))
+            })
+            .collect();
+        let (lo, hi) = (
+            stats::quantile(&mut medians, 0.05),
+            stats::quantile(&mut medians, 0.95),
+        );
+        (median, lo.min(median), hi.max(median))
+    }
+}
+
+/// Sum of `per_piece` over the pieces of the fit or of the held-out blocks.
+fn total(per_piece: &[f64], pieces: &Pieces, held: bool) -> f64 {
+    per_piece
+        .iter()
+        .enumerate()
+        .filter(|&(p, _)| pieces.held(p) == held)
+        .map(|(_, d)| d)
+        .sum()
+}
+
+/// What makes a slip evident besides its size: V_P at rest on both sides of the move.
+struct Rest {
+    /// Samples the move may take (the slip detector's span).
+    span: usize,
+    /// Noise of the reading, %.
+    sigma: f64,
+    /// Samples of the initial transient, not counted.
+    skip: usize,
+}
+
+impl Rest {
+    /// Number of `slips` of the reading `y` at least `least` in size, outside the initial
+    /// transient, with `y` at rest for a span just before and just after the move: within a
+    /// quarter of the slip plus what five noise sigmas spread over. A valve that jitters
+    /// after a noisy controller output moves all the time; a stuck stem stands still, then
+    /// slips.
+    fn evident(&self, slips: &[Slip], y: &[f64], least: f64) -> usize {
+        let h = self.span;
+        let still = |a: usize, b: usize, size: f64| {
+            let (lo, hi) = y[a..b]
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &v| {
+                    (l.min(v), u.max(v))
+                });
+            hi - lo <= 0.25 * size + 5.0 * self.sigma
+        };
+        slips
+            .iter()
+            .filter(|s| {
+                let size = s.size_pct.abs();
+                s.k >= self.skip.max(2 * h)
+                    && s.k + 2 * h <= y.len()
+                    && size >= least
+                    && still(s.k - 2 * h, s.k - h, size)
+                    && still(s.k + h, s.k + 2 * h, size)
+            })
+            .count()
+    }
+}
+
+/// Number and median size of the slips in the fit (`held` false) or held-out blocks.
+fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
+    let mut sizes: Vec<f64> = slips
+        .iter()
+        .filter(|s| s.k >= scorer.skip && scorer.held(s.k) == held)
+        .map(|s| s.size_pct.abs())
+        .collect();
+    (sizes.len(), stats::quantile(&mut sizes, 0.5))
+}
+
+/// The stick-slip variants to try on top of a model with positioner gain `gain`, seeded from
+/// the median measured slip `size`: stick-slip inside the positioner loop (the breakaway is
+/// about the slip; a slower positioner hunts with a longer period), and Choudhury's stick-slip
+/// on the input (the jump J is about the slip, S from J to 4 J; a fast positioner passes the
+/// jump on as a jump). Slip sizes from half to twice the median.
+fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
+    let sizes = || (0..=8).map(move |i| size * 2f64.powf(i as f64 / 4.0 - 1.0));
+    let breakaway = sizes().flat_map(|b| {
+        (-4..=3).map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
+    });
+    let input = sizes().flat_map(|jump| {
+        [1.0, 0.5, 0.25].into_iter().flat_map(move |fraction| {
+            [1.0, 4.0, 16.0].into_iter().map(move |g| {
+                vec![
+                    (Knob::Stickband, jump / fraction),
+                    (Knob::JumpFraction, fraction),
+                    (Knob::Gain, gain * g),
+                ]
+            })
+        })
+    });
+    breakaway.chain(input).collect()
+}
+
+/// Fits stick-slip to the measured slips and compares it with `current` on the held-out
+/// blocks; `None` when the current model misses too few slips to fit anything.
+///
+/// Slips are counted against the current (smooth) model's V_P. Every simulation gets the same
+/// seeded sensor noise (and lattice) the recording has, so the slips that noise alone makes
+/// count alike in the measurement and in every model. The grid point whose slips are closest
+/// to the measured ones on the fit blocks wins (the free-run error only breaks ties: it cannot
+/// judge a limit cycle).
+pub(crate) fn fit(
+    scorer: &Scorer,
+    current: &ModelSpec,
+    facts: &Facts,
+    sigma: f64,
+    tuning: &Tuning,
+) -> Option<Candidate> {
+    let scale = &facts.slip_scale;
+    let threshold = scale.threshold_pct;
+    let pieces = Pieces::new(scorer);
+    let reference = scorer.simulate(current);
+    let measured_slips = facts::slips(&reference, scorer.vp, scale);
+    let measured = histograms(&measured_slips, threshold, &pieces);
+    let sensor = Sensor::new(scorer.vp, sigma, facts.lattice_pct);
+    let run = |spec: &ModelSpec| {
+        let y = scorer.simulate(spec);
+        let slips = facts::slips(&reference, &sensor.read(&y), scale);
+        let d = distances(&measured, &histograms(&slips, threshold, &pieces));
+        (slips, d, scorer.errors_of(&y).fit)
+    };
+    let (slips_before, before, _) = run(current);
+    let missed = (
+        total(&before, &pieces, false),
+        total(&before, &pieces, true),
+    );
+    tracing::debug!(
+        measured = measured_slips.len(),
+        model = slips_before.len(),
+        missed_fit = missed.0,
+        missed_held = missed.1,
+        size_fit = count_and_size(&measured_slips, scorer, false).1,
+        size_held = count_and_size(&measured_slips, scorer, true).1,
+        threshold,
+        "slips of V_P"
+    );
+    let least = (EVIDENT_FACTOR * threshold)
+        .max(tuning.worth.friction_band_pct)
+        .max(1.5 * sigma);
+    let rest = Rest {
+        span: scale.span,
+        sigma,
+        skip: scorer.skip,
+    };
+    let (evident, evident_model) = (
+        rest.evident(&measured_slips, scorer.vp, least),
+        rest.evident(&slips_before, &sensor.read(&reference), least),
+    );
+    let by_evidence =
+        evident >= EVIDENT_SLIPS && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
+    tracing::debug!(evident, evident_model, least, by_evidence, "evident slips");
+    let both_halves = missed.0 >= MIN_MISSED && missed.1 >= MIN_MISSED;
+    if !both_halves && !by_evidence {
+        return None;
+    }
+    // Fitted on the fit blocks; on all of them when those hold too few slips to fit.
+    let fit_on = |d: &[f64]| {
+        if missed.0 >= MIN_MISSED {
+            total(d, &pieces, false)
+        } else {
+            d.iter().sum()
+        }
+    };
+    let size = if missed.0 >= MIN_MISSED {
+        count_and_size(&measured_slips, scorer, false).1
+    } else {
+        let mut all: Vec<f64> = measured_slips.iter().map(|s| s.size_pct.abs()).collect();
+        stats::quantile(&mut all, 0.5)
+    };
+    let gain = composed::get(current, Knob::Gain);
+    let (spec, knobs, _, _) = grid(size, gain)
+        .par_iter()
+        .map(|knobs| {
+            let mut spec = current.clone();
+            for &(k, v) in knobs {
+                composed::set(&mut spec, k, v);
+            }
+            let (_, d, sse) = run(&spec);
+            let free: Vec<Knob> = knobs.iter().map(|&(k, _)| k).collect();
+            (spec, free, fit_on(&d), sse)
+        })
+        .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))?;
+    let (slips_after, after, _) = run(&spec);
+    let held = Match::new(
+        &pieces,
+        scorer,
+        (&before, &after),
+        (&measured_slips, &slips_after),
+    );
+    let per_min = EVIDENT_PER_MIN * scorer.n_fit() as f64 * scorer.dt / 60.0;
+    let by_count = by_evidence
+        || (missed.0.min(missed.1) >= per_min
+            && size >= tuning.worth.slip_pct.max(1.5 * sigma)
+            && held.distance_after < held.distance_before);
+    let sum = |d: &[f64]| d.iter().sum::<f64>();
+    let candidate = Candidate {
+        distance_all: (sum(&before), sum(&after)),
+        held,
+        by_count,
+        spec,
+        knobs,
+        slips_measured: measured_slips,
+        slips_before,
+        slips_after,
+    };
+    tracing::debug!(
+        params = ?candidate.knobs.iter().map(|&k| (k.label(), composed::get(&candidate.spec, k))).collect::<Vec<_>>(),
+        held = ?candidate.held,
+        passes = candidate.passes(),
+        "stick-slip by slip statistics"
+    );
+    Some(candidate)
+}
+
+/// The recording's sensor, for simulations: seeded Gaussian noise of the noise floor, then the
+/// sensor lattice, and no reading where the recording has none (so a simulation's slips are
+/// counted on the same rows as the measured ones).
+struct Sensor {
+    noise: Vec<f64>,
+    lattice: f64,
+}
+
+impl Sensor {
+    /// The sensor of the measured V_P `vp` (NaN where missing).
+    fn new(vp: &[f64], sigma: f64, lattice: f64) -> Self {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51_1b5);
+        let noise = vp
+            .iter()
+            .map(|v| {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                if v.is_finite() {
+                    sigma * e
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        Sensor { noise, lattice }
+    }
+
+    /// What the sensor would have read of the positions `y`.
+    fn read(&self, y: &[f64]) -> Vec<f64> {
+        y.iter()
+            .zip(&self.noise)
+            .map(|(v, e)| {
+                let r = v + e;
+                if self.lattice > 0.0 {
+                    (r / self.lattice).round() * self.lattice
+                } else {
+                    r
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn signed_rank_test_is_exact() {
+        // All five positive: 1 pattern in 32.
+        assert!((signed_rank_p(&[1.0, 2.0, 3.0, 4.0, 5.0]) - 1.0 / 32.0).abs() < 1e-12);
+        // Zeros are dropped; nothing left means no evidence.
+        assert_eq!(signed_rank_p(&[0.0, 0.0]), 1.0);
+        // Ranks 1-4, only rank 1 negative: W+ = 9 of 10; patterns with W+ >= 9: {2,3,4}, all.
+        assert!((signed_rank_p(&[-1.0, 2.0, 3.0, 4.0]) - 2.0 / 16.0).abs() < 1e-12);
+        // Ties share a rank: |1|, |1| -> 1.5 each; W+ = 1.5 + 3 of 6; patterns reaching it: {1, 2}, {1', 2}, all.
+        assert!((signed_rank_p(&[1.0, -1.0, 2.0]) - 3.0 / 8.0).abs() < 1e-12);
+        // Leaning negative: large p.
+        assert!(signed_rank_p(&[-3.0, -2.0, -1.0, 0.5]) > 0.9);
+    }
+
+    #[test]
+    fn histogram_distance_counts_slips_of_the_wrong_size_or_number() {
+        let pieces = Pieces {
+            block_len: 1000,
+            per_block: 1,
+            count: 4,
+            skip: 0,
+        };
+        let slip = |k, size_pct| Slip { k, size_pct };
+        // Threshold 0.2: 0.4 sits on the second bin, 0.3 between the first two.
+        let a = histograms(&[slip(100, 0.4), slip(1500, -0.4)], 0.2, &pieces);
+        assert_eq!(a[0], [0.0, 1.0, 0.0, 0.0]);
+        let b = histograms(&[slip(900, 0.4), slip(1200, 0.4)], 0.2, &pieces);
+        // Timing inside a block does not matter, the sign does not either.
+        assert_eq!(distances(&a, &b), vec![0.0, 0.0, 0.0, 0.0]);
+        let c = histograms(&[slip(100, 0.3)], 0.2, &pieces);
+        let x = 0.3f64 / 0.2;
+        let f = x.log2();
+        assert!((c[0][0] - (1.0 - f)).abs() < 1e-12 && (c[0][1] - f).abs() < 1e-12);
+        assert_eq!(distances(&a, &c)[1], 1.0);
+    }
+
+    #[test]
+    fn stick_slip_is_named_by_a_close_match_or_by_an_overwhelming_count() {
+        let held = |simulated: usize, distance_after: f64| Match {
+            better: 25,
+            worse: 5,
+            p_value: 0.001,
+            distance_before: 500.0,
+            distance_after,
+            measured: (500, 0.9),
+            simulated: (simulated, 0.9),
+        };
+        let mut spec = vb_core::model::bundled(vb_core::model::ModelKind::Pincart2);
+        composed::set(&mut spec, Knob::Breakaway, 0.9);
+        let candidate = |held, by_count| Candidate {
+            spec: spec.clone(),
+            knobs: vec![Knob::Breakaway],
+            held,
+            slips_measured: vec![],
+            slips_before: vec![],
+            slips_after: vec![],
+            by_count,
+            distance_all: (1000.0, 700.0),
+        };
+        // Slipping as often and as much, and a third of the distance gone: named.
+        assert!(candidate(held(450, 300.0), false).passes());
+        // A fifth as often and a fifth of the distance gone: not a match...
+        assert!(!held(100, 400.0).slips_alike());
+        assert!(!candidate(held(100, 400.0), false).passes());
+        // ...but named when the current model misses slips by the hundred (`by_count`).
+        assert!(candidate(held(100, 400.0), true).passes());
+        // Only when it brings the histograms closer somewhere: the held-out pieces, or else
+        // the whole recording.
+        assert!(matches!(
+            candidate(held(100, 400.0), true).distance(),
+            Measure::SlipDistance { heldout: true, .. }
+        ));
+        let worse = candidate(held(100, 600.0), true);
+        assert!(matches!(
+            worse.distance(),
+            Measure::SlipDistance { heldout: false, after, .. } if after == 700.0
+        ));
+        assert!(worse.passes());
+        let nowhere = Candidate {
+            distance_all: (1000.0, 1100.0),
+            ..candidate(held(100, 600.0), true)
+        };
+        assert!(!nowhere.passes());
+    }
+}
