@@ -6,7 +6,7 @@
 
 use std::time::Instant;
 
-use valve_bridge::daemon::health::Figures;
+use valve_bridge::daemon::monitor::health::Figures;
 use valve_bridge::model::{bundled, ModelKind, Valve};
 use valve_bridge::signal::{RandomSteps, RandomStepsParams};
 

@@ -1,15 +1,15 @@
 //! The analysis the daemon runs beside its loop ([`crate::daemon::Analysis`]): live diagnosis
 //! of a valve's window (its verdict, its effects and its report) and the health plot.
 //!
-//! Not here: when windows are diagnosed, the history and its alarms (`daemon::diagnosis`).
+//! Not here: when windows are diagnosed, the history and its alarms (`daemon::monitor::diagnosis`).
 
 use std::path::Path;
 use std::sync::OnceLock;
 
 use rayon::ThreadPool;
 
-use crate::daemon::analysis::{Analysis, WindowDiagnosis};
-use crate::daemon::diagnosis::history::Entry;
+use crate::daemon::monitor::analysis::{Analysis, WindowDiagnosis};
+use crate::daemon::monitor::diagnosis::history::Entry;
 use crate::diagnose::{diagnose, Diagnosis};
 use crate::model::ModelSpec;
 use crate::priority::lowest_priority;

@@ -173,9 +173,9 @@ fn slow_nothing(
     _rec: &valve_bridge::recording::RecordingView,
     _base: Option<&valve_bridge::model::ModelSpec>,
     _title: Option<&str>,
-) -> Result<valve_bridge::daemon::analysis::WindowDiagnosis, String> {
+) -> Result<valve_bridge::daemon::monitor::analysis::WindowDiagnosis, String> {
     std::thread::sleep(std::time::Duration::from_millis(30));
-    Ok(valve_bridge::daemon::analysis::WindowDiagnosis {
+    Ok(valve_bridge::daemon::monitor::analysis::WindowDiagnosis {
         verdict: "nothing found".into(),
         effects: Vec::new(),
         report: Vec::new(),

@@ -8,10 +8,10 @@ use std::sync::Arc;
 
 use serde_json::Value;
 use valve_bridge::daemon::config::{HealthConfig, MetricsConfig};
-use valve_bridge::daemon::diagnosis::history::{Entry, Record};
-use valve_bridge::daemon::diagnosis::DiagnosisMetrics;
-use valve_bridge::daemon::exporter::LoopMetrics;
-use valve_bridge::daemon::health::Figures;
+use valve_bridge::daemon::monitor::diagnosis::history::{Entry, Record};
+use valve_bridge::daemon::monitor::diagnosis::DiagnosisMetrics;
+use valve_bridge::daemon::monitor::health::Figures;
+use valve_bridge::daemon::serve::exporter::LoopMetrics;
 use valve_bridge::diagnose::{Effect, Size};
 
 const DASHBOARD: &str = include_str!("../contrib/grafana/valve-bridge.json");

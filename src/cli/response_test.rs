@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use valve_bridge::daemon::response::Test;
-use valve_bridge::daemon::stats::StopReason;
+use valve_bridge::daemon::runtime::stats::StopReason;
 use valve_bridge::daemon::{Analysis, Config, RunOptions};
 use valve_bridge::recording::{self, ReadOptions};
 use valve_bridge::report::{self, response as words};

@@ -2,7 +2,7 @@
 //! priority of work that must not delay it (live diagnosis, in the runtime and in the analysis
 //! layer alike). Linux system calls on the calling thread, nothing else.
 //!
-//! Not here: when the loop wakes (`daemon::schedule`), which threads run what (`daemon`).
+//! Not here: when the loop wakes (`daemon::runtime::schedule`), which threads run what (`daemon`).
 
 /// Makes the calling thread's sleeps end as close to their deadline as the kernel allows.
 ///

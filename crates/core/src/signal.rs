@@ -6,7 +6,7 @@
 //! (ChaCha8) and depend on the time only, not on how often they are asked, so two runs that ask
 //! at different times see the same signal. Asking never allocates.
 //!
-//! Both the daemon's sources (`vb_daemon::source`, which adds the clamp to `[source]`'s
+//! Both the daemon's sources (`vb_daemon::runtime::source`, which adds the clamp to `[source]`'s
 //! range and the Modbus-server controller) and offline generation (`vb_analysis::synth`) use these.
 //! Nothing here clamps, checks ranges (the owner of the parameters does), knows about valves or
 //! reads files (a replay is handed the O_P samples already held on its grid).

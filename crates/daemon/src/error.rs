@@ -1,12 +1,12 @@
 //! [`DaemonError`]: why the daemon could not start or finish, for every thread of it.
 //!
 //! Not here: the errors of the configuration ([`vb_core::toml_file::TomlError`]) and of the valve
-//! backends ([`super::valve::BackendError`]), which this wraps.
+//! backends ([`crate::runtime::valve::BackendError`]), which this wraps.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use super::valve::BackendError;
+use crate::runtime::valve::BackendError;
 use vb_core::toml_file::TomlError;
 
 /// Why the daemon could not start or finish.
@@ -72,8 +72,9 @@ pub enum DaemonError {
     /// A history the daemon appends to starts with another header than the one it writes.
     #[error("`{path}` starts with another header than this version writes: move it aside (the daemon then starts a new one)")]
     LogHeader { path: PathBuf },
-    /// `[diagnosis]` asked of a daemon started without a diagnosis to run.
-    #[error("[diagnosis]: this program runs the loop without diagnosis; remove [diagnosis] from the config or run it with a `valve-bridge run` built with the `analysis` feature (the default)")]
+    /// `[diagnosis]` asked of a daemon started without a diagnosis to run (a program that
+    /// embeds the daemon's crate without the analysis; `valve-bridge run` always has it).
+    #[error("[diagnosis]: this program runs the loop without diagnosis; remove [diagnosis] from the config or run it with `valve-bridge run`")]
     NoDiagnosis,
     /// A thread, runtime or signal handler could not be set up.
     #[error("cannot start the {what}: {source}")]

@@ -1,62 +1,54 @@
 //! `valve-bridge run`: the valve loop, at 100 Hz by default, from source to valve to log.
 //!
-//! Every slot of an absolute time grid, the loop asks the [`source::Source`] for the wanted
-//! opening O_P, sends it to the valve [`valve::Backend`] and reads V_P back in one transaction,
-//! and hands a [`vb_core::recording::log_format::Sample`] to the [`logger`]. Missed slots and failed transactions are
-//! logged as such with an empty V_P. On stop (SIGINT, SIGTERM, `--duration`, or the end of a
-//! replay) the loop applies the configured safe action in the next slot, logs it, the log is
-//! flushed and closed, and a [`stats::Summary`] is returned.
+//! Every slot of an absolute time grid, the loop asks the [`runtime::source::Source`] for the
+//! wanted opening O_P, sends it to the valve [`runtime::valve::Backend`] and reads V_P back in
+//! one transaction, and hands a [`vb_core::recording::log_format::Sample`] to the
+//! [`runtime::logger`]. Missed slots and failed transactions are logged as such with an empty
+//! V_P. On stop (SIGINT, SIGTERM, `--duration`, or the end of a replay) the loop applies the
+//! configured safe action in the next slot, logs it, the log is flushed and closed, and a
+//! [`Summary`] is returned.
 //!
 //! Threads: the loop runs on its own OS thread (`vb-loop`) that sleeps to absolute deadlines
-//! ([`schedule`]) and runs each valve transaction on a current-thread tokio runtime it owns, so
-//! async backends need no other thread and no cross-thread hop. The logger writes on its own
-//! thread, and passes the rows on to the health thread (`vb-health`, with `[health]`,
-//! [`health`]), which estimates each valve's health off the loop and, with `[diagnosis]`,
-//! hands windows to the diagnosis thread (`vb-diagnosis`, [`diagnosis`]). The network thread (`vb-net`, only when there is something to serve) runs the
-//! process controller's Modbus server ([`hil`]) and the HTTP server ([`http`]) of the Prometheus
-//! metrics ([`exporter`]) and the live page ([`page`]) on a runtime of its own: the loop shares
-//! only a register bank and atomic metric handles with it and never waits on a socket; the page
-//! reads what the logger, health and diagnosis threads put on its board. The calling thread waits for signals (tokio), drives the progress
-//! display, talks to systemd when run as a service ([`service`]) and joins.
+//! ([`runtime::schedule`]) and runs each valve transaction on a current-thread tokio runtime it
+//! owns, so async backends need no other thread and no cross-thread hop. The logger writes on
+//! its own thread, and passes the rows on to the health thread (`vb-health`, with `[health]`,
+//! [`monitor::health`]), which estimates each valve's health off the loop and, with
+//! `[diagnosis]`, hands windows to the diagnosis thread (`vb-diagnosis`,
+//! [`monitor::diagnosis`]). The network thread (`vb-net`, only when there is something to
+//! serve, [`serve`]) runs the process controller's Modbus server ([`serve::hil`]) and the HTTP
+//! server of the Prometheus metrics ([`serve::exporter`]) and the live page on a runtime of its
+//! own: the loop shares only a register bank and atomic metric handles with it and never waits
+//! on a socket; the page reads what the logger, health and diagnosis threads put on its board.
+//! The calling thread waits for signals (tokio), drives the progress display, talks to systemd
+//! when run as a service ([`service`]) and joins.
 //!
 //! Sample convention (as [`vb_core::model::Valve::simulate_into`]): in slot `k` the valve gets
 //! `op_k` and the V_P it returns is sample `k`. The emulated valve starts at rest at the first
 //! O_P, so a log replays through `Valve::simulate(op, op[0])`: O_P exactly (the loop rounds it to
 //! the log's 0.0001 % before sending), V_P to the log's precision.
 //!
-//! Files: [`running`] starts the threads ([`start`], [`Running`]), [`control`] is the loop
-//! thread's body, [`compensation`] a valve's compensation in it, [`net`] the network thread;
-//! [`error`] the errors; [`response`] runs a response test through all of it; this file holds
-//! the options and [`run`] (signals and progress display). The log directory's files are
-//! opened by `files` (never through a symbolic link, each new one with its header on the disk)
-//! and written through [`log_file`] (which outlives a full disk).
+//! Rooms, by concern:
+//! - [`runtime`]: the loop, its schedule, sources, valve backends, compensation, the log and its
+//!   files, the run's statistics;
+//! - [`config`]: the TOML configuration and its checks;
+//! - [`serve`]: the network thread (HIL Modbus server, HTTP: metrics and live page);
+//! - [`monitor`]: live health and diagnosis beside the loop, and the [`Analysis`] seam;
+//! - here: the options and [`run`] (signals and progress display), [`start`] ([`Running`],
+//!   in `running.rs`), the errors ([`DaemonError`]), [`response`] (a response test through all
+//!   of it), [`service`] (systemd).
 //!
-//! Not here: the Modbus protocol (a backend variant in [`valve`]), recording analysis (the
-//! daemon runs diagnosis and plotting only as the [`Analysis`] it is handed).
+//! Not here: the Modbus protocol (`vb-modbus`; a backend variant in [`runtime::valve`]),
+//! recording analysis (the daemon runs diagnosis and plotting only as the [`Analysis`] it is
+//! handed).
 
-pub mod analysis;
-mod compensation;
 pub mod config;
-mod control;
-pub mod diagnosis;
 mod error;
-pub mod exporter;
-mod files;
-pub mod health;
-mod health_figures;
-pub mod hil;
-mod http;
-pub mod log_file;
-pub mod logger;
-mod net;
-mod page;
+pub mod monitor;
 pub mod response;
 mod running;
-pub mod schedule;
+pub mod runtime;
+pub mod serve;
 pub mod service;
-pub mod source;
-pub mod stats;
-pub mod valve;
 
 use std::io::Write;
 use std::net::SocketAddr;
@@ -65,12 +57,12 @@ use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-pub use analysis::Analysis;
-pub use compensation::CompensationReport;
 pub use config::Config;
 pub use error::DaemonError;
+pub use monitor::analysis::Analysis;
 pub use running::{start, Running};
-pub use stats::{Summary, ValveSummary};
+pub use runtime::compensation::CompensationReport;
+pub use runtime::stats::{Summary, ValveSummary};
 /// Command-line overrides of the configuration.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {

@@ -3,7 +3,7 @@
 //! parts.
 //! [`Running`] is the started daemon: stop it, watch it, and join it for the [`Summary`].
 //!
-//! Not here: what the loop does each slot ([`super::control`]), serving ([`super::net`]).
+//! Not here: what the loop does each slot ([`crate::runtime::control`]), serving ([`crate::serve`]).
 
 use std::net::SocketAddr;
 use std::path::Path;
@@ -12,23 +12,23 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use super::analysis::{DiagnoseWindow, PlotHealth};
-use super::compensation::Compensation;
-use super::config::{ClockKind, Config, DiagnosisConfig};
-use super::control::{self, Lane, Loop, LoopEnd};
-use super::diagnosis::{self, DiagnosisMetrics};
-use super::error::DaemonError;
-use super::exporter::LoopMetrics;
-use super::files;
-use super::health::{self, HealthReport};
-use super::log_file::LogAlarm;
-use super::logger::{LogReport, Logger};
-use super::net::{Listeners, Net};
-use super::page::board::Board;
-use super::source::Source;
-use super::stats::{Live, Summary, ValveSummary};
-use super::valve::BackendError;
-use super::RunOptions;
+use crate::config::{ClockKind, Config, DiagnosisConfig};
+use crate::error::DaemonError;
+use crate::monitor::analysis::{DiagnoseWindow, PlotHealth};
+use crate::monitor::diagnosis::{self, DiagnosisMetrics};
+use crate::monitor::health::{self, HealthReport};
+use crate::runtime::compensation::Compensation;
+use crate::runtime::control::{self, Lane, Loop, LoopEnd};
+use crate::runtime::files;
+use crate::runtime::log_file::LogAlarm;
+use crate::runtime::logger::{LogReport, Logger};
+use crate::runtime::source::Source;
+use crate::runtime::stats::{Live, Summary, ValveSummary};
+use crate::runtime::valve::BackendError;
+use crate::serve::exporter::LoopMetrics;
+use crate::serve::page::board::Board;
+use crate::serve::{Listeners, Net};
+use crate::RunOptions;
 use vb_core::model::{ModelSpec, Valve};
 use vb_modbus::net::Health;
 

@@ -5,7 +5,7 @@
 //! A CSV that several runs appended to is drawn for its last run: its rows from the last where
 //! loop time goes back (each run starts it at 0).
 //!
-//! Not here: estimating the figures or writing the CSV (`vb_daemon::health`).
+//! Not here: estimating the figures or writing the CSV (`vb_daemon::monitor::health`).
 
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 //! an empty cell), in bursts of one to three rows. For tests and benchmarks that check an
 //! analysis gives on such a log what it gives on the intact recording.
 //!
-//! Not here: the daemon's logger itself (`daemon::logger`), or reading logs (`recording`).
+//! Not here: the daemon's logger itself (`daemon::runtime::logger`), or reading logs (`recording`).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

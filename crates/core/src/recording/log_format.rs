@@ -26,7 +26,7 @@
 //! percentages to 0.0001 % ([`PCT_DECIMALS`]; the loop rounds O_P to it before sending, so the
 //! logged O_P is the one sent), durations to 1 ns: never `49.400000000000006`.
 //!
-//! Not here: writing files (`vb_daemon::logger`), reading them ([`super::read`]).
+//! Not here: writing files (`vb_daemon::runtime::logger`), reading them ([`super::read`]).
 
 use std::fmt;
 use std::str::FromStr;

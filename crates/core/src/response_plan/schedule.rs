@@ -8,7 +8,7 @@
 //!
 //! Asking and feeding back never allocate: the moves are laid out once, the stillness is kept
 //! in running sums. Not here: the plan's checks ([`super::plan`]), the clamp to the source's
-//! range (the daemon's `vb_daemon::source::Source`).
+//! range (the daemon's `vb_daemon::runtime::source::Source`).
 
 use super::{HoldRule, Move, Plan};
 use crate::recording::log_format::{Sample, Status};

@@ -4,7 +4,7 @@
 //! within the loop period) and leave each other their share of the period as deadlines
 //! ([`BusBudget::deadlines`]). A refusal names the port and what to change.
 //!
-//! Checking only: opening the shared link is [`crate::valve`]'s job.
+//! Checking only: opening the shared link is [`crate::runtime::valve`]'s job.
 
 use super::{Check, LoopConfig, ValveConfig, ValveSpec};
 use vb_core::toml_file::TomlError;

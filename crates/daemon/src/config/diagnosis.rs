@@ -1,7 +1,7 @@
 //! `[diagnosis]`: the live diagnosis of every valve (cadence, window, whether a health alarm
 //! triggers one) and its checks. It is fed by the health check, so it needs `[health]`.
 //!
-//! Checking only: the diagnosis is [`crate::diagnosis`]'s.
+//! Checking only: the diagnosis is [`crate::monitor::diagnosis`]'s.
 
 use serde::Deserialize;
 

@@ -2,7 +2,7 @@
 //! limits) and its checks. A valve's own `health_baseline_model` (in its `[valve]` table) makes
 //! a model file its baseline instead of the first window.
 //!
-//! Checking only: the estimation is [`crate::health`]'s.
+//! Checking only: the estimation is [`crate::monitor::health`]'s.
 
 use serde::Deserialize;
 

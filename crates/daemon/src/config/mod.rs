@@ -265,7 +265,7 @@ pub struct LogConfig {
 #[serde(rename_all = "kebab-case")]
 pub enum OnError {
     /// The loop runs on; the log holds its lines and writes them when the disk takes them
-    /// again (see `crate::log_file`).
+    /// again (see `crate::runtime::log_file`).
     #[default]
     KeepRunning,
     /// The loop stops at the first refused write, with its stop action.

@@ -6,7 +6,7 @@
 //! loaded onto the loop grid). A kind whose table is missing gets the table's defaults where
 //! it has them and is refused where it has none (`steps`, `replay`, `constant`).
 //!
-//! Not here: running a source is [`crate::source`] and [`crate::hil`].
+//! Not here: running a source is [`crate::runtime::source`] and [`crate::serve::hil`].
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};

@@ -8,7 +8,7 @@
 //! backend's settings only: the emulated model, or a Modbus link with its [`Device`] (register
 //! map resolved over the profile). A Modbus kind without its link table is refused there.
 //!
-//! Not here: opening the backend is [`crate::valve`]'s job, and the link settings
+//! Not here: opening the backend is [`crate::runtime::valve`]'s job, and the link settings
 //! themselves are [`vb_modbus::link`]'s types.
 
 use std::path::PathBuf;

@@ -20,10 +20,10 @@ pub use vb_core::response_plan::{
 };
 
 use super::config::{Config, SourceConfig, SourceSpec, ValveChoice, ValveConfig, ValveSpec};
-use super::control::current_thread_runtime;
 use super::error::DaemonError;
-use super::stats::Summary;
 use super::RunOptions;
+use crate::runtime::control::current_thread_runtime;
+use crate::runtime::stats::Summary;
 use vb_core::toml_file::TomlError;
 use vb_modbus::client::{Link, ModbusValve, OpenError};
 use vb_modbus::map::Format;

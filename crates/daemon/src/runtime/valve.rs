@@ -7,7 +7,7 @@
 //! I/O (with its own timeout, well inside one period) without any other thread.
 //!
 //! Adding a backend: add its `kind`, its `[valve.<kind>]` table and a [`ValveSpec`] variant in
-//! [`super::config`], a variant here, and its arm in [`Backend::open`], [`Backend::transact`] and
+//! [`crate::config`], a variant here, and its arm in [`Backend::open`], [`Backend::transact`] and
 //! [`Backend::describe`]. Nothing else in the daemon changes. [`Backend::open`] runs on the loop
 //! thread's runtime, so a network backend's sockets belong to the runtime that drives them.
 //!
@@ -37,7 +37,7 @@ use rand_distr::{Distribution, Normal};
 
 use std::time::Duration;
 
-use super::config::{bus, ValveConfig, ValveSpec};
+use crate::config::{bus, ValveConfig, ValveSpec};
 use vb_core::model::{Drift, ModelError, Valve};
 use vb_modbus::client::{Link, LinkStats, ModbusValve, OpenError, MAX_BACKOFF};
 use vb_modbus::map::RegisterMap;

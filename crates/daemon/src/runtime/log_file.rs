@@ -14,7 +14,7 @@
 //!   were written late and how many dropped ([`Refused`]).
 //! - `"stop"`: the error is returned at once (the logger then stops the loop, as it always did).
 //!
-//! Not here: what the lines say, opening files ([`super::files`]).
+//! Not here: what the lines say, opening files ([`crate::runtime::files`]).
 
 use std::fs::File;
 use std::io::{self, Write};
@@ -22,10 +22,10 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
-use super::config::OnError;
-use super::error::DaemonError;
-use super::exporter::ValveMetrics;
-use super::page::board::ValveBoard;
+use crate::config::OnError;
+use crate::error::DaemonError;
+use crate::serve::exporter::ValveMetrics;
+use crate::serve::page::board::ValveBoard;
 
 /// Bytes of lines held while the disk refuses them, at most (8 MiB: 110,000 rows of the log,
 /// some 76 bytes each, 18 minutes of a valve at 100 Hz).
@@ -406,8 +406,8 @@ mod tests {
 
     #[test]
     fn the_alarm_shows_in_the_metrics_and_on_the_live_page_while_the_disk_refuses() {
-        use crate::exporter::LoopMetrics;
-        use crate::page::board::Board;
+        use crate::serve::exporter::LoopMetrics;
+        use crate::serve::page::board::Board;
         let metrics = LoopMetrics::new(&["v"], false).unwrap();
         let board = Board::new(&["v"], 100.0, (None, None), Path::new("/logs"));
         let alarm = LogAlarm::new("v", metrics.valve(0), board.valve(0));

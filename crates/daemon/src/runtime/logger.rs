@@ -13,7 +13,7 @@
 //! the next ([`vb_core::recording::gzip`]: `NAME.csv.gz`, read as it is by every reader).
 //!
 //! A disk that refuses rows (full) keeps the loop running with `[log] on_error =
-//! "keep-running"`: the rows are held and written later ([`super::log_file`]), and the log
+//! "keep-running"`: the rows are held and written later ([`crate::runtime::log_file`]), and the log
 //! rotates only once the current file has taken its rows. With `"stop"`, a refused write stops
 //! the loop.
 //!
@@ -35,11 +35,11 @@ use std::time::{Duration, Instant, SystemTime};
 
 use time::OffsetDateTime;
 
-use super::config::{LogConfig, OnError};
-use super::error::DaemonError;
-use super::files;
-use super::log_file::{csv_line, LogAlarm, LogFile, Refused};
-use super::page::board::TraceFeed;
+use crate::config::{LogConfig, OnError};
+use crate::error::DaemonError;
+use crate::runtime::files;
+use crate::runtime::log_file::{csv_line, LogAlarm, LogFile, Refused};
+use crate::serve::page::board::TraceFeed;
 use vb_core::recording::gzip;
 use vb_core::recording::log_format::{Sample, HEADER};
 

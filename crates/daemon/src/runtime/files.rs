@@ -16,14 +16,14 @@
 //! a crate that confines paths to a directory (cap-std) would replace all of the daemon's file
 //! handling for the same checks.
 //!
-//! Not here: writing rows and outliving a full disk ([`super::log_file`]).
+//! Not here: writing rows and outliving a full disk ([`crate::runtime::log_file`]).
 
 use std::fs::File;
 use std::io::{self, Read, Seek, SeekFrom, Write};
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
-use super::error::DaemonError;
+use crate::error::DaemonError;
 
 /// Most names tried for a new file or directory (`NAME`, `NAME-1`, ...).
 const NAME_TRIES: usize = 1000;
@@ -285,7 +285,7 @@ pub(crate) fn open_read(dir: &Path, rel: &[&str]) -> io::Result<File> {
 }
 
 /// The live-diagnosis history of the valve named `valve` in the log directory `dir`.
-pub(super) fn history_file(dir: &Path, valve: &str) -> PathBuf {
+pub(crate) fn history_file(dir: &Path, valve: &str) -> PathBuf {
     dir.join(format!("diagnosis-{valve}.jsonl"))
 }
 

@@ -6,11 +6,11 @@
 //! measures it within it; a window with too few steps to measure a delay leaves that delay's
 //! state as it was (not measuring is a state, never a reason for an alarm).
 //!
-//! Not here: the windows, the baseline's choice, the alarm and its outputs ([`super::health`]).
+//! Not here: the windows, the baseline's choice, the alarm and its outputs ([`crate::monitor::health`]).
 
 use serde::Serialize;
 
-use super::config::HealthConfig;
+use crate::config::HealthConfig;
 use vb_core::metrics::stats::median;
 use vb_core::metrics::steps::travel_speed;
 use vb_core::metrics::steps::{analyse, StepOptions};

@@ -1,5 +1,5 @@
 //! Sources of the wanted opening O_P: random steps, steps, ramp, sine, PRBS, replay, constant,
-//! and a process controller writing over Modbus (`modbus-server`, see [`super::hil`]).
+//! and a process controller writing over Modbus (`modbus-server`, see [`crate::serve::hil`]).
 //!
 //! A [`Source`] is asked `op_at(t_s)` once per cycle with non-decreasing loop times and answers
 //! the clamped O_P, or `None` when it has nothing more to give (only a replay ends). Random
@@ -17,8 +17,8 @@
 
 use std::sync::Arc;
 
-use super::config::{SafetyConfig, SourceConfig, SourceSpec};
-use super::hil::Controller;
+use crate::config::{SafetyConfig, SourceConfig, SourceSpec};
+use crate::serve::hil::Controller;
 use vb_core::recording::log_format::Sample;
 use vb_core::response_plan::Schedule;
 use vb_core::signal::{Prbs, RandomSteps, Signal};

@@ -31,7 +31,7 @@
 //! window's end) and `valve_bridge_diagnosis_alarm{valve,effect}` (1 while the effect is in
 //! alarm against the valve's first diagnosis, see [`history`]).
 //!
-//! Not here: the diagnosis itself (`vb_analysis::diagnose`), the health figures ([`super::health`]).
+//! Not here: the diagnosis itself (`vb_analysis::diagnose`), the health figures ([`crate::monitor::health`]).
 
 pub mod history;
 
@@ -45,13 +45,13 @@ use std::time::SystemTime;
 
 use prometheus::{Gauge, GaugeVec, Opts, Registry};
 
-use super::analysis::DiagnoseWindow;
-use super::config::{ClockKind, DiagnosisConfig, OnError};
-use super::files;
-use super::log_file::{LogAlarm, LogFile, Refused};
-use super::logger::file_stamp;
-use super::page::board::ValveBoard;
-use super::DaemonError;
+use crate::config::{ClockKind, DiagnosisConfig, OnError};
+use crate::monitor::analysis::DiagnoseWindow;
+use crate::runtime::files;
+use crate::runtime::log_file::{LogAlarm, LogFile, Refused};
+use crate::runtime::logger::file_stamp;
+use crate::serve::page::board::ValveBoard;
+use crate::DaemonError;
 use history::{Baseline, Record};
 use vb_core::model::composed::Effect;
 use vb_core::model::ModelSpec;
@@ -535,7 +535,7 @@ mod tests {
     use std::sync::Mutex;
 
     use super::*;
-    use crate::analysis::WindowDiagnosis;
+    use crate::monitor::analysis::WindowDiagnosis;
 
     /// Held by a test that keeps a diagnosis running.
     static RUNNING: Mutex<()> = Mutex::new(());

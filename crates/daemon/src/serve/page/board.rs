@@ -3,10 +3,10 @@
 //! the valve's trace every 1/[`TRACE_HZ`] s (and at every change of status), the health thread
 //! each window's figures with their baseline and limits, the diagnosis thread the count of its
 //! diagnoses and where this run's lines of its history start, and a file that cannot be
-//! written its log alarm ([`crate::log_file`]). The network thread reads it for `/api/live` ([`Board::live_json`]): the locks are
+//! written its log alarm ([`crate::runtime::log_file`]). The network thread reads it for `/api/live` ([`Board::live_json`]): the locks are
 //! held for a copy, never across I/O.
 //!
-//! Not here: serving ([`crate::http`]), the page itself (`live.js`), the diagnosis
+//! Not here: serving ([`crate::serve::http`]), the page itself (`live.js`), the diagnosis
 //! history (read from its file, [`super::history_tail`]).
 
 use std::collections::VecDeque;
@@ -17,8 +17,8 @@ use std::time::UNIX_EPOCH;
 
 use serde::Serialize;
 
-use crate::files::history_file;
-use crate::health_figures::{Figures, HealthLimits, Held, Judged};
+use crate::monitor::health_figures::{Figures, HealthLimits, Held, Judged};
+use crate::runtime::files::history_file;
 use vb_core::recording::log_format::{Sample, Status};
 
 /// How much of each valve's trace the page shows, s.

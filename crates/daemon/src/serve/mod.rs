@@ -1,5 +1,5 @@
-//! The network thread (`vb-net`): the process controller's Modbus server ([`super::hil`]) and
-//! the HTTP server of the metrics and the live page ([`super::http`]), on a current-thread
+//! The network thread (`vb-net`): the process controller's Modbus server ([`crate::serve::hil`]) and
+//! the HTTP server of the metrics and the live page ([`crate::serve::http`]), on a current-thread
 //! runtime of their own.
 //!
 //! [`Listeners`] binds the sockets at start-up (before the valve is opened, so a taken port stops
@@ -7,18 +7,22 @@
 //! survives accept errors and caps its connections; their [`Health`] goes into the summary and
 //! the metrics. Not here: what is served.
 
+pub mod exporter;
+pub mod hil;
+pub(crate) mod http;
+pub(crate) mod page;
+
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use super::config::Config;
-use super::control::current_thread_runtime;
-use super::error::DaemonError;
-use super::exporter::LoopMetrics;
-use super::hil;
-use super::http::{self, Site};
-use super::page::board::Board;
-use super::source::Source;
+use crate::config::Config;
+use crate::error::DaemonError;
+use crate::runtime::control::current_thread_runtime;
+use crate::runtime::source::Source;
+use crate::serve::exporter::LoopMetrics;
+use crate::serve::page::board::Board;
+use http::Site;
 use vb_modbus::blocks::Blocks;
 use vb_modbus::net::{Health, Limits};
 
@@ -32,7 +36,7 @@ struct Served<T> {
 }
 
 /// The listening sockets of a daemon, bound, with what each serves.
-pub(super) struct Listeners {
+pub(crate) struct Listeners {
     modbus: Option<Served<Arc<Blocks>>>,
     exporter: Option<Served<(LoopMetrics, Arc<Board>)>>,
 }
@@ -41,7 +45,7 @@ impl Listeners {
     /// Binds the Modbus server (when `sources`, the valves' in order, serve banks: one block
     /// each) and the HTTP server of the metrics and the live page (when there are `metrics`
     /// and a `board`).
-    pub(super) fn bind(
+    pub(crate) fn bind(
         config: &Config,
         sources: &[Source],
         (metrics, board): (Option<&LoopMetrics>, Option<&Arc<Board>>),
@@ -86,14 +90,14 @@ impl Listeners {
     }
 
     /// What is served, by name (`modbus-server`, `metrics`), with the bound addresses.
-    pub(super) fn endpoints(&self) -> Vec<(&'static str, SocketAddr)> {
+    pub(crate) fn endpoints(&self) -> Vec<(&'static str, SocketAddr)> {
         let modbus = self.modbus.as_ref().map(|m| ("modbus-server", m.addr));
         let metrics = self.exporter.as_ref().map(|m| ("metrics", m.addr));
         modbus.into_iter().chain(metrics).collect()
     }
 
     /// The health of each server, by the same names.
-    pub(super) fn health(&self) -> Vec<(&'static str, Arc<Health>)> {
+    pub(crate) fn health(&self) -> Vec<(&'static str, Arc<Health>)> {
         let modbus = (self.modbus.as_ref()).map(|m| ("modbus-server", Arc::clone(&m.health)));
         let metrics = (self.exporter.as_ref()).map(|m| ("metrics", Arc::clone(&m.health)));
         modbus.into_iter().chain(metrics).collect()
@@ -126,14 +130,14 @@ fn bind(
 /// The network thread (`vb-net`): the process controller's Modbus server and the HTTP server,
 /// on a current-thread runtime of their own. It ends when [`Net`] is stopped or dropped.
 #[derive(Debug)]
-pub(super) struct Net {
+pub(crate) struct Net {
     stop: tokio::sync::oneshot::Sender<()>,
     handle: JoinHandle<()>,
 }
 
 impl Net {
     /// Starts serving `listeners` on a thread of its own; None when there is nothing to serve.
-    pub(super) fn start(listeners: Listeners) -> Result<Option<Net>, DaemonError> {
+    pub(crate) fn start(listeners: Listeners) -> Result<Option<Net>, DaemonError> {
         let servers = listeners.health();
         let Listeners { modbus, exporter } = listeners;
         if modbus.is_none() && exporter.is_none() {
@@ -186,7 +190,7 @@ impl Net {
     }
 
     /// Stops serving and waits for the thread.
-    pub(super) fn stop(self) -> Result<(), DaemonError> {
+    pub(crate) fn stop(self) -> Result<(), DaemonError> {
         // An error only means the thread has already ended.
         let _ = self.stop.send(());
         self.handle

@@ -1,12 +1,12 @@
 //! The loop thread (`vb-loop`): each slot of the schedule, for every valve in the order of the
-//! config, O_P from its source, its compensation ([`super::compensation`], with
+//! config, O_P from its source, its compensation ([`crate::runtime::compensation`], with
 //! `[valve.compensation]`), one valve transaction, a row to its logger; on stop, the safe
 //! action (never compensated). A valve whose transaction fails logs its own row as failed; the
 //! others run on.
 //!
 //! [`spawn`] starts the thread and opens the valves on it (inside the runtime that drives the
 //! valve's I/O); [`Spawned::run`] hands it the rest of the loop. Not here: starting the other
-//! threads ([`super::running`]), the valve protocols ([`super::valve`]).
+//! threads ([`crate::running`]), the valve protocols ([`crate::runtime::valve`]).
 
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -15,73 +15,73 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use super::compensation::{Compensation, CompensationReport};
-use super::config::{ClockKind, OnStop, ValveConfig};
-use super::error::DaemonError;
-use super::exporter::{LoopMetrics, ValveMetrics};
-use super::schedule::{Schedule, Slot};
-use super::source::Source;
-use super::stats::{Live, Stats, StopAction, StopReason};
-use super::valve::{Backend, Fault};
+use crate::config::{ClockKind, OnStop, ValveConfig};
+use crate::error::DaemonError;
+use crate::runtime::compensation::{Compensation, CompensationReport};
+use crate::runtime::schedule::{Schedule, Slot};
+use crate::runtime::source::Source;
+use crate::runtime::stats::{Live, Stats, StopAction, StopReason};
+use crate::runtime::valve::{Backend, Fault};
+use crate::serve::exporter::{LoopMetrics, ValveMetrics};
 use vb_core::recording::log_format::{round_pct, Sample, Status};
 use vb_modbus::client::LinkStats;
 
 /// What the loop thread hands back.
-pub(super) struct LoopEnd {
-    pub(super) reason: StopReason,
-    pub(super) slots: u64,
+pub(crate) struct LoopEnd {
+    pub(crate) reason: StopReason,
+    pub(crate) slots: u64,
     /// Each valve's end, in the order of the config.
-    pub(super) valves: Vec<LaneEnd>,
+    pub(crate) valves: Vec<LaneEnd>,
 }
 
 /// What one valve's lane hands back.
-pub(super) struct LaneEnd {
-    pub(super) stats: Stats,
-    pub(super) safe: Option<StopAction>,
-    pub(super) link: Option<LinkStats>,
-    pub(super) compensation: Option<CompensationReport>,
+pub(crate) struct LaneEnd {
+    pub(crate) stats: Stats,
+    pub(crate) safe: Option<StopAction>,
+    pub(crate) link: Option<LinkStats>,
+    pub(crate) compensation: Option<CompensationReport>,
 }
 
 /// Everything the loop thread owns.
-pub(super) struct Loop {
-    pub(super) clock: ClockKind,
-    pub(super) period: Duration,
-    pub(super) spin: Duration,
-    pub(super) realtime_priority: u8,
+pub(crate) struct Loop {
+    pub(crate) clock: ClockKind,
+    pub(crate) period: Duration,
+    pub(crate) spin: Duration,
+    pub(crate) realtime_priority: u8,
     /// The valves, driven in this order within each cycle.
-    pub(super) lanes: Vec<Lane>,
-    pub(super) metrics: Option<LoopMetrics>,
-    pub(super) safe_action: OnStop,
-    pub(super) go_to_pct: Option<f64>,
-    pub(super) max_slots: Option<u64>,
-    pub(super) stop: Arc<AtomicBool>,
+    pub(crate) lanes: Vec<Lane>,
+    pub(crate) metrics: Option<LoopMetrics>,
+    pub(crate) safe_action: OnStop,
+    pub(crate) go_to_pct: Option<f64>,
+    pub(crate) max_slots: Option<u64>,
+    pub(crate) stop: Arc<AtomicBool>,
     /// The first valve's figures, for the progress display and the service watchdog.
-    pub(super) live: Arc<Live>,
+    pub(crate) live: Arc<Live>,
 }
 
 /// One valve of the loop: its source, backend, log channel and figures.
-pub(super) struct Lane {
+pub(crate) struct Lane {
     /// The valve's name, in the log's messages.
-    pub(super) name: String,
-    pub(super) source: Source,
+    pub(crate) name: String,
+    pub(crate) source: Source,
     /// The compensation of its O_P, with `[valve.compensation]`.
-    pub(super) compensation: Option<Compensation>,
-    pub(super) backend: Backend,
-    pub(super) metrics: Option<ValveMetrics>,
-    pub(super) tx: SyncSender<Sample>,
-    pub(super) stats: Stats,
+    pub(crate) compensation: Option<Compensation>,
+    pub(crate) backend: Backend,
+    pub(crate) metrics: Option<ValveMetrics>,
+    pub(crate) tx: SyncSender<Sample>,
+    pub(crate) stats: Stats,
     /// The O_P this cycle's source asked for (taken before any valve transacts).
-    pub(super) op: f64,
+    pub(crate) op: f64,
     /// The last O_P sent (compensated), and the last the source asked for.
-    pub(super) last_op: Option<f64>,
-    pub(super) last_op_controller: Option<f64>,
-    pub(super) last_status: Status,
-    pub(super) last_skipped_k: Option<u64>,
+    pub(crate) last_op: Option<f64>,
+    pub(crate) last_op_controller: Option<f64>,
+    pub(crate) last_status: Status,
+    pub(crate) last_skipped_k: Option<u64>,
 }
 
 impl Lane {
     /// A lane for `backend`, fed by `source` through `compensation`, logging to `tx`.
-    pub(super) fn new(
+    pub(crate) fn new(
         name: String,
         (source, compensation): (Source, Option<Compensation>),
         backend: Backend,
@@ -109,7 +109,7 @@ impl Lane {
 type Build = Box<dyn FnOnce(Vec<Backend>) -> Loop + Send>;
 
 /// The loop thread, its valves open, waiting for the rest of the loop.
-pub(super) struct Spawned {
+pub(crate) struct Spawned {
     /// The valves, described for the log.
     pub valves: Vec<String>,
     handle: JoinHandle<Result<LoopEnd, DaemonError>>,
@@ -119,7 +119,7 @@ pub(super) struct Spawned {
 /// Starts the loop thread and opens the valves `valves` describe on it, in order, for a loop of
 /// period `period_s`; the error of a valve that cannot be opened (or, with `require_device`,
 /// reached) is returned here.
-pub(super) fn spawn(
+pub(crate) fn spawn(
     valves: Vec<ValveConfig>,
     period_s: f64,
     require_device: bool,
@@ -160,7 +160,7 @@ pub(super) fn spawn(
 
 impl Spawned {
     /// Hands the loop thread the rest of the loop (`build` gets the opened backends); it runs.
-    pub(super) fn run(
+    pub(crate) fn run(
         self,
         build: impl FnOnce(Vec<Backend>) -> Loop + Send + 'static,
     ) -> Result<JoinHandle<Result<LoopEnd, DaemonError>>, DaemonError> {
@@ -478,7 +478,7 @@ impl Lane {
 }
 
 /// A current-thread runtime: the loop thread's (every valve transaction) or the network thread's.
-pub(super) fn current_thread_runtime(
+pub(crate) fn current_thread_runtime(
     what: &'static str,
 ) -> Result<tokio::runtime::Runtime, DaemonError> {
     tokio::runtime::Builder::new_current_thread()

@@ -23,8 +23,8 @@
 //! disk that refuses them is survived as the log's is ([`LogFile`]); an alarm is a warning in the log, the
 //! `valve_bridge_health_alarm` gauge, the summary and, for a valve a process controller drives,
 //! bit [`HEALTH_ALARM_BIT`] of its status word; each window is also on the live page
-//! ([`super::page`]). With `[diagnosis]`, the thread also feeds the
-//! live diagnosis ([`super::diagnosis::Feed`]) each row and each alarm it raises.
+//! ([`crate::serve::page`]). With `[diagnosis]`, the thread also feeds the
+//! live diagnosis ([`crate::monitor::diagnosis::Feed`]) each row and each alarm it raises.
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -32,15 +32,15 @@ use std::sync::mpsc::{Receiver, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use super::analysis::PlotHealth;
-use super::config::{HealthConfig, OnError};
-use super::diagnosis::Feed;
-use super::error::DaemonError;
-use super::exporter::HealthMetrics;
-use super::files;
-pub use super::health_figures::{Figures, HealthLimits, Held, Judged};
-use super::log_file::{csv_line, LogAlarm, LogFile, Refused};
-use super::page::board::{HealthWindow, ValveBoard};
+use crate::config::{HealthConfig, OnError};
+use crate::error::DaemonError;
+use crate::monitor::analysis::PlotHealth;
+use crate::monitor::diagnosis::Feed;
+pub use crate::monitor::health_figures::{Figures, HealthLimits, Held, Judged};
+use crate::runtime::files;
+use crate::runtime::log_file::{csv_line, LogAlarm, LogFile, Refused};
+use crate::serve::exporter::HealthMetrics;
+use crate::serve::page::board::{HealthWindow, ValveBoard};
 use vb_core::model::Valve;
 use vb_core::recording::log_format::{fixed, Sample};
 use vb_modbus::map::HEALTH_ALARM_BIT;
@@ -186,7 +186,7 @@ pub fn start(
         });
     }
     // Bounded like the loggers' queues; a logger waits for the health thread, never the loop.
-    let (tx, rx) = std::sync::mpsc::sync_channel(super::logger::QUEUE_ROWS);
+    let (tx, rx) = std::sync::mpsc::sync_channel(crate::runtime::logger::QUEUE_ROWS);
     let cfg = cfg.clone();
     let handle = std::thread::Builder::new()
         .name("vb-health".into())

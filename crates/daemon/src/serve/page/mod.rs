@@ -40,7 +40,7 @@ pub(crate) fn history_tail(path: &Path, from: u64) -> std::io::Result<String> {
     let (Some(dir), Some(name)) = (dir, name) else {
         return Err(std::io::ErrorKind::InvalidInput.into());
     };
-    let mut file = crate::files::open_read(dir, &[name])?;
+    let mut file = crate::runtime::files::open_read(dir, &[name])?;
     let start = (file.metadata()?.len().saturating_sub(HISTORY_TAIL)).max(from);
     file.seek(SeekFrom::Start(start))?;
     let mut bytes = Vec::new();

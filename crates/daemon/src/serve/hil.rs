@@ -17,7 +17,7 @@
 //! - bit [`WATCHDOG_BIT`] (2): the watchdog has fired, the loop sends the safe O_P;
 //! - bit [`HEALTH_ALARM_BIT`](vb_modbus::map::HEALTH_ALARM_BIT) (3): the live health
 //!   check (`[health]`) is in alarm for the valve; set by the health thread
-//!   ([`super::health`]) at each window, not by the loop.
+//!   ([`crate::monitor::health`]) at each window, not by the loop.
 //!
 //! Until the first write the O_P is `initial_pct`. Watchdog: when no set-point write has been
 //! accepted for `watchdog_s` of loop time (counted from the start of the loop, so a controller
@@ -46,7 +46,7 @@ use std::time::{Duration, Instant};
 use tokio::net::TcpListener;
 use tokio_modbus::{ExceptionCode, Request};
 
-use super::config::{ModbusServerConfig, OnStop, SafetyConfig};
+use crate::config::{ModbusServerConfig, OnStop, SafetyConfig};
 use vb_core::recording::log_format::Sample;
 use vb_modbus::blocks::Blocks;
 use vb_modbus::map::{VALVE_FAULT_BIT, WATCHDOG_BIT};
@@ -91,7 +91,7 @@ impl Controller {
         let bank = RegisterBank::new(cfg.registers, op_min_pct, op_max_pct, OutOfRange::Exception)
             .with_setpoint(initial);
         Controller {
-            valve: super::config::UNNAMED.to_string(),
+            valve: crate::config::UNNAMED.to_string(),
             bank: Arc::new(bank),
             watchdog_s: cfg.watchdog_s,
             safe_pct,

@@ -11,12 +11,12 @@ use std::time::Duration;
 
 use hdrhistogram::Histogram;
 
-use super::compensation::CompensationReport;
-use super::diagnosis::DiagnosisReport;
-use super::health::HealthReport;
-use super::log_file::Refused;
-use super::logger::LogReport;
-use super::valve::Fault;
+use crate::monitor::diagnosis::DiagnosisReport;
+use crate::monitor::health::HealthReport;
+use crate::runtime::compensation::CompensationReport;
+use crate::runtime::log_file::Refused;
+use crate::runtime::logger::LogReport;
+use crate::runtime::valve::Fault;
 use vb_core::human;
 use vb_core::recording::log_format::{Sample, Status};
 use vb_modbus::client::LinkStats;
@@ -475,7 +475,7 @@ fn write_refused(f: &mut fmt::Formatter<'_>, indent: &str, what: &str, r: Refuse
         "{indent}{what} the disk refused: {} written late, {} dropped (a full disk? they were held, up to {} MiB)",
         r.late,
         r.dropped,
-        super::log_file::HOLD_BYTES >> 20
+        crate::runtime::log_file::HOLD_BYTES >> 20
     )
 }
 
@@ -488,7 +488,7 @@ fn write_compensation(
     let state = match (c.switched_off_s, &c.tripping) {
         (Some(t), Some(w)) => format!(
             "switched off by its guard at {t:.1} s ({})",
-            super::compensation::tripped(w)
+            crate::runtime::compensation::tripped(w)
         ),
         (Some(t), None) => format!("switched off by its guard at {t:.1} s"),
         (None, _) => "on".into(),

@@ -7,9 +7,9 @@
 //! [`Compensation::observe`]. Allocation-free on the loop thread, except for the one warning
 //! when compensation is switched off. Not here: the compensation itself ([`vb_core::compensate`]).
 
-use super::config::ValveConfig;
-use super::error::DaemonError;
-use super::exporter::CompensationMetrics;
+use crate::config::ValveConfig;
+use crate::error::DaemonError;
+use crate::serve::exporter::CompensationMetrics;
 use vb_core::compensate::guard;
 use vb_core::compensate::{CompensateError, Compensator, Window};
 use vb_core::model::ModelSpec;
@@ -32,7 +32,7 @@ pub struct CompensationReport {
 
 /// A valve's compensator and its figures.
 #[derive(Debug)]
-pub(super) struct Compensation {
+pub(crate) struct Compensation {
     valve: String,
     comp: Compensator,
     metrics: Option<CompensationMetrics>,
@@ -43,7 +43,7 @@ pub(super) struct Compensation {
 impl Compensation {
     /// The compensation `valve` configures, for a loop of period `period_s` sending set-points
     /// within `op_range`; None without `[valve.compensation]`.
-    pub(super) fn new(
+    pub(crate) fn new(
         valve: &ValveConfig,
         period_s: f64,
         op_range: (f64, f64),
@@ -80,14 +80,14 @@ impl Compensation {
     }
 
     /// The set-point to send for the controller's O_P `op` at loop time `t_s`.
-    pub(super) fn setpoint(&mut self, op: f64, t_s: f64) -> f64 {
+    pub(crate) fn setpoint(&mut self, op: f64, t_s: f64) -> f64 {
         self.t_s = t_s;
         round_pct(self.comp.setpoint(op, t_s))
     }
 
     /// Hands the guard the cycle's row; publishes a judged window, and warns once when the
     /// guard switches compensation off.
-    pub(super) fn observe(&mut self, row: &Sample) {
+    pub(crate) fn observe(&mut self, row: &Sample) {
         let Some(w) = self.comp.observe(row.vp_pct) else {
             return;
         };
@@ -113,14 +113,14 @@ impl Compensation {
     }
 
     /// What compensation did.
-    pub(super) fn report(self) -> CompensationReport {
+    pub(crate) fn report(self) -> CompensationReport {
         self.report
     }
 }
 
 /// What tripped the guard in `w`, in words: the figure, in how many of the judged holds of the
 /// pooled windows the valve exceeded its model, and by how much on average.
-pub(super) fn tripped(w: &Window) -> String {
+pub(crate) fn tripped(w: &Window) -> String {
     let Some(figure) = w.exceeded else {
         return "no figure exceeded".into();
     };

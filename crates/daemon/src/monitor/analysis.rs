@@ -3,11 +3,11 @@
 //! program that starts the daemon hands them in ([`Analysis`], filled by
 //! `valve_bridge::live`) and the daemon imports none of them.
 //!
-//! Not here: when a window is diagnosed and what its history keeps ([`super::diagnosis`]).
+//! Not here: when a window is diagnosed and what its history keeps ([`crate::monitor::diagnosis`]).
 
 use std::path::Path;
 
-use super::diagnosis::history::Entry;
+use crate::monitor::diagnosis::history::Entry;
 use vb_core::model::ModelSpec;
 use vb_core::recording::RecordingView;
 

@@ -15,7 +15,7 @@
 //!   bytes that formed no frame, and frames no request waited for (a noisy or slow line);
 //! - `valve_bridge_watchdog_trips_total`: watchdog trips of the `modbus-server` source;
 //! - `valve_bridge_log_rows_dropped_total`: rows that never reached the log (the logger fell
-//!   behind, or the disk refused them past the hold, [`super::log_file`]);
+//!   behind, or the disk refused them past the hold, [`crate::runtime::log_file`]);
 //!   `valve_bridge_log_rows_late_total`: lines written after the disk had refused them;
 //!   `valve_bridge_log_write_failing`: 1 while one of the valve's files cannot be written;
 //! - with `[health]`, per valve, each window's figures: `valve_bridge_health_dead_time_seconds`,
@@ -32,7 +32,7 @@
 //!   measured with compensation, and the model's without it);
 //! - with `[diagnosis]`, per valve: `valve_bridge_effect_size{effect,unit}`,
 //!   `valve_bridge_diagnosis_age_seconds` and `valve_bridge_diagnosis_alarm{effect}`
-//!   (registered by [`super::diagnosis::DiagnosisMetrics`]);
+//!   (registered by [`crate::monitor::diagnosis::DiagnosisMetrics`]);
 //! - per server (`server="modbus-server"|"metrics"`): `valve_bridge_server_up` (0 while
 //!   `accept()` fails), `valve_bridge_server_connections` (open now),
 //!   `valve_bridge_server_connections_accepted_total`, `..._evicted_total` (closed at the
@@ -43,7 +43,7 @@
 //! ([`ValveMetrics`]), so the loop updates its own with atomic operations only (no lookup by label, no allocation); the server
 //! figures are copied from their [`Health`] when the endpoint is scraped.
 //!
-//! Not here: the HTTP server ([`super::http`]), which encodes them ([`LoopMetrics::text`]) for
+//! Not here: the HTTP server ([`crate::serve::http`]), which encodes them ([`LoopMetrics::text`]) for
 //! `GET /metrics` on the network thread, never on the loop thread.
 
 use std::sync::Arc;
@@ -54,7 +54,7 @@ use prometheus::{
     Registry,
 };
 
-use super::health_figures::{Figures, HealthLimits};
+use crate::monitor::health_figures::{Figures, HealthLimits};
 use vb_core::compensate::Window;
 use vb_core::recording::log_format::{Sample, Status};
 use vb_modbus::client::LinkStats;

@@ -3,8 +3,8 @@
 //! most `max_connections` open, one closed to make room for a new one: first from the host
 //! holding the most). A connection that has asked for `/metrics` is a scraper's: within its
 //! host it gives way after the others ([`Standing::Preferred`]). It serves
-//! - `GET /metrics`: the Prometheus text format ([`super::exporter`]);
-//! - `GET /`: the live page ([`super::page`]); `GET /api/live[?since=T]`: its figures, with each
+//! - `GET /metrics`: the Prometheus text format ([`crate::serve::exporter`]);
+//! - `GET /`: the live page ([`crate::serve::page`]); `GET /api/live[?since=T]`: its figures, with each
 //!   valve's trace after loop time `T`; `GET /api/diagnoses/NAME`: a valve's diagnosis history
 //!   (the last lines of its file);
 //! - `GET /reports/diagnosis-NAME/T/FILE`: the files of a diagnosis report beside the logs, for
@@ -17,7 +17,7 @@
 //! ([`HEAD_TIMEOUT`] for the daemon), its first or the next after an answer, is closed and
 //! counted as closed idle.
 //!
-//! Not here: the metrics ([`super::exporter`]), what the page shows ([`super::page`]).
+//! Not here: the metrics ([`crate::serve::exporter`]), what the page shows ([`crate::serve::page`]).
 
 use std::convert::Infallible;
 use std::io::Read;
@@ -33,9 +33,9 @@ use hyper::{Method, Request, Response, StatusCode};
 use hyper_util::rt::{TokioIo, TokioTimer};
 use tokio::net::TcpListener;
 
-use super::exporter::LoopMetrics;
-use super::files;
-use super::page::{self, board::Board};
+use crate::runtime::files;
+use crate::serve::exporter::LoopMetrics;
+use crate::serve::page::{self, board::Board};
 use vb_modbus::net::{self, Health, Limits, Standing};
 
 /// Time a client of the daemon gets to send a request head: its first, or the next after an
