@@ -11,51 +11,17 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use vb_core::recording::health_log::{Figure, HealthRow};
+
 use super::plot::{drawn, AFTER, AXIS_FONT, BEFORE, GREY};
 
-/// One panel: its title, unit and the CSV columns of the figure, its baseline and its limit.
-const PANELS: [(&str, &str, [&str; 3]); 5] = [
-    (
-        "dead time",
-        "s",
-        ["dead_time_s", "dead_time_base_s", "dead_time_limit_s"],
-    ),
-    (
-        "reversal delay",
-        "s",
-        [
-            "reversal_delay_s",
-            "reversal_delay_base_s",
-            "reversal_delay_limit_s",
-        ],
-    ),
-    (
-        "opening speed",
-        "%/s",
-        [
-            "opening_speed_pct_per_s",
-            "opening_speed_base_pct_per_s",
-            "opening_speed_limit_pct_per_s",
-        ],
-    ),
-    (
-        "closing speed",
-        "%/s",
-        [
-            "closing_speed_pct_per_s",
-            "closing_speed_base_pct_per_s",
-            "closing_speed_limit_pct_per_s",
-        ],
-    ),
-    (
-        "tracking error (RMS of O_P - V_P)",
-        "%",
-        [
-            "tracking_rms_pct",
-            "tracking_rms_base_pct",
-            "tracking_rms_limit_pct",
-        ],
-    ),
+/// One panel: its title, its unit and its figure.
+const PANELS: [(&str, &str, Figure); 5] = [
+    ("dead time", "s", Figure::DeadTime),
+    ("reversal delay", "s", Figure::ReversalDelay),
+    ("opening speed", "%/s", Figure::OpeningSpeed),
+    ("closing speed", "%/s", Figure::ClosingSpeed),
+    ("tracking error (RMS of O_P - V_P)", "%", Figure::Tracking),
 ];
 
 /// Width of the plotting column and of the legend column beside it, and a panel's height, px.
@@ -63,50 +29,34 @@ const PLOT_W: u32 = 780;
 const LEGEND_W: u32 = 150;
 const PANEL_H: u32 = 210;
 
-/// The health CSV's columns, by header name (NaN for an empty cell).
+/// The rows of the health log's last run, as the plot reads them.
 struct Table {
     t_h: Vec<f64>,
-    alarm: Vec<bool>,
-    columns: Vec<(String, Vec<f64>)>,
+    rows: Vec<HealthRow>,
 }
 
 impl Table {
-    /// The rows of the last run in the CSV at `path`.
+    /// The rows of the last run in the health log at `path`: from the last row where loop time
+    /// goes back (each run starts it at 0).
     fn read(path: &Path) -> Result<Table, csv::Error> {
-        let mut r = csv::Reader::from_path(path)?;
-        let header: Vec<String> = r.headers()?.iter().map(String::from).collect();
-        let mut columns: Vec<(String, Vec<f64>)> =
-            header.iter().map(|h| (h.clone(), Vec::new())).collect();
-        for rec in r.records() {
-            let rec = rec?;
-            for (c, cell) in columns.iter_mut().zip(rec.iter()) {
-                c.1.push(cell.parse().unwrap_or(f64::NAN));
-            }
-        }
-        if let Some((_, t)) = columns.iter().find(|c| c.0 == "t_s") {
-            let run = (1..t.len()).rfind(|&k| t[k] <= t[k - 1]).unwrap_or(0);
-            for c in &mut columns {
-                c.1.drain(..run.min(c.1.len()));
-            }
-        }
-        let col = |name: &str| {
-            (columns.iter())
-                .find(|c| c.0 == name)
-                .map_or(Vec::new(), |c| c.1.clone())
-        };
-        let t_h = col("t_s").iter().map(|t| t / 3600.0).collect();
-        let alarm = col("alarm").iter().map(|&a| a == 1.0).collect();
-        Ok(Table {
-            t_h,
-            alarm,
-            columns,
-        })
+        let mut rows = HealthRow::read(path)?;
+        let run = (1..rows.len())
+            .rfind(|&k| rows[k].t_s <= rows[k - 1].t_s)
+            .unwrap_or(0);
+        rows.drain(..run);
+        let t_h = rows.iter().map(|r| r.t_s / 3600.0).collect();
+        Ok(Table { t_h, rows })
     }
 
-    fn column(&self, name: &str) -> &[f64] {
-        (self.columns.iter())
-            .find(|c| c.0 == name)
-            .map_or(&[], |c| &c.1)
+    /// A figure's values, its baselines and its limits (NaN where not known).
+    fn columns(&self, figure: Figure) -> [Vec<f64>; 3] {
+        let k = figure as usize;
+        let nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
+        [
+            self.rows.iter().map(|r| nan(r.figures[k])).collect(),
+            self.rows.iter().map(|r| nan(r.base[k])).collect(),
+            self.rows.iter().map(|r| nan(r.limits[k])).collect(),
+        ]
     }
 
     /// The spans of loop time (h) in alarm: each alarmed row's window until the next row.
@@ -114,7 +64,7 @@ impl Table {
         let t = &self.t_h;
         let step = if t.len() > 1 { t[1] - t[0] } else { 0.0 };
         let mut spans: Vec<(f64, f64)> = Vec::new();
-        for (k, _) in self.alarm.iter().enumerate().filter(|(_, &a)| a) {
+        for k in (0..self.rows.len()).filter(|&k| self.rows[k].alarm) {
             let end = t.get(k + 1).copied().unwrap_or(t[k] + step);
             match spans.last_mut() {
                 Some(last) if (last.1 - t[k]).abs() < 1e-9 => last.1 = end,
@@ -162,10 +112,10 @@ fn draw_panel<DB: DrawingBackend>(
     side: &DrawingArea<DB, plotters::coord::Shift>,
     table: &Table,
     spans: &[(f64, f64)],
-    (title, unit, cols): (&str, &str, [&str; 3]),
+    (title, unit, figure): (&str, &str, Figure),
 ) {
     let t = &table.t_h;
-    let ys = cols.map(|c| table.column(c));
+    let ys = table.columns(figure);
     let finite = ys
         .iter()
         .flat_map(|y| y.iter())
@@ -264,6 +214,6 @@ mod tests {
         let table = Table::read(&path).unwrap();
         let t: Vec<f64> = table.t_h.iter().map(|h| (h * 3600.0).round()).collect();
         assert_eq!(t, [600.0, 660.0, 720.0, 780.0]);
-        assert_eq!(table.column("dead_time_s").len(), 4);
+        assert_eq!(table.columns(Figure::DeadTime)[0], [0.4; 4]);
     }
 }

@@ -29,6 +29,7 @@ mod columns;
 mod error;
 pub mod grid;
 pub mod gzip;
+pub mod health_log;
 mod join;
 mod limits;
 pub mod log_format;

@@ -42,7 +42,8 @@ use crate::runtime::log_file::{csv_line, LogAlarm, LogFile, Refused};
 use crate::serve::exporter::HealthMetrics;
 use crate::serve::page::board::{HealthWindow, ValveBoard};
 use vb_core::model::Valve;
-use vb_core::recording::log_format::{fixed, Sample};
+use vb_core::recording::health_log::{HealthRow, HEADER};
+use vb_core::recording::log_format::Sample;
 use vb_modbus::map::HEALTH_ALARM_BIT;
 use vb_modbus::server::RegisterBank;
 
@@ -91,31 +92,6 @@ struct Monitor {
     /// The valve on the live page.
     board: Option<Arc<ValveBoard>>,
 }
-
-/// The header of the health CSV: the figures, the alarm, each figure's baseline and limit
-/// (empty until there is a baseline), the note.
-pub const HEADER: [&str; 20] = [
-    "t_s",
-    "same_steps",
-    "reversals",
-    "dead_time_s",
-    "reversal_delay_s",
-    "opening_speed_pct_per_s",
-    "closing_speed_pct_per_s",
-    "tracking_rms_pct",
-    "alarm",
-    "dead_time_base_s",
-    "dead_time_limit_s",
-    "reversal_delay_base_s",
-    "reversal_delay_limit_s",
-    "opening_speed_base_pct_per_s",
-    "opening_speed_limit_pct_per_s",
-    "closing_speed_base_pct_per_s",
-    "closing_speed_limit_pct_per_s",
-    "tracking_rms_base_pct",
-    "tracking_rms_limit_pct",
-    "note",
-];
 
 /// One valve to watch: its name, its health file's name, its baseline model, its metrics, the
 /// register bank whose status word carries its alarm (a valve a controller drives) and its
@@ -361,29 +337,15 @@ impl Monitor {
         base: Option<&(Figures, HealthLimits)>,
         note: &str,
     ) -> Result<(), DaemonError> {
-        let opt = |v: Option<f64>| v.map_or(String::new(), |v| fixed(v, 4));
-        let row = [
-            fixed(t_s, 3),
-            fig.map_or(String::new(), |f| f.same_steps.to_string()),
-            fig.map_or(String::new(), |f| f.reversals.to_string()),
-            opt(fig.and_then(|f| f.dead_time_s)),
-            opt(fig.and_then(|f| f.reversal_delay_s)),
-            opt(fig.map(|f| f.opening_speed_pct_per_s)),
-            opt(fig.map(|f| f.closing_speed_pct_per_s)),
-            opt(fig.map(|f| f.tracking_rms_pct)),
-            u8::from(self.alarm()).to_string(),
-            opt(base.and_then(|b| b.0.dead_time_s)),
-            opt(base.and_then(|b| b.1.dead_time_s)),
-            opt(base.and_then(|b| b.0.reversal_delay_s)),
-            opt(base.and_then(|b| b.1.reversal_delay_s)),
-            opt(base.map(|b| b.0.opening_speed_pct_per_s)),
-            opt(base.map(|b| b.1.opening_speed_pct_per_s)),
-            opt(base.map(|b| b.0.closing_speed_pct_per_s)),
-            opt(base.map(|b| b.1.closing_speed_pct_per_s)),
-            opt(base.map(|b| b.0.tracking_rms_pct)),
-            opt(base.map(|b| b.1.tracking_rms_pct)),
-            note.to_string(),
-        ];
+        let row = HealthRow {
+            t_s,
+            steps: fig.map(|f| (f.same_steps, f.reversals)),
+            figures: fig.map_or([None; 5], Figures::in_log_order),
+            alarm: self.alarm(),
+            base: base.map_or([None; 5], |b| b.0.in_log_order()),
+            limits: base.map_or([None; 5], |b| b.1.in_log_order()),
+            note: note.to_string(),
+        };
         if let Some(b) = &self.board {
             b.health(HealthWindow {
                 t_s,
@@ -396,7 +358,7 @@ impl Monitor {
             });
         }
         self.line.clear();
-        csv_line(&row, &mut self.line);
+        csv_line(row.cells(), &mut self.line);
         self.log.line(&self.line)?;
         self.log.flush()
     }

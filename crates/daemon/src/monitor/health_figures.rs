@@ -92,6 +92,17 @@ pub struct Figures {
 }
 
 impl Figures {
+    /// The figures in the order of the health log's ([`vb_core::recording::health_log::Figure`]).
+    pub fn in_log_order(&self) -> [Option<f64>; 5] {
+        [
+            self.dead_time_s,
+            self.reversal_delay_s,
+            Some(self.opening_speed_pct_per_s),
+            Some(self.closing_speed_pct_per_s),
+            Some(self.tracking_rms_pct),
+        ]
+    }
+
     /// The figures of `op` and `vp` sampled every `dt` s; a delay needs `min_steps` steps.
     pub fn of(op: &[f64], vp: &[f64], dt: f64, min_steps: usize) -> Figures {
         let rec = RecordingView {
@@ -280,6 +291,19 @@ pub struct HealthLimits {
     pub closing_speed_pct_per_s: f64,
     /// Highest RMS of O_P - V_P, %.
     pub tracking_rms_pct: f64,
+}
+
+impl HealthLimits {
+    /// The limits in the order of the health log's figures.
+    pub fn in_log_order(&self) -> [Option<f64>; 5] {
+        [
+            self.dead_time_s,
+            self.reversal_delay_s,
+            Some(self.opening_speed_pct_per_s),
+            Some(self.closing_speed_pct_per_s),
+            Some(self.tracking_rms_pct),
+        ]
+    }
 }
 
 #[cfg(test)]
