@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The Table 1 fits of `valve-bridge identify` done with scipy.optimize, for comparison.
 
-The models are the same equations as src/model/ (delay line with fractional interpolation,
+The models are the same equations as crates/core/src/model/ (delay line with fractional interpolation,
 FOPDT, Choudhury stiction, pin-cart I and II, travel clamp), written as plain Python loops over
 NumPy-loaded data (the models are recursive, so there is nothing to vectorise). Each model is
 fitted with scipy.optimize.minimize(method="Nelder-Mead") in the same unit cube and bounds as
@@ -23,7 +23,7 @@ from scipy.optimize import minimize
 
 
 def delay_line(op, td, dt):
-    """O_P delayed by td seconds, linear interpolation for the fraction (src/model/delay.rs)."""
+    """O_P delayed by td seconds, linear interpolation for the fraction (crates/core/src/model/delay.rs)."""
     s = max(td, 0.0) / dt
     r = round(s)
     if abs(s - r) < 1e-9:
@@ -119,7 +119,7 @@ def simulate(model, p, op, vp0, dt):
 
 
 def crossing_poly(t0, t50, t100):
-    """a_p, b_p, c_p through the crossing times at 0/50/100 % (src/fit/params.rs)."""
+    """a_p, b_p, c_p through the crossing times at 0/50/100 % (crates/analysis/src/fit/params.rs)."""
     a = (t100 - 2.0 * t50 + t0) / 5000.0
     b = (t50 - t0) / 50.0 - 50.0 * a
     c = t0
@@ -133,7 +133,7 @@ def crossing_poly(t0, t50, t100):
 
 
 def params_of(model, x):
-    """Physical parameter dict from the search vector (same layout as src/fit/params.rs)."""
+    """Physical parameter dict from the search vector (same layout as crates/analysis/src/fit/params.rs)."""
     if model == "delayed":
         return {"dead_time_s": x[0]}
     if model == "fopdt":

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Pin-cart II (same equations and parameters as src/model/pincart.rs) as a plain Python loop.
+"""Pin-cart II (same equations and parameters as crates/core/src/model/pincart.rs) as a plain Python loop.
 
 Times 41,300 steps (the paper's validation size) to compare with `cargo bench --bench models`.
 Run: python3 benches/models_python.py   (no third-party packages needed)

@@ -596,7 +596,7 @@ fn blocks_and_rules() {
 }
 
 /// Every file of the checkout that README.md or a page of docs/ names in backticks
-/// (`src/...`, `tests/...`, `config/...`, `benches/...`, `docs/...`, `sim-device/...`,
+/// (`src/...`, `crates/...`, `tests/...`, `config/...`, `benches/...`, `docs/...`, `sim-device/...`,
 /// `python/...`, `contrib/...`; a pattern such as `config/sim-device-NAME.toml` aside) exists:
 /// a moved file leaves no stale path behind.
 #[test]
@@ -611,6 +611,7 @@ fn files_the_documents_name_exist() {
     }
     let tops = [
         "src/",
+        "crates/",
         "tests/",
         "config/",
         "benches/",

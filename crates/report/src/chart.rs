@@ -1,5 +1,5 @@
 //! Interactive time-series charts of the report pages: the series as JSON in the page and the
-//! vendored uPlot (`src/assets/uplot/`, embedded, no network; the daemon's live page embeds the
+//! vendored uPlot (`crates/core/src/assets/uplot/`, embedded, no network; the daemon's live page embeds the
 //! same files) drawing them with drag-to-zoom on the time axis (double-click resets), live
 //! values under the cursor, and the static SVG of [`plot::lines`] kept for a page without
 //! scripts.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference output of SciPy's zero-phase Butterworth low-pass, for src/metrics tests.
+"""Reference output of SciPy's zero-phase Butterworth low-pass, for crates/core/src/metrics tests.
 
 Run once (needs numpy and scipy) from the repository root:
 

@@ -1,4 +1,4 @@
-// Draws the interactive charts of a valve-bridge report (src/report/chart.rs) with uPlot: each
+// Draws the interactive charts of a valve-bridge report (crates/report/src/chart.rs) with uPlot: each
 // <div class="vb-chart" data-set=ID> reads the series of <script id="vb-data-ID"> (over its
 // data-x0..data-x1 stretch of time when given). Drag across a chart to zoom into that time,
 // turn the wheel with Shift held to pan along it, double-click to go back; the legend shows the

@@ -1,4 +1,4 @@
-// The live page of valve-bridge's daemon (src/daemon/page/): every second it asks /api/live for
+// The live page of valve-bridge's daemon (crates/daemon/src/serve/page/): every second it asks /api/live for
 // what is new (each valve's trace after the last point it has, its status, its last health
 // window, its count of diagnoses) and draws, per valve, O_P and V_P over the last minutes with
 // uPlot, the health figures against their limits and the alarms (each health alarm with its

@@ -2,7 +2,7 @@
 //! the last [`board::TRACE_S`] (a chart that updates every second from `/api/live`), its health
 //! figures against their limits, its alarms, and its diagnosis history (effect sizes over time,
 //! each diagnosis linked to its report). One self-contained page: `index.html` with the
-//! vendored uPlot (`src/assets/uplot/`, the reports' charts) and `live.js` inlined, so a browser
+//! vendored uPlot (`crates/core/src/assets/uplot/`, the reports' charts) and `live.js` inlined, so a browser
 //! needs nothing but the daemon.
 //!
 //! [`board`] keeps what the page shows; [`history_tail`] reads a valve's diagnosis history for
