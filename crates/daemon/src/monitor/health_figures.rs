@@ -35,7 +35,7 @@ struct Figure {
     limit: fn(&HealthLimits) -> Option<f64>,
 }
 
-/// The figures, in the order of the health CSV.
+/// The figures, in the order of the health log ([`vb_core::recording::health_log::Figure`]).
 const FIGURES: [Figure; 5] = [
     Figure {
         name: "dead time",
@@ -94,13 +94,7 @@ pub struct Figures {
 impl Figures {
     /// The figures in the order of the health log's ([`vb_core::recording::health_log::Figure`]).
     pub fn in_log_order(&self) -> [Option<f64>; 5] {
-        [
-            self.dead_time_s,
-            self.reversal_delay_s,
-            Some(self.opening_speed_pct_per_s),
-            Some(self.closing_speed_pct_per_s),
-            Some(self.tracking_rms_pct),
-        ]
+        FIGURES.map(|fig| (fig.get)(self))
     }
 
     /// The figures of `op` and `vp` sampled every `dt` s; a delay needs `min_steps` steps.
@@ -296,13 +290,7 @@ pub struct HealthLimits {
 impl HealthLimits {
     /// The limits in the order of the health log's figures.
     pub fn in_log_order(&self) -> [Option<f64>; 5] {
-        [
-            self.dead_time_s,
-            self.reversal_delay_s,
-            Some(self.opening_speed_pct_per_s),
-            Some(self.closing_speed_pct_per_s),
-            Some(self.tracking_rms_pct),
-        ]
+        FIGURES.map(|fig| (fig.limit)(self))
     }
 }
 
