@@ -30,7 +30,6 @@ pub mod health;
 pub mod identify;
 pub mod live;
 pub mod plot;
-pub mod readme;
 pub mod response;
 pub mod verdict;
 
