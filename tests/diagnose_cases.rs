@@ -4,7 +4,7 @@
 //! by the slips of V_P (a limit cycle's phase is beyond the free-run error), which must say so.
 //! Every case also as the daemon would log it (per mille, 0.5 % of the rows without V_P in
 //! bursts of 1-3): the same effects must be named. Each case's row of the table of these
-//! diagnoses in README must be the one the generator (`examples/readme-figures/`)
+//! diagnoses in `docs/diagnosis.md` must be the one the generator (`examples/readme-figures/`)
 //! makes of the diagnosis.
 
 use std::path::{Path, PathBuf};
@@ -57,7 +57,7 @@ fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
 }
 
 /// Diagnoses `case`, checks the shape of the JSON, that the effects named are the truth's and
-/// that README's row of the case is the one generated from this diagnosis.
+/// that the docs' row of the case (docs/diagnosis.md) is the one generated from this diagnosis.
 fn named(case: &str) -> (Value, Vec<String>) {
     let (d, want) = diagnose(case);
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

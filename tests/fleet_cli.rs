@@ -2,7 +2,7 @@
 //! that is not a recording) and a wide export with a column-mapping file are diagnosed, ranked,
 //! and written as a page, CSV and JSON summaries and one report per valve; the per-valve
 //! diagnosis is the one `valve-bridge diagnose --json` gives. The shared recordings rank by
-//! consequence for the process as README's generated table says, the valves whose findings
+//! consequence for the process as the generated table of `docs/fleet.md` says, the valves whose findings
 //! make a loop cycle (stick-slip, the large friction bands) first, each finding in the
 //! vocabulary's words.
 

@@ -23,8 +23,12 @@ use valve_bridge::report::verdict::{num, size_text};
 pub(crate) const REGENERATE: &str = "cargo run --example readme-figures -- --write";
 
 /// The page (relative to the checkout) that holds block `name`.
-pub(crate) fn page(_name: &str) -> &'static str {
-    "README.md"
+pub(crate) fn page(name: &str) -> &'static str {
+    match name {
+        DIAGNOSE_CASES | VOCABULARY => "docs/diagnosis.md",
+        FLEET_CASES => "docs/fleet.md",
+        _ => "README.md",
+    }
 }
 
 /// The shared recordings (`tests/data/cases/`) in the order of the diagnoses' table.
