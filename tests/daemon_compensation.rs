@@ -10,8 +10,8 @@
 //! - a compensator whose model overstates the valve's faults (a healthy valve given a worn
 //!   valve's band) is switched off by its guard in its first window, with a warning naming
 //!   the figure, and the controller's O_P is sent unchanged from then on;
-//! - README's walk-through: `config/models/physical-band-diagnosed.toml` is the model
-//!   `diagnose` finds in the log of `config/physical-band.toml`.
+//! - the walk-through of docs/compensation.md: `config/models/physical-band-diagnosed.toml` is
+//!   the model `diagnose` finds in the log of `config/physical-band.toml`.
 
 use std::path::{Path, PathBuf};
 
@@ -253,7 +253,7 @@ fn a_model_that_overstates_the_valve_s_faults_is_switched_off_by_the_guard() {
 
 #[test]
 fn the_shipped_diagnosed_model_is_what_diagnose_finds_in_the_worn_valve_s_log() {
-    // README's walk-through: the worn valve's own log, diagnosed, is the model
+    // the walk-through of docs/compensation.md: the worn valve's own log, diagnosed, is the model
     // config/compensated.toml compensates with.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = tempfile::tempdir().unwrap();

@@ -3,16 +3,21 @@
 //! and the held-out error must drop whenever something is added, except for stick-slip judged
 //! by the slips of V_P (a limit cycle's phase is beyond the free-run error), which must say so.
 //! Every case also as the daemon would log it (per mille, 0.5 % of the rows without V_P in
-//! bursts of 1-3): the same effects must be named. Each case's row of README's table of these
-//! diagnoses must be the one `valve_bridge::report::readme` makes of the diagnosis.
+//! bursts of 1-3): the same effects must be named. Each case's row of the table of these
+//! diagnoses in `docs/diagnosis.md` must be the one the generator (`examples/readme-figures/`)
+//! makes of the diagnosis.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::Value;
 use valve_bridge::recording::{self, ReadOptions};
-use valve_bridge::report::readme;
 use valve_bridge::synth::logged;
+
+// The generator of the figures README and docs/ quote: the example's own code, one implementation.
+#[allow(dead_code)] // this test checks some of its blocks only
+#[path = "../examples/readme-figures/blocks.rs"]
+mod blocks;
 
 /// Share of the rows of a logged case without V_P.
 const LOST_SHARE: f64 = 0.005;
@@ -52,7 +57,7 @@ fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
 }
 
 /// Diagnoses `case`, checks the shape of the JSON, that the effects named are the truth's and
-/// that README's row of the case is the one generated from this diagnosis.
+/// that the docs' row of the case (docs/diagnosis.md) is the one generated from this diagnosis.
 fn named(case: &str) -> (Value, Vec<String>) {
     let (d, want) = diagnose(case);
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -60,9 +65,9 @@ fn named(case: &str) -> (Value, Vec<String>) {
         &std::fs::read_to_string(root.join(format!("tests/data/cases/{case}.truth.json"))).unwrap(),
     )
     .unwrap();
-    let row = readme::diagnose_row(case, &truth, &d);
-    let text = std::fs::read_to_string(root.join("README.md")).unwrap();
-    if let Err(e) = readme::check_line(&text, readme::DIAGNOSE_CASES, &format!("| {case} |"), &row)
+    let row = blocks::diagnose_row(case, &truth, &d);
+    let text = std::fs::read_to_string(root.join(blocks::page(blocks::DIAGNOSE_CASES))).unwrap();
+    if let Err(e) = blocks::check_line(&text, blocks::DIAGNOSE_CASES, &format!("| {case} |"), &row)
     {
         panic!("{e}");
     }

@@ -2,7 +2,7 @@
 //! that is not a recording) and a wide export with a column-mapping file are diagnosed, ranked,
 //! and written as a page, CSV and JSON summaries and one report per valve; the per-valve
 //! diagnosis is the one `valve-bridge diagnose --json` gives. The shared recordings rank by
-//! consequence for the process as README's generated table says, the valves whose findings
+//! consequence for the process as the generated table of `docs/fleet.md` says, the valves whose findings
 //! make a loop cycle (stick-slip, the large friction bands) first, each finding in the
 //! vocabulary's words.
 
@@ -10,6 +10,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::Value;
+
+// The generator of the figures README and docs/ quote: the example's own code, one implementation.
+#[allow(dead_code)] // this test checks some of its blocks only
+#[path = "../examples/readme-figures/blocks.rs"]
+mod blocks;
 
 fn case(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -45,14 +50,10 @@ fn the_shared_recordings_rank_by_consequence_as_readme_says() {
         out.path().to_str().unwrap(),
     ]);
     let summary = json(&out.path().join("summary.json"));
-    let readme =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
-    let table = valve_bridge::report::readme::fleet_table(&summary);
-    if let Err(e) = valve_bridge::report::readme::check_block(
-        &readme,
-        valve_bridge::report::readme::FLEET_CASES,
-        &table,
-    ) {
+    let page = blocks::page(blocks::FLEET_CASES);
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(page)).unwrap();
+    let table = blocks::fleet_table(&summary);
+    if let Err(e) = blocks::check_block(&text, blocks::FLEET_CASES, &table) {
         panic!("{e}");
     }
     let valves = summary["valves"].as_array().unwrap();

@@ -1,14 +1,16 @@
-//! README.md's command blocks, run as written, so the walk-throughs cannot drift from the code.
+//! The command blocks of README.md and of every page of docs/ (`docs/*.md`), run as written,
+//! so the walk-throughs cannot drift from the code.
 //!
 //! Blocks are the indented (four spaces after a blank line) and fenced (untagged, `sh`, `bash`,
 //! `console`, `shell`) code blocks. A command is a line (with `\` continuations joined); a
 //! trailing `# ...` is a comment, and ``# prints `TEXT` `` says what its first line of output
-//! is (`N` stands for a number). Each block runs in order, in a scratch directory laid out like
-//! the checkout (its entries linked), with `valve-bridge` and `sim-device` on PATH as the built
-//! binaries and `cargo run [--release] [-p sim-device] --` meaning them, through `bash -c`; the
-//! paths README gives under `/tmp/` are taken under the scratch directory's `tmp/` (a test
-//! writes in its own directories only), but for the pseudo-terminal links `/tmp/vb-*` that
-//! the shipped configs name:
+//! is (`N` stands for a number). Each block runs in order (README's first, then the pages of
+//! docs/ by name), in one scratch directory laid out like the checkout (its entries linked),
+//! with `valve-bridge` and `sim-device` on PATH as the built binaries and
+//! `cargo run [--release] [-p sim-device] --` meaning them, through `bash -c`; the paths a page
+//! gives under `/tmp/` are taken under the scratch directory's `tmp/` (a test writes in its own
+//! directories only), but for the pseudo-terminal links `/tmp/vb-*` that the shipped configs
+//! name:
 //!
 //! - `valve-bridge`, `sim-device`, `mbpoll`, `curl`, `python3` and `for` loops run to the end
 //!   and must exit 0 (within [`FOREGROUND_LIMIT`]); a `valve-bridge run` with `--duration`
@@ -18,7 +20,7 @@
 //!   block's end they get SIGTERM, last started first, and a daemon must exit 0 with its
 //!   summary. A block with a `while` loop feeding the daemon's Modbus server must end without
 //!   a watchdog trip (the loop is there to hold the set-point);
-//! - `cargo test`/`bench`/`build`/`install`, `cargo run --example` (README's generator), `pip`,
+//! - `cargo test`/`bench`/`build`/`install`, `cargo run --example` (the pages' generator), `pip`,
 //!   `maturin`, `pytest`, `apt-get`, `sudo`, `systemctl`, `journalctl`, `python3 -m venv` and
 //!   `.`/`source` are not run (listed, with the reason); ```python blocks are
 //!   text here and run by `python/tests/test_readme.py`;
@@ -52,7 +54,9 @@ const BACKGROUND_LIMIT: Duration = Duration::from_secs(30);
 /// One command of a block.
 #[derive(Debug, Clone)]
 struct Cmd {
-    /// Its line in README.md.
+    /// Its page (`README.md`, `docs/NAME.md`).
+    page: String,
+    /// Its line in the page.
     line: usize,
     /// The command, continuations joined, comment removed.
     text: String,
@@ -69,9 +73,9 @@ enum How {
     Unknown,
 }
 
-/// The code blocks of `readme`, each as its commands.
-fn blocks(readme: &str) -> Vec<Vec<Cmd>> {
-    let lines: Vec<&str> = readme.lines().collect();
+/// The code blocks of `text`, the text of `page`, each as its commands.
+fn blocks(page: &str, text: &str) -> Vec<Vec<Cmd>> {
+    let lines: Vec<&str> = text.lines().collect();
     let mut out = Vec::new();
     let mut i = 0;
     while i < lines.len() {
@@ -83,14 +87,14 @@ fn blocks(readme: &str) -> Vec<Vec<Cmd>> {
                 i += 1;
             }
             if ["", "sh", "bash", "console", "shell"].contains(&tag.trim()) {
-                out.push(commands(&lines[start..i.min(lines.len())], start));
+                out.push(commands(page, &lines[start..i.min(lines.len())], start));
             }
         } else if lines[i].starts_with("    ") && (i == 0 || lines[i - 1].trim().is_empty()) {
             let start = i;
             while i < lines.len() && (lines[i].starts_with("    ") || lines[i].trim().is_empty()) {
                 i += 1;
             }
-            out.push(commands(&lines[start..i], start));
+            out.push(commands(page, &lines[start..i], start));
             continue;
         }
         i += 1;
@@ -99,8 +103,8 @@ fn blocks(readme: &str) -> Vec<Vec<Cmd>> {
     out
 }
 
-/// The commands of a block's lines (`first` is the 0-based index of the first line).
-fn commands(lines: &[&str], first: usize) -> Vec<Cmd> {
+/// The commands of a block's lines in `page` (`first` is the 0-based index of the first line).
+fn commands(page: &str, lines: &[&str], first: usize) -> Vec<Cmd> {
     let mut out = Vec::new();
     let mut pending: Option<(usize, String)> = None;
     for (j, raw) in lines.iter().enumerate() {
@@ -122,6 +126,7 @@ fn commands(lines: &[&str], first: usize) -> Vec<Cmd> {
             Some(c[..c.find('`')?].to_string())
         });
         out.push(Cmd {
+            page: page.to_string(),
             line: start,
             text,
             prints,
@@ -169,7 +174,7 @@ fn how(cmd: &Cmd) -> How {
         }
         ["mbpoll" | "curl" | "python3" | "for", ..] => How::Foreground,
         ["cargo", "run", "--example", ..] => {
-            How::NotRun("rewrites README itself (the tests compare its figures)")
+            How::NotRun("rewrites the pages' generated blocks (the tests compare their figures)")
         }
         ["cargo", "run", ..] => match mapped(&cmd.text) {
             Some(m) => how(&Cmd {
@@ -275,7 +280,7 @@ impl Scratch {
         }
     }
 
-    /// `text` with README's `/tmp/` paths under the scratch directory (see the module
+    /// `text` with a page's `/tmp/` paths under the scratch directory (see the module
     /// documentation).
     fn local(&self, text: &str) -> String {
         let tmp = self.dir.path().join("tmp");
@@ -393,11 +398,12 @@ fn check_prints(s: &Started, problems: &mut Vec<String>) {
     match s.first.recv_timeout(BACKGROUND_LIMIT) {
         Ok(line) if matches(want, &line) => {}
         Ok(line) => problems.push(format!(
-            "README.md:{}: `{}` printed `{line}`, not `{want}`",
-            s.cmd.line, s.cmd.text
+            "{}:{}: `{}` printed `{line}`, not `{want}`",
+            s.cmd.page, s.cmd.line, s.cmd.text
         )),
         Err(_) => problems.push(format!(
-            "README.md:{}: `{}` printed nothing within {} s",
+            "{}:{}: `{}` printed nothing within {} s",
+            s.cmd.page,
             s.cmd.line,
             s.cmd.text,
             BACKGROUND_LIMIT.as_secs()
@@ -423,14 +429,14 @@ fn ok_share(summary: &str) -> Option<f64> {
 fn run_block(scratch: &Scratch, block: &[Cmd], problems: &mut Vec<String>) -> Vec<String> {
     let mut report = Vec::new();
     if how(&block[0]) == How::Unknown {
-        return vec![format!("README.md:{}: text", block[0].line)];
+        return vec![format!("{}:{}: text", block[0].page, block[0].line)];
     }
     let mut background: Vec<Started> = Vec::new();
     let holds_set_point = block.iter().any(|c| c.text.starts_with("while mbpoll"));
     for cmd in block {
         let h = how(cmd);
         let text = mapped(&cmd.text).unwrap_or_else(|| cmd.text.clone());
-        let at = format!("README.md:{}: `{}`", cmd.line, cmd.text);
+        let at = format!("{}:{}: `{}`", cmd.page, cmd.line, cmd.text);
         if let How::NotRun(why) = h {
             report.push(format!("{at}: not run ({why})"));
             continue;
@@ -481,7 +487,7 @@ fn run_block(scratch: &Scratch, block: &[Cmd], problems: &mut Vec<String>) -> Ve
     while let Some(s) = background.pop() {
         let daemon = words(&mapped(&s.cmd.text).unwrap_or_else(|| s.cmd.text.clone()))
             .starts_with(&["valve-bridge", "run"]);
-        let at = format!("README.md:{}: `{}`", s.cmd.line, s.cmd.text);
+        let at = format!("{}:{}: `{}`", s.cmd.page, s.cmd.line, s.cmd.text);
         let (status, out, err) = end(s, Some(libc::SIGTERM));
         if status.is_none() {
             problems.push(format!("{at}: did not stop on SIGTERM\n{err}"));
@@ -502,14 +508,36 @@ fn run_block(scratch: &Scratch, block: &[Cmd], problems: &mut Vec<String>) -> Ve
     report
 }
 
+/// README.md, then the pages of docs/ by name, each as (its path in the checkout, its text).
+fn pages() -> Vec<(String, String)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut names: Vec<String> = (std::fs::read_dir(root.join("docs")).expect("docs/ lists"))
+        .map(|e| {
+            e.expect("docs/ entry")
+                .file_name()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .filter(|n| n.ends_with(".md"))
+        .map(|n| format!("docs/{n}"))
+        .collect();
+    names.sort();
+    names.insert(0, "README.md".to_string());
+    (names.into_iter())
+        .map(|n| {
+            let text = std::fs::read_to_string(root.join(&n)).expect("page reads");
+            (n, text)
+        })
+        .collect()
+}
+
 #[test]
-fn readme_command_blocks_run_as_written() {
-    let readme =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+fn command_blocks_of_readme_and_docs_run_as_written() {
     let scratch = Scratch::new();
     let mut problems = Vec::new();
     let mut ran = 0;
-    for block in blocks(&readme) {
+    let pages = pages();
+    for block in (pages.iter()).flat_map(|(page, text)| blocks(page, text)) {
         let report = run_block(&scratch, &block, &mut problems);
         ran += report
             .iter()
@@ -519,36 +547,43 @@ fn readme_command_blocks_run_as_written() {
             println!("{line}");
         }
     }
-    assert!(ran >= 10, "only {ran} README commands ran");
+    assert!(ran >= 10, "only {ran} commands of README and docs/ ran");
     assert!(problems.is_empty(), "{}", problems.join("\n\n"));
 }
 
 #[test]
 fn set_up_builds_what_was_tested_and_says_each_step_once() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let pages = pages();
     // `cargo install` without `--locked` resolves every dependency anew, past the lock file
     // the tests ran with, and fails offline.
-    for (n, line) in readme.lines().enumerate() {
-        for (at, _) in line.match_indices("cargo install") {
-            let command = line[at..].split(['`', '&', ';', '(']).next().unwrap_or("");
-            assert!(
-                command.contains("--locked"),
-                "README.md:{}: `{command}` without --locked",
-                n + 1
-            );
+    for (page, text) in &pages {
+        for (n, line) in text.lines().enumerate() {
+            for (at, _) in line.match_indices("cargo install") {
+                let command = line[at..].split(['`', '&', ';', '(']).next().unwrap_or("");
+                assert!(
+                    command.contains("--locked"),
+                    "{page}:{}: `{command}` without --locked",
+                    n + 1
+                );
+            }
         }
     }
-    // The Python package is installed one way, in one place.
+    // The Python package is installed one way, in one place (README's set-up).
+    let all: String = pages.iter().map(|(_, text)| text.as_str()).collect();
     let installs: Vec<&str> = ["maturin develop", "maturin build", "pip install dist"]
         .into_iter()
-        .filter(|how| readme.contains(how))
+        .filter(|how| all.contains(how))
         .collect();
-    let places: usize = installs.iter().map(|how| readme.matches(how).count()).sum();
+    let places: usize = installs.iter().map(|how| all.matches(how).count()).sum();
     assert_eq!(
         (installs.as_slice(), places),
         (&["maturin develop"][..], 1),
-        "README installs the Python package in more than one way or place"
+        "README and docs/ install the Python package in more than one way or place"
+    );
+    assert!(
+        pages[0].1.contains("maturin develop"),
+        "README's set-up installs it"
     );
     // What README's commands leave in the checkout is ignored by git.
     let ignore = std::fs::read_to_string(root.join(".gitignore")).unwrap();
@@ -563,7 +598,7 @@ fn set_up_builds_what_was_tested_and_says_each_step_once() {
 #[test]
 fn blocks_and_rules() {
     let text = "intro\n\n    valve-bridge run --config x.toml   # prints `modbus-server: 1.2.3.4:5`\n    mbpoll -a 1 \\\n        -r 2 host   # read\n\n```toml\nkey = 1\n```\n\n```sh\ncargo run --release -p sim-device -- --pty   # prints `pty: /dev/pts/N`\nsudo systemctl enable x\n```\n\n    O_P ──▶ V_P\n";
-    let b = blocks(text);
+    let b = blocks("t.md", text);
     assert_eq!(b.len(), 3, "{b:?}");
     assert_eq!(b[0][0].prints.as_deref(), Some("modbus-server: 1.2.3.4:5"));
     assert_eq!(how(&b[0][0]), How::Background);
@@ -577,6 +612,7 @@ fn blocks_and_rules() {
     assert_eq!(how(&b[2][0]), How::Unknown, "the diagram is text");
     let run = |t: &str| {
         how(&Cmd {
+            page: "t.md".into(),
             line: 1,
             text: t.into(),
             prints: None,

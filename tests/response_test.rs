@@ -11,8 +11,11 @@ use std::process::{Command, Output, Stdio};
 use std::time::Duration;
 
 use serde_json::Value;
-use valve_bridge::report::readme;
 
+// The generator of the figures README and docs/ quote: the example's own code, one implementation.
+#[allow(dead_code)] // this test checks some of its blocks only
+#[path = "../examples/readme-figures/blocks.rs"]
+mod blocks;
 mod common;
 
 use common::sim::{self, SimDevice, BIN};
@@ -128,11 +131,12 @@ fn the_standard_plan_on_the_emulated_valve_reads_as_steps_reads_it() {
         compared += 1;
     }
     assert_eq!(compared, 48);
-    let readme = std::fs::read_to_string(format!("{ROOT}/README.md")).unwrap();
-    if let Err(e) = readme::check_block(
-        &readme,
-        readme::RESPONSE_EMULATED,
-        &readme::response_table(&doc),
+    let page = blocks::page(blocks::RESPONSE_EMULATED);
+    let text = std::fs::read_to_string(format!("{ROOT}/{page}")).unwrap();
+    if let Err(e) = blocks::check_block(
+        &text,
+        blocks::RESPONSE_EMULATED,
+        &blocks::response_table(&doc),
     ) {
         panic!("{e}");
     }

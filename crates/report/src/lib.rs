@@ -27,7 +27,6 @@ pub mod fleet;
 pub mod health;
 pub mod identify;
 pub mod plot;
-pub mod readme;
 pub mod response;
 pub mod verdict;
 

@@ -1,15 +1,22 @@
-//! Generates the deterministic figures README quotes (`valve_bridge::report::readme`): diagnoses
-//! the nine shared recordings (their table, and their fleet ranking as `valve-bridge fleet`
-//! makes it), identifies the paper-like one, runs the standard response test on the emulated
-//! valve and writes the vocabulary's table, then prints README's generated blocks, or with
-//! `--write` puts them into README.md. Tests compare README with the same rows
-//! (`tests/diagnose_cases.rs`, `tests/fleet_cli.rs`, `tests/identify_cli.rs`,
-//! `tests/response_test.rs`, the vocabulary in the library's tests), so a stale figure fails CI.
+//! Generates the deterministic figures README and docs/ quote: diagnoses the nine shared
+//! recordings (their table, and their fleet ranking as `valve-bridge fleet` makes it),
+//! identifies the paper-like one, runs the standard response test on the emulated valve and
+//! writes the vocabulary's table, then prints the generated blocks, or with `--write` puts each
+//! into its page (`blocks::page`). Tests compare the pages with
+//! the same rows, made by this example's own `blocks.rs` (`tests/diagnose_cases.rs`,
+//! `tests/fleet_cli.rs`, `tests/identify_cli.rs`, `tests/response_test.rs`; the vocabulary in
+//! `tests.rs`), so a stale figure fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
-//! optimised in debug builds too, and the tests that check README are debug builds).
+//! optimised in debug builds too, and the tests that check the pages are debug builds).
 //!
-//! Not here: how the rows are worded (`valve_bridge::report::readme`).
+//! Not here: how the rows are worded (`blocks.rs`).
+
+// The checks of `blocks.rs` are the tests' (they include the file), not the generator's.
+#[allow(dead_code)]
+mod blocks;
+#[cfg(test)]
+mod tests;
 
 use std::path::Path;
 
@@ -20,16 +27,16 @@ use valve_bridge::fit::{self, Options};
 use valve_bridge::fleet::{Fleet, Job, ValveSummary};
 use valve_bridge::model::ModelKind;
 use valve_bridge::recording::{self, ReadOptions};
-use valve_bridge::report::{diagnose, readme};
+use valve_bridge::report::diagnose;
 
 fn main() -> anyhow::Result<()> {
     let write = std::env::args().skip(1).any(|a| a == "--write");
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cases = root.join("tests/data/cases");
-    let bar = indicatif::ProgressBar::new(readme::CASES.len() as u64 + 1);
-    let mut rows = vec![readme::DIAGNOSE_HEADER.to_string()];
+    let bar = indicatif::ProgressBar::new(blocks::CASES.len() as u64 + 1);
+    let mut rows = vec![blocks::DIAGNOSE_HEADER.to_string()];
     let mut valves: Vec<ValveSummary> = Vec::new();
-    for case in readme::CASES {
+    for case in blocks::CASES {
         bar.set_message(case);
         let rec = recording::read(&cases.join(format!("{case}.csv")), &ReadOptions::default())?;
         let d = valve_bridge::diagnose::diagnose(&rec.view(), None, &|_, _| {})
@@ -39,7 +46,7 @@ fn main() -> anyhow::Result<()> {
             &std::fs::read_to_string(&truth_path)
                 .with_context(|| format!("reading {}", truth_path.display()))?,
         )?;
-        rows.push(readme::diagnose_row(case, &truth, &diagnose::json(&d)));
+        rows.push(blocks::diagnose_row(case, &truth, &diagnose::json(&d)));
         let job = Job {
             valve: case.to_string(),
             path: cases.join(format!("{case}.csv")),
@@ -49,9 +56,9 @@ fn main() -> anyhow::Result<()> {
         valves.push(ValveSummary::of(&job, &rec, &d));
         bar.inc(1);
     }
-    let ranking = readme::fleet_table(&serde_json::to_value(Fleet::ranked(valves))?);
+    let ranking = blocks::fleet_table(&serde_json::to_value(Fleet::ranked(valves))?);
     let rec = recording::read(
-        &cases.join(format!("{}.csv", readme::TABLE1_CASE)),
+        &cases.join(format!("{}.csv", blocks::TABLE1_CASE)),
         &ReadOptions::default(),
     )?;
     let models = [
@@ -61,25 +68,26 @@ fn main() -> anyhow::Result<()> {
         ModelKind::Pincart2,
     ];
     let id = fit::identify(&rec.view(), &Options::for_models(&models), &|_, _| {})?;
-    let table1 = readme::table1(&serde_json::to_value(&id)?);
+    let table1 = blocks::table1(&serde_json::to_value(&id)?);
     let response = response_test(root)?;
     bar.finish_and_clear();
     let blocks = [
-        (readme::DIAGNOSE_CASES, rows.join("\n")),
-        (readme::FLEET_CASES, ranking),
-        (readme::IDENTIFY_TABLE1, table1),
-        (readme::VOCABULARY, readme::vocabulary_table()),
-        (readme::RESPONSE_EMULATED, response),
+        (blocks::DIAGNOSE_CASES, rows.join("\n")),
+        (blocks::FLEET_CASES, ranking),
+        (blocks::IDENTIFY_TABLE1, table1),
+        (blocks::VOCABULARY, blocks::vocabulary_table()),
+        (blocks::RESPONSE_EMULATED, response),
     ];
     if write {
-        let path = root.join("README.md");
-        let mut text = std::fs::read_to_string(&path)?;
         for (name, content) in &blocks {
-            text = readme::with_block(&text, name, content)
-                .with_context(|| format!("README.md has no block `{name}`"))?;
+            let path = root.join(blocks::page(name));
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let text = blocks::with_block(&text, name, content)
+                .with_context(|| format!("{} has no block `{name}`", path.display()))?;
+            std::fs::write(&path, text)?;
+            eprintln!("wrote block `{name}` into {}", path.display());
         }
-        std::fs::write(&path, text)?;
-        eprintln!("wrote {} blocks into {}", blocks.len(), path.display());
     } else {
         for (name, content) in &blocks {
             println!("<!-- generated: {name} -->\n{content}\n<!-- end generated -->\n");
@@ -107,5 +115,5 @@ fn response_test(root: &Path) -> anyhow::Result<String> {
         .collect();
     let rec = recording::read_all(&files, &ReadOptions::default())?;
     let found = valve_bridge::response::analyse(&rec, &plan, setpoint_step)?;
-    Ok(readme::response_table(&serde_json::to_value(&found)?))
+    Ok(blocks::response_table(&serde_json::to_value(&found)?))
 }

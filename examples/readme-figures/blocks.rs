@@ -1,27 +1,38 @@
-//! The deterministic figures README quotes, generated from the tool's own `--json` documents:
-//! the table of the shared recordings' diagnoses ([`diagnose_row`]), the fleet ranking of the
-//! same recordings ([`fleet_table`], from `summary.json`), identify's Table 1 on the paper-like
-//! recording ([`table1`]), the vocabulary's words ([`vocabulary_table`]), the standard response
-//! test of the emulated valve ([`response_table`], from its `response.json`), and README's
-//! marked blocks that hold them (`<!-- generated: NAME -->` ... `<!-- end generated -->`).
+//! The deterministic figures README and docs/ quote, generated from the tool's own `--json`
+//! documents: the table of the shared recordings' diagnoses ([`diagnose_row`]), the fleet
+//! ranking of the same recordings ([`fleet_table`], from `summary.json`), identify's Table 1 on
+//! the paper-like recording ([`table1`]), the vocabulary's words ([`vocabulary_table`]), the
+//! standard response test of the emulated valve ([`response_table`], from its `response.json`),
+//! and the marked blocks of the pages that hold them (`<!-- generated: NAME -->` ...
+//! `<!-- end generated -->`, each block in the page [`page`] names).
 //!
-//! `examples/readme-figures.rs` prints them or writes them into README ([`REGENERATE`]); the
-//! tests that already diagnose and identify those recordings compare README's blocks with them
-//! ([`check_line`]), so no recording is analysed twice for it.
+//! `main.rs` prints them or writes them into their pages ([`REGENERATE`]); the tests that
+//! already diagnose and identify those recordings include this file (`#[path]`) and compare the
+//! pages' blocks with them ([`check_line`], [`check_block`]), so no recording is analysed twice
+//! for it and the rows have one implementation.
 //!
 //! Not here: the analyses themselves.
 
 use serde_json::Value;
 
-use super::verdict::{num, size_text};
-use vb_core::metrics::{table1_cells, Scores};
-use vb_core::model::ModelKind;
+use valve_bridge::metrics::{table1_cells, Scores};
+use valve_bridge::model::ModelKind;
+use valve_bridge::report::verdict::{num, size_text};
 
-/// The command that regenerates README's blocks.
-pub const REGENERATE: &str = "cargo run --example readme-figures -- --write";
+/// The command that regenerates the blocks.
+pub(crate) const REGENERATE: &str = "cargo run --example readme-figures -- --write";
 
-/// The shared recordings (`tests/data/cases/`) in the order of README's table.
-pub const CASES: [&str; 9] = [
+/// The page (relative to the checkout) that holds block `name`.
+pub(crate) fn page(name: &str) -> &'static str {
+    match name {
+        DIAGNOSE_CASES | VOCABULARY => "docs/diagnosis.md",
+        FLEET_CASES => "docs/fleet.md",
+        _ => "README.md",
+    }
+}
+
+/// The shared recordings (`tests/data/cases/`) in the order of the diagnoses' table.
+pub(crate) const CASES: [&str; 9] = [
     "pub_clean_rs",
     "pub_backlash_rs",
     "pub_backlash_normal_op",
@@ -34,21 +45,21 @@ pub const CASES: [&str; 9] = [
 ];
 
 /// The block of the diagnoses of [`CASES`].
-pub const DIAGNOSE_CASES: &str = "diagnose-cases";
+pub(crate) const DIAGNOSE_CASES: &str = "diagnose-cases";
 /// The block of identify's Table 1 on [`TABLE1_CASE`].
-pub const IDENTIFY_TABLE1: &str = "identify-table1";
-/// The recording of identify's Table 1 in README.
-pub const TABLE1_CASE: &str = "pub_sdd_paper_rs";
+pub(crate) const IDENTIFY_TABLE1: &str = "identify-table1";
+/// The recording of identify's Table 1 (README).
+pub(crate) const TABLE1_CASE: &str = "pub_sdd_paper_rs";
 
 /// The block of the fleet ranking of [`CASES`].
-pub const FLEET_CASES: &str = "fleet-cases";
+pub(crate) const FLEET_CASES: &str = "fleet-cases";
 /// The block of the vocabulary's words.
-pub const VOCABULARY: &str = "vocabulary";
+pub(crate) const VOCABULARY: &str = "vocabulary";
 
 /// The fleet ranking of a `summary.json` document `summary` as a Markdown table: rank, valve,
 /// severity, priority, what is wrong (each finding's plain name and what it does) and what to
 /// do first (the first clause of the highest-priority finding's action).
-pub fn fleet_table(summary: &Value) -> String {
+pub(crate) fn fleet_table(summary: &Value) -> String {
     let mut o = String::from(
         "| rank | valve | severity | priority | what is wrong | to do first |\n|---|---|---|---|---|---|\n",
     );
@@ -79,9 +90,9 @@ pub fn fleet_table(summary: &Value) -> String {
 
 /// The vocabulary as a Markdown table: each effect's name in the JSON, its plain name, what it
 /// does to control, the weight of that consequence in a finding's priority, and what to do.
-pub fn vocabulary_table() -> String {
-    use vb_core::model::composed::Effect;
-    use vb_core::vocabulary::words;
+pub(crate) fn vocabulary_table() -> String {
+    use valve_bridge::model::composed::Effect;
+    use valve_bridge::vocabulary::words;
     let mut o = String::from(
         "| effect (JSON) | plain name | what it does to control | weight | what to do |\n|---|---|---|---|---|\n",
     );
@@ -100,15 +111,15 @@ pub fn vocabulary_table() -> String {
 }
 
 /// The block of the standard response test of `config/emulated.toml`, as fast as possible.
-pub const RESPONSE_EMULATED: &str = "response-emulated";
+pub(crate) const RESPONSE_EMULATED: &str = "response-emulated";
 
 /// The head of the diagnoses' table.
-pub const DIAGNOSE_HEADER: &str =
+pub(crate) const DIAGNOSE_HEADER: &str =
     "| case | truth | found | measure before → after |\n|---|---|---|---|";
 
 /// The row of `case` in the diagnoses' table, from its `truth.json` and its `diagnose --json`
 /// document `d`.
-pub fn diagnose_row(case: &str, truth: &Value, d: &Value) -> String {
+pub(crate) fn diagnose_row(case: &str, truth: &Value, d: &Value) -> String {
     let list = |v: &Value| -> Vec<String> {
         (v.as_array().into_iter().flatten())
             .filter_map(|e| e.as_str().map(str::to_string))
@@ -170,7 +181,7 @@ pub fn diagnose_row(case: &str, truth: &Value, d: &Value) -> String {
 /// identify's Table 1 of the `identify --json` document `doc` as a Markdown table (with the
 /// held-out Rel. SSE), then pin-cart II's speed limit and the reversal delay its step
 /// analysis fits, at 20 % and 95 % opening.
-pub fn table1(doc: &Value) -> String {
+pub(crate) fn table1(doc: &Value) -> String {
     let mut o = String::from(
         "| model | MAE | MAE filtered | R² | SSE (%²) | Rel. SSE | held-out Rel. SSE | samples |\n\
          |---|---|---|---|---|---|---|---|\n",
@@ -216,48 +227,50 @@ fn opening(name: &str) -> String {
 /// The closing marker of every block.
 const CLOSING: &str = "<!-- end generated -->";
 
-/// The text between the markers of block `name` in `readme`, trimmed.
-pub fn block<'a>(readme: &'a str, name: &str) -> Option<&'a str> {
-    let start = readme.find(&opening(name))? + opening(name).len();
-    let end = start + readme[start..].find(CLOSING)?;
-    Some(readme[start..end].trim())
+/// The text between the markers of block `name` in `text`, trimmed.
+pub(crate) fn block<'a>(text: &'a str, name: &str) -> Option<&'a str> {
+    let start = text.find(&opening(name))? + opening(name).len();
+    let end = start + text[start..].find(CLOSING)?;
+    Some(text[start..end].trim())
 }
 
-/// `readme` with block `name` holding `content`; `None` without the block's markers.
-pub fn with_block(readme: &str, name: &str, content: &str) -> Option<String> {
-    let start = readme.find(&opening(name))? + opening(name).len();
-    let end = start + readme[start..].find(CLOSING)?;
+/// `text` with block `name` holding `content`; `None` without the block's markers.
+pub(crate) fn with_block(text: &str, name: &str, content: &str) -> Option<String> {
+    let start = text.find(&opening(name))? + opening(name).len();
+    let end = start + text[start..].find(CLOSING)?;
     Some(format!(
         "{}\n{}\n{}",
-        &readme[..start],
+        &text[..start],
         content.trim(),
-        &readme[end..]
+        &text[end..]
     ))
 }
 
-/// Checks that block `name` of `readme` holds the line starting with `prefix` as `want`; the
-/// error names the difference and the command that regenerates the block.
-pub fn check_line(readme: &str, name: &str, prefix: &str, want: &str) -> Result<(), String> {
-    let Some(b) = block(readme, name) else {
+/// Checks that block `name` of `text` (the text of its [`page`]) holds the line starting with
+/// `prefix` as `want`; the error names the page, the difference and the command that
+/// regenerates the block.
+pub(crate) fn check_line(text: &str, name: &str, prefix: &str, want: &str) -> Result<(), String> {
+    let page = page(name);
+    let Some(b) = block(text, name) else {
         return Err(format!(
-            "README.md has no block `{}` ... `{CLOSING}`",
+            "{page} has no block `{}` ... `{CLOSING}`",
             opening(name)
         ));
     };
     match b.lines().find(|l| l.starts_with(prefix)) {
         Some(l) if l == want => Ok(()),
         Some(l) => Err(format!(
-            "README.md's block `{name}` is stale:\n  README:    {l}\n  generated: {want}\nregenerate it with `{REGENERATE}`"
+            "{page}'s block `{name}` is stale:\n  page:      {l}\n  generated: {want}\nregenerate it with `{REGENERATE}`"
         )),
         None => Err(format!(
-            "README.md's block `{name}` has no line starting `{prefix}`; it should read\n  {want}\nregenerate it with `{REGENERATE}`"
+            "{page}'s block `{name}` has no line starting `{prefix}`; it should read\n  {want}\nregenerate it with `{REGENERATE}`"
         )),
     }
 }
 
 /// The worst figures per step size and the signature of a response test, from its
 /// `response.json` document `r`.
-pub fn response_table(r: &Value) -> String {
+pub(crate) fn response_table(r: &Value) -> String {
     let secs = |v: &Value| v.as_f64().map_or("-".into(), |v| format!("{v:.2} s"));
     let pct = |v: &Value| v.as_f64().map_or("-".into(), |v| format!("{v:.2} %"));
     let side = |w: &Value| {
@@ -292,9 +305,10 @@ pub fn response_table(r: &Value) -> String {
     rows.join("\n")
 }
 
-/// Checks that block `name` of `readme` is `want`, naming the first line that differs.
-pub fn check_block(readme: &str, name: &str, want: &str) -> Result<(), String> {
-    let have = block(readme, name).unwrap_or("");
+/// Checks that block `name` of `text` (the text of its [`page`]) is `want`, naming the first
+/// line that differs.
+pub(crate) fn check_block(text: &str, name: &str, want: &str) -> Result<(), String> {
+    let have = block(text, name).unwrap_or("");
     if have == want.trim() {
         return Ok(());
     }
@@ -303,7 +317,8 @@ pub fn check_block(readme: &str, name: &str, want: &str) -> Result<(), String> {
         match (h.next(), w.next()) {
             (a, b) if a != b => {
                 return Err(format!(
-                    "README.md's block `{name}` is stale:\n  README:    {}\n  generated: {}\nregenerate it with `{REGENERATE}`",
+                    "{}'s block `{name}` is stale:\n  page:      {}\n  generated: {}\nregenerate it with `{REGENERATE}`",
+                    page(name),
                     a.unwrap_or("(nothing)"),
                     b.unwrap_or("(nothing)")
                 ))
@@ -311,91 +326,5 @@ pub fn check_block(readme: &str, name: &str, want: &str) -> Result<(), String> {
             (None, None) => return Ok(()),
             _ => {}
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use serde_json::json;
-
-    #[test]
-    fn rows_are_made_from_the_json_documents() {
-        let d = json!({
-            "baseline": {"heldout_sse": 16032.4},
-            "final": {"heldout_sse": 1542.2},
-            "findings": [{"effect": "backlash", "measure": {"kind": "heldout_sse"},
-                "size": {"name": "friction_band_pct", "value": 5.83, "low": 5.63, "high": 5.83}}]
-        });
-        let truth = json!({"effects": ["backlash"]});
-        assert_eq!(
-            diagnose_row("pub_backlash_rs", &truth, &d),
-            "| pub_backlash_rs | backlash | backlash: friction band 5.83 % (5.63-5.83) | held-out SSE 16032 → 1542 |"
-        );
-        let none = json!({"baseline": {"heldout_sse": 683.0}, "final": {"heldout_sse": 683.0}, "findings": []});
-        assert_eq!(
-            diagnose_row("c", &json!({"effects": []}), &none),
-            "| c | — | — (nothing worth maintenance) | held-out SSE 683 → 683 |"
-        );
-    }
-
-    #[test]
-    fn blocks_are_found_replaced_and_checked() {
-        let readme = "a\n<!-- generated: t -->\n| x | 1 |\n| y | 2 |\n<!-- end generated -->\nb\n";
-        assert_eq!(block(readme, "t"), Some("| x | 1 |\n| y | 2 |"));
-        let new = with_block(readme, "t", "| x | 1 |\n| y | 3 |").unwrap();
-        assert_eq!(
-            new,
-            "a\n<!-- generated: t -->\n| x | 1 |\n| y | 3 |\n<!-- end generated -->\nb\n"
-        );
-        assert!(check_line(readme, "t", "| x |", "| x | 1 |").is_ok());
-        let e = check_line(readme, "t", "| y |", "| y | 3 |").unwrap_err();
-        assert!(e.contains("| y | 2 |") && e.contains("| y | 3 |") && e.contains(REGENERATE));
-        assert!(check_block(readme, "t", "| x | 1 |\n| y | 2 |").is_ok());
-        assert!(check_block(&new, "t", "| x | 1 |\n| y | 2 |").is_err());
-        assert!(check_line(readme, "missing", "| x |", "").is_err());
-    }
-
-    /// README holds both blocks, the diagnoses' with its head and a row for every case (each
-    /// row's figures are checked where its case is diagnosed: `tests/diagnose_cases.rs`).
-    #[test]
-    fn readme_has_the_generated_blocks() {
-        let readme = include_str!("../../../README.md");
-        let cases = block(readme, DIAGNOSE_CASES).expect("no diagnose-cases block");
-        assert!(cases.starts_with(DIAGNOSE_HEADER), "{cases}");
-        let rows: Vec<&str> = cases.lines().skip(2).collect();
-        assert_eq!(rows.len(), CASES.len(), "{cases}");
-        for (row, case) in rows.iter().zip(CASES) {
-            assert!(row.starts_with(&format!("| {case} |")), "{row}");
-        }
-        assert!(block(readme, IDENTIFY_TABLE1).is_some_and(|b| b.contains("| Pin-cart II |")));
-        let fleet = block(readme, FLEET_CASES).expect("no fleet-cases block");
-        assert_eq!(fleet.lines().count(), 2 + CASES.len(), "{fleet}");
-    }
-
-    /// README's vocabulary is the table's (each ranking's figures are checked where the fleet
-    /// runs: `tests/fleet_cli.rs`).
-    #[test]
-    fn readme_quotes_the_vocabulary() {
-        let readme = include_str!("../../../README.md");
-        if let Err(e) = check_block(readme, VOCABULARY, &vocabulary_table()) {
-            panic!("{e}");
-        }
-    }
-
-    #[test]
-    fn a_fleet_summary_is_a_ranking_table() {
-        let summary = json!({"valves": [
-            {"valve": "a", "severity": "high", "priority": 58.25, "advice": [
-                {"name": "lost motion (backlash)", "does": "loses 5.83 % (5.69-5.86) of travel on every reversal",
-                 "action": "check the packing; tighten"}]},
-            {"valve": "b", "severity": null, "priority": 0.0, "advice": []}
-        ]});
-        assert_eq!(
-            fleet_table(&summary),
-            "| rank | valve | severity | priority | what is wrong | to do first |\n|---|---|---|---|---|---|\n\
-             | 1 | a | high | 58.2 | lost motion (backlash) loses 5.83 % (5.69-5.86) of travel on every reversal | check the packing |\n\
-             | 2 | b | none | 0.0 | nothing worth maintenance |  |"
-        );
     }
 }
