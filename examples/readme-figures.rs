@@ -3,8 +3,9 @@
 //! makes it), identifies the paper-like one, runs the standard response test on the emulated
 //! valve and writes the vocabulary's table, then prints README's generated blocks, or with
 //! `--write` puts them into README.md. Tests compare README with the same rows
-//! (`tests/diagnose_cases.rs`, `tests/fleet_cli.rs`, `tests/identify_cli.rs`,
-//! `tests/response_test.rs`, the vocabulary in the library's tests), so a stale figure fails CI.
+//! (`tests/analysis/diagnose_cases.rs`, `tests/analysis/fleet_cli.rs`,
+//! `tests/analysis/identify_cli.rs`, `tests/analysis/response_test.rs`, the vocabulary in the
+//! library's tests), so a stale figure fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
 //! optimised in debug builds too, and the tests that check README are debug builds).

@@ -2,13 +2,12 @@
 //! recordings as long as the bench's: one valve per effect and a healthy one are labelled with
 //! exactly the planned effects, only the planned physics leaves the healthy ranges, generation
 //! is deterministic, and the full plan holds every effect often enough. Diagnosis is not run
-//! here (the digital family: `tests/diagnose_blind_digital.rs`).
+//! here (the digital family: `tests/analysis/diagnose_blind_digital.rs`).
 
-#[path = "../benches/blind/cases.rs"]
-mod cases;
+use crate::cases;
 
-use cases::physical::outside_healthy;
-use cases::{build, plans, Family, Physics, Plan, EXCITATIONS, NOISY_LOOP};
+use crate::cases::physical::outside_healthy;
+use crate::cases::{build, plans, Family, Physics, Plan, EXCITATIONS, NOISY_LOOP};
 use valve_bridge::diagnose::Effect;
 
 const SHORT_S: f64 = 600.0;

@@ -11,8 +11,7 @@ use valve_bridge::model::composed::{self, Knob};
 use valve_bridge::model::{bundled, ModelKind, ModelSpec};
 use valve_bridge::synth::{self, Excitation};
 
-mod common;
-use common::diagnosis::{names, param};
+use crate::common::diagnosis::{names, param};
 
 const DT: f64 = 0.01;
 

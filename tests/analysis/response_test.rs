@@ -13,9 +13,9 @@ use std::time::Duration;
 use serde_json::Value;
 use valve_bridge::report::readme;
 
-mod common;
+use crate::common;
 
-use common::sim::{self, SimDevice, BIN};
+use crate::common::sim::{self, SimDevice, BIN};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 

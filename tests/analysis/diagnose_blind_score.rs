@@ -3,15 +3,8 @@
 //! value, and the median of reported over true; a finding quoted in another unit and a missed
 //! label count apart. Arithmetic only; no diagnosis runs.
 
-#[path = "../benches/blind/cases.rs"]
-mod cases;
-// Only the coverage of the bench's tables is checked here.
-#[allow(dead_code)]
-#[path = "../benches/blind/score.rs"]
-mod score;
-
-use cases::Truth;
-use score::{coverage, Coverage, Outcome};
+use crate::cases::Truth;
+use crate::score::{coverage, Coverage, Outcome};
 use valve_bridge::diagnose::{Effect, Size};
 
 fn size(name: &'static str, value: f64, low: f64, high: f64) -> Size {

@@ -13,11 +13,8 @@ use valve_bridge::diagnose::{self, Diagnosis, Note};
 use valve_bridge::model::{ModelSpec, PhysicalParams};
 use valve_bridge::synth::{self, physical, Excitation};
 
-mod common;
-use common::diagnosis::{names, param};
-
-#[path = "../benches/blind/cases.rs"]
-mod cases;
+use crate::cases;
+use crate::common::diagnosis::{names, param};
 
 const DT: f64 = 0.01;
 const MINUTES_10: f64 = 600.0;

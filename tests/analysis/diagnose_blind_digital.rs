@@ -6,15 +6,14 @@
 //! state-dependent delay, and the plans cover every effect of the family under every
 //! excitation. Diagnosis is not run here.
 
-#[path = "../benches/blind/cases.rs"]
-mod cases;
+use crate::cases;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use valve_bridge::diagnose::Effect;
 use valve_bridge::synth::digital::{DigitalParams, DigitalValve};
 
-use cases::{build, digital, plans, Case, Family, Physics, Plan, DT, EXCITATIONS};
+use crate::cases::{build, digital, plans, Case, Family, Physics, Plan, DT, EXCITATIONS};
 
 const SHORT_S: f64 = 240.0;
 
