@@ -8,9 +8,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-mod common;
-
-use common::sim::BIN;
+use crate::common::sim::BIN;
 
 /// Runs `cmd`, which must exit 0.
 fn succeeds(mut cmd: Command) {

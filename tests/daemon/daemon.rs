@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use valve_bridge::model::{bundled, ModelKind, Valve};
 use valve_bridge::recording::{self, ReadOptions};
 
-mod common;
+use crate::common;
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 const REPLAY: &str = concat!(

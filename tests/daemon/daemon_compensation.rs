@@ -18,9 +18,7 @@ use std::path::{Path, PathBuf};
 use valve_bridge::model::{ModelSpec, Valve};
 use valve_bridge::recording::{self, ReadOptions};
 
-mod common;
-
-use common::sim::{read_log, real_time_turn, run_cmd, stdout, SimDevice};
+use crate::common::sim::{read_log, real_time_turn, run_cmd, stdout, SimDevice};
 
 /// A valve whose stem crosses a 1.5 % friction band on reversals, pushed at 8 % per s and % of
 /// error up to 60 %/s, 0.05 s of dead time: the form `diagnose` writes.

@@ -7,7 +7,7 @@
 //! planted in the directory is not followed; a file killed right after its rotation holds its
 //! header.
 
-mod common;
+use crate::common;
 
 use std::io::Read;
 use std::path::Path;

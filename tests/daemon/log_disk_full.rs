@@ -7,13 +7,13 @@
 //! past it fails (EFBIG) as one to a full disk does (ENOSPC), through the daemon's own write
 //! path; raised from outside (`prlimit --pid`), the space returns.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::sim::{real_time_turn, BIN};
+use crate::common::sim::{real_time_turn, BIN};
 
 /// The header line of a log file, with its newline.
 const HEADER: &str =

@@ -10,14 +10,16 @@
 //! - an analysis command writing to `/dev/full` fails with one line; into a closed pipe it ends
 //!   quietly.
 
-mod common;
+use crate::common;
 
 use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use common::sim::{nobody_listening, read_log, real_time_turn, run_cmd, SimDevice, BIN, CONSTANT};
+use crate::common::sim::{
+    nobody_listening, read_log, real_time_turn, run_cmd, SimDevice, BIN, CONSTANT,
+};
 
 /// The rows of a daemon log, as far as these tests look.
 #[derive(Debug, serde::Deserialize)]

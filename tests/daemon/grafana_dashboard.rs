@@ -14,8 +14,8 @@ use valve_bridge::daemon::exporter::LoopMetrics;
 use valve_bridge::daemon::health::Figures;
 use valve_bridge::diagnose::{Effect, Size};
 
-const DASHBOARD: &str = include_str!("../contrib/grafana/valve-bridge.json");
-const PROMETHEUS: &str = include_str!("../contrib/prometheus/prometheus.yml");
+const DASHBOARD: &str = include_str!("../../contrib/grafana/valve-bridge.json");
+const PROMETHEUS: &str = include_str!("../../contrib/prometheus/prometheus.yml");
 
 /// Every string under a key `expr`, `query` or `definition`, anywhere in `v`.
 fn queries(v: &Value, out: &mut Vec<String>) {

@@ -4,11 +4,9 @@
 //! - a valve whose device is not there logs its own rows as `disconnected` while every cycle
 //!   of the other valve reads its V_P; the run exits 1 naming that valve.
 
-mod common;
-
 use std::process::{Command, Output};
 
-use common::{log_rows, logs, LogRow};
+use crate::common::{log_rows, logs, LogRow};
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 const TWO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/two-valves.toml");
