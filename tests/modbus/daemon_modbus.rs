@@ -39,9 +39,9 @@ use valve_bridge::model::composed::{self, Knob};
 use valve_bridge::model::{bundled, ModelKind, Valve};
 use valve_bridge::recording;
 
-mod common;
+use crate::common;
 
-use common::sim::{
+use crate::common::sim::{
     config, real_time_turn, run_cmd, stdout, summary_count, SimDevice, CONSTANT, RTU_CONFIG,
     TCP_CONFIG,
 };

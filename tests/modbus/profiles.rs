@@ -7,9 +7,9 @@ use std::process::Command;
 
 use valve_bridge::modbus::profile::{self, Profile};
 
-mod common;
+use crate::common;
 
-use common::sim::{probe, read_log, real_time_turn, run_cmd, stdout, SimDevice, CONSTANT};
+use crate::common::sim::{probe, read_log, real_time_turn, run_cmd, stdout, SimDevice, CONSTANT};
 
 /// Each shipped profile, its walk-through config and the pty link that config names.
 const WALKS: [(&str, &str, &str); 4] = [

@@ -16,12 +16,12 @@ use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-mod common;
+use crate::common;
 
-use common::servers::{
+use crate::common::servers::{
     crowd, daemon, get_kept, metric, scrape, server_line, write_register, Client, Server,
 };
-use common::sim::real_time_turn;
+use crate::common::sim::real_time_turn;
 
 /// Starts `cmd` with at most `fds` open file descriptors.
 fn spawn_with_fd_limit(cmd: &mut Command, fds: u64) -> Child {

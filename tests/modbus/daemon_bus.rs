@@ -8,12 +8,10 @@
 //! - a rate the bus cannot carry is refused at load, naming the port, the total wire time,
 //!   the period and what to change.
 
-mod common;
-
 use std::path::Path;
 
-use common::sim::{config, real_time_turn, run_cmd, SimDevice, RTU_CONFIG};
-use common::{log_rows, logs, LogRow};
+use crate::common::sim::{config, real_time_turn, run_cmd, SimDevice, RTU_CONFIG};
+use crate::common::{log_rows, logs, LogRow};
 
 const SHIPPED: &str = "config/two-valves-rtu.toml";
 const PORT: &str = "/tmp/vb-sim-bus";

@@ -12,7 +12,7 @@
 //! `valve-bridge run` on the same kind of line: every `ok` row of its log reads back its own
 //! set-point.
 
-mod common;
+use crate::common;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;

@@ -22,9 +22,9 @@ use std::process::{Child, ChildStdout, Command, Stdio};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-mod common;
+use crate::common;
 
-use common::tools::{have_mbpoll, have_pymodbus};
+use crate::common::tools::{have_mbpoll, have_pymodbus};
 
 const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 

@@ -20,10 +20,12 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-mod common;
+use crate::common;
 
-use common::servers::{connect_from, daemon, get_kept, scrape_from, server_line, Client, Server};
-use common::sim::real_time_turn;
+use crate::common::servers::{
+    connect_from, daemon, get_kept, scrape_from, server_line, Client, Server,
+};
+use crate::common::sim::real_time_turn;
 
 /// One row of a daemon log.
 #[derive(Debug, serde::Deserialize)]

@@ -9,14 +9,14 @@
 //!   measured against a baseline model with no delay and no speed limit, is in alarm after its
 //!   first window; `b` is not.
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::tools::have_mbpoll;
+use crate::common::tools::have_mbpoll;
 use tokio_modbus::client::{Reader, Writer};
 use tokio_modbus::{ExceptionCode, Slave};
 

@@ -4,9 +4,9 @@
 
 use std::process::Output;
 
-mod common;
+use crate::common;
 
-use common::sim::{probe, SimDevice, RTU_CONFIG};
+use crate::common::sim::{probe, SimDevice, RTU_CONFIG};
 
 fn text(out: &Output) -> (String, String) {
     (

@@ -12,9 +12,9 @@ use std::path::Path;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-mod common;
+use crate::common;
 
-use common::sim::{real_time_turn, run_cmd, summary_count, SimDevice, CONSTANT};
+use crate::common::sim::{real_time_turn, run_cmd, summary_count, SimDevice, CONSTANT};
 
 #[derive(Debug, serde::Deserialize)]
 struct Row {
