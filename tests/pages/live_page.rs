@@ -24,10 +24,10 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-mod common;
+use crate::common;
 
-use common::sim::BIN;
-use common::tools;
+use crate::common::sim::BIN;
+use crate::common::tools;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 

@@ -16,10 +16,8 @@
 use std::path::Path;
 use std::process::Command;
 
-mod common;
-
-use common::sim::BIN;
-use common::tools;
+use crate::common::sim::BIN;
+use crate::common::tools;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
