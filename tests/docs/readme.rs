@@ -28,7 +28,7 @@
 //!
 //! A command needing mbpoll, curl or python3 that is not installed is a visible skip of the
 //! rest of its block, or a failure under `VB_REQUIRE_TOOLS=1` (`tests/common/tools.rs`).
-//! `cargo test --test readme -- --nocapture` lists what happened to each block.
+//! `cargo test --test docs readme:: -- --nocapture` lists what happened to each block.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
@@ -37,10 +37,10 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-mod common;
+use crate::common;
 
-use common::sim::{sim_device_bin, BIN};
-use common::tools;
+use crate::common::sim::{sim_device_bin, BIN};
+use crate::common::tools;
 
 /// The longest a foreground command may take.
 const FOREGROUND_LIMIT: Duration = Duration::from_secs(300);
@@ -437,7 +437,7 @@ fn run_block(scratch: &Scratch, block: &[Cmd], problems: &mut Vec<String>) -> Ve
         }
         if h == How::Unknown {
             problems.push(format!(
-                "{at}: tests/readme.rs has no rule for this program: run it or list it as not run"
+                "{at}: tests/docs/readme.rs has no rule for this program: run it or list it as not run"
             ));
             continue;
         }
