@@ -18,7 +18,7 @@
 //! sizes it in (`Truth`), so the intervals diagnosis reports can be checked against it.
 //!
 //! Used by `benches/diagnose_blind.rs` and, on short recordings, by
-//! `tests/diagnose_blind_cases.rs`. Nothing here runs diagnosis.
+//! `tests/analysis/diagnose_blind_cases.rs`. Nothing here runs diagnosis.
 
 #![allow(dead_code)]
 

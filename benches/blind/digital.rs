@@ -22,7 +22,7 @@
 //!
 //! The chamber's volume growth is kept healthy (no `state_dependent_delay`): the family is
 //! never drawn with one, and a healthy valve's stroke at 95 % is at most 1.4 times slower than
-//! at 5 % (`tests/diagnose_blind_digital.rs`). Nothing here runs diagnosis.
+//! at 5 % (`tests/analysis/diagnose_blind_digital.rs`). Nothing here runs diagnosis.
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;

@@ -3,9 +3,9 @@
 //! identifies the paper-like one, runs the standard response test on the emulated valve and
 //! writes the vocabulary's table, then prints the generated blocks, or with `--write` puts each
 //! into its page (`blocks::page`). Tests compare the pages with
-//! the same rows, made by this example's own `blocks.rs` (`tests/diagnose_cases.rs`,
-//! `tests/fleet_cli.rs`, `tests/identify_cli.rs`, `tests/response_test.rs`; the vocabulary in
-//! `tests.rs`), so a stale figure fails CI.
+//! the same rows, made by this example's own `blocks.rs` (`tests/analysis/diagnose_cases.rs`,
+//! `tests/analysis/fleet_cli.rs`, `tests/analysis/identify_cli.rs`,
+//! `tests/analysis/response_test.rs`; the vocabulary in `tests.rs`), so a stale figure fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
 //! optimised in debug builds too, and the tests that check the pages are debug builds).

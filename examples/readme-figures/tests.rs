@@ -1,7 +1,7 @@
 //! The generator's own tests: rows made from `--json` documents, blocks found, replaced and
 //! checked, and the pages holding every block (the figures themselves are checked by the tests
-//! that run the analyses: `tests/diagnose_cases.rs`, `tests/identify_cli.rs`,
-//! `tests/response_test.rs`, `tests/fleet_cli.rs`).
+//! that run the analyses: `tests/analysis/diagnose_cases.rs`, `tests/analysis/identify_cli.rs`,
+//! `tests/analysis/response_test.rs`, `tests/analysis/fleet_cli.rs`).
 
 use serde_json::json;
 
@@ -51,7 +51,7 @@ fn page_of(name: &str) -> String {
 }
 
 /// The pages hold the blocks, the diagnoses' with its head and a row for every case (each
-/// row's figures are checked where its case is diagnosed: `tests/diagnose_cases.rs`).
+/// row's figures are checked where its case is diagnosed: `tests/analysis/diagnose_cases.rs`).
 #[test]
 fn the_pages_have_the_generated_blocks() {
     let text = page_of(DIAGNOSE_CASES);
@@ -70,7 +70,7 @@ fn the_pages_have_the_generated_blocks() {
 }
 
 /// The quoted vocabulary is the table's (each ranking's figures are checked where the fleet
-/// runs: `tests/fleet_cli.rs`).
+/// runs: `tests/analysis/fleet_cli.rs`).
 #[test]
 fn the_vocabulary_quoted_is_the_tables() {
     if let Err(e) = check_block(&page_of(VOCABULARY), VOCABULARY, &vocabulary_table()) {

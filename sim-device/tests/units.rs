@@ -1,5 +1,5 @@
 //! Several units on one sim-device, and their drift, through the real binary over Modbus TCP
-//! (the RTU side is tested from the daemon, `tests/daemon_bus.rs`):
+//! (the RTU side is tested from the daemon, `tests/modbus/daemon_bus.rs`):
 //! - each unit id answers from its own registers and model; an id no unit has gets exception
 //!   0B (gateway target device failed to respond); one unit alone answers any id;
 //! - a unit's dead-time drift delays its valve more as it runs;

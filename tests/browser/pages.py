@@ -7,8 +7,8 @@ Each opened page collects its console errors and uncaught exceptions; the helper
 chart drew (ink on its canvas, or paths in an SVG), zoom a uPlot chart by dragging across it and
 read its time range, and take screenshots (of the page, or of one chart).
 
-Used by check_reports.py (run by tests/browser_reports.rs) and check_live.py (run by
-tests/live_page.rs); not here: which pages to check.
+Used by check_reports.py (run by tests/pages/browser_reports.rs) and check_live.py (run by
+tests/pages/live_page.rs); not here: which pages to check.
 """
 
 import os

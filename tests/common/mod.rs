@@ -1,4 +1,5 @@
-//! Helpers shared by the integration tests of `valve-bridge` (each test file uses a part).
+//! Helpers shared by the integration tests of `valve-bridge` (each test crate, a folder of
+//! tests/ whose main.rs includes this one with `#[path]`, uses a part).
 #![allow(dead_code)]
 
 pub(crate) mod diagnosis;
