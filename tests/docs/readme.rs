@@ -569,6 +569,17 @@ fn set_up_builds_what_was_tested_and_says_each_step_once() {
             }
         }
     }
+    // README's test command is the one CI runs, as written.
+    let readme = &pages[0].1;
+    let test_command = (readme.lines())
+        .map(str::trim)
+        .find(|l| l.starts_with("cargo test --workspace"))
+        .expect("README's set-up gives the test command");
+    let ci = std::fs::read_to_string(root.join(".ci/run")).unwrap();
+    assert!(
+        ci.lines().any(|l| l.trim() == test_command),
+        "`.ci/run` does not run README's test command `{test_command}`"
+    );
     // The Python package is installed one way, in one place (README's set-up).
     let all: String = pages.iter().map(|(_, text)| text.as_str()).collect();
     let installs: Vec<&str> = ["maturin develop", "maturin build", "pip install dist"]
