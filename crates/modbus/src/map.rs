@@ -172,7 +172,7 @@ impl StatusRegister {
 /// [`RegisterKeys`]: a key left out keeps its [`Default`].
 ///
 /// ```
-/// use valve_bridge::modbus::map::RegisterMap;
+/// use vb_modbus::map::RegisterMap;
 ///
 /// // The default map: O_P written and V_P read in per mille of travel.
 /// let map = RegisterMap::default();

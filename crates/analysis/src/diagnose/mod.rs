@@ -86,8 +86,8 @@ pub enum DiagnoseError {
 /// rounds finish.
 ///
 /// ```no_run
-/// use valve_bridge::diagnose::diagnose;
-/// use valve_bridge::recording::{read, ReadOptions};
+/// use vb_analysis::diagnose::diagnose;
+/// use vb_core::recording::{read, ReadOptions};
 ///
 /// let rec = read("recording.csv".as_ref(), &ReadOptions::default())?;
 /// let d = diagnose(&rec.view(), None, &|_, _| {})?;

@@ -321,9 +321,9 @@ struct Shared<'a> {
 /// (from worker threads).
 ///
 /// ```
-/// use valve_bridge::fit::{identify, Options};
-/// use valve_bridge::model::{bundled, ModelKind, Valve};
-/// use valve_bridge::recording::RecordingView;
+/// use vb_analysis::fit::{identify, Options};
+/// use vb_core::model::{bundled, ModelKind, Valve};
+/// use vb_core::recording::RecordingView;
 ///
 /// // 60 s at 10 Hz of an FOPDT valve answering steps of O_P every 5 s.
 /// let dt = 0.1;

@@ -330,14 +330,14 @@ enum Core {
 /// A runnable valve model: `reset`, then `step(O_P) -> V_P` once per sample.
 ///
 /// ```
-/// use valve_bridge::model::{bundled, ModelKind, Valve};
+/// use vb_core::model::{bundled, ModelKind, Valve};
 ///
 /// // The paper's pin-cart II valve with its bundled parameters, stepped at 100 Hz.
 /// let mut valve = Valve::new(&bundled(ModelKind::Pincart2), 0.01)?;
 /// valve.reset(40.0, 40.0);
 /// let vp: Vec<f64> = (0..1000).map(|_| valve.step(60.0)).collect();
 /// assert!(vp[999] > 50.0 && vp[999] <= 60.5, "V_P follows the O_P step: {}", vp[999]);
-/// # Ok::<(), valve_bridge::model::ModelError>(())
+/// # Ok::<(), vb_core::model::ModelError>(())
 /// ```
 #[derive(Debug, Clone)]
 pub struct Valve {
