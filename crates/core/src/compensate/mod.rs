@@ -277,7 +277,11 @@ impl Compensator {
         Ok(Compensator {
             parts: Parts {
                 backlash: cfg.backlash && identified.band_pct > 0.0,
-                deadband: cfg.deadband && identified.deadband_pct > 0.0,
+                // A step smaller than the smallest move compensated is below the resolution
+                // and noise the compensator ignores everywhere else: a deadband that small (a
+                // trace a fit puts in a model) is as likely not there, and stepping for it
+                // would hold a valve without one off its target by the step.
+                deadband: cfg.deadband && identified.deadband_pct / 2.0 >= cfg.min_move_pct,
                 calibration: cfg.calibration
                     && (identified.calibration_gain != 1.0
                         || identified.calibration_offset_pct != 0.0),
@@ -340,12 +344,18 @@ impl Compensator {
                 id.calibration_gain, id.calibration_offset_pct
             ));
         }
-        let what = if parts.is_empty() {
+        let mut what = if parts.is_empty() {
             "nothing (the model has no band, deadband or calibration the enabled parts answer)"
-                .into()
+                .to_string()
         } else {
             parts.join(", ")
         };
+        if id.deadband_pct > 0.0 && id.deadband_pct / 2.0 < self.parts.min_move {
+            what += &format!(
+                "; its deadband of {:.3} % is left alone (half of it is less than the smallest move compensated, {:.2} %)",
+                id.deadband_pct, self.parts.min_move
+            );
+        }
         if id.stroke_speed_known {
             what
         } else {

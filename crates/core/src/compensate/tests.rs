@@ -113,6 +113,35 @@ fn the_inverse_calibration_and_deadband_bring_the_valve_to_the_target() {
 }
 
 #[test]
+fn a_deadband_trace_smaller_than_twice_the_smallest_move_is_left_alone() {
+    // A band model with a deadband trace of 0.04 % (a fit's, on a valve without one): a step
+    // of 0.02 % would hold the valve that far off every target. It is not sent, and the
+    // description says so; a deadband of twice the smallest move is stepped for.
+    let op = levels((50.0, 300), (49.5, 600), (50.2, 600));
+    let mut traced = band_valve(1.5);
+    traced.effects.positioner_deadband_pct = 0.04;
+    let mut comp = compensator(&traced);
+    let (sent, _) = run(&band_valve(1.5), Some(&mut comp), &op);
+    assert_eq!((sent[899], sent[1499]), (49.5, 50.2));
+    assert!(
+        comp.describe()
+            .contains("its deadband of 0.040 % is left alone"),
+        "{}",
+        comp.describe()
+    );
+    let mut stepped = band_valve(1.5);
+    stepped.effects.positioner_deadband_pct = 0.2;
+    let mut comp = compensator(&stepped);
+    let (sent, _) = run(&band_valve(1.5), Some(&mut comp), &op);
+    assert!((sent[899] - 49.4).abs() < 1e-9 && (sent[1499] - 50.3).abs() < 1e-9);
+    assert!(
+        comp.describe().contains("deadband (0.20 %)"),
+        "{}",
+        comp.describe()
+    );
+}
+
+#[test]
 fn the_deadband_step_is_on_the_side_of_the_move_closing_as_well_as_opening() {
     // A band on the input (the form diagnose writes for a positioner deadband seen through a
     // log) and one in the positioner, each compensated with its own model; and a valve with a
