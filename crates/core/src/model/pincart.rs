@@ -117,6 +117,12 @@ pub(crate) struct PinCart {
     y: f64,
     /// Cart position (valve position).
     v: f64,
+    /// The opening-dependent slowdown at the cart position `slowed_at` (NaN before the first):
+    /// `1 + r V / 100` and its inverse. A cart at rest keeps them, so the two divisions are
+    /// made only when it has moved.
+    slowed_at: f64,
+    grow: f64,
+    slow: f64,
 }
 
 impl PinCart {
@@ -172,6 +178,9 @@ impl PinCart {
             dt,
             y: 0.0,
             v: 0.0,
+            slowed_at: f64::NAN,
+            grow: 1.0,
+            slow: 1.0,
         }
     }
 
@@ -183,10 +192,11 @@ impl PinCart {
         self.stuck = false;
     }
 
-    #[inline]
+    // Always inlined: [`super::Valve::run`] steps it in a loop that keeps its state in registers.
+    #[inline(always)]
     pub(crate) fn step(&mut self, u: f64) -> f64 {
         let e = u - self.v; // eq. (1)
-        let dy = match &self.law {
+        let dy = match self.law {
             // eq. (2); one sample never carries the pin past the target, which keeps slow
             // sampling (P_k dt > 1, e.g. 1 Hz data) stable and changes nothing at 100 Hz.
             PinLaw::Proportional { k } => (k * self.dt).min(1.0) * e,
@@ -197,10 +207,10 @@ impl PinCart {
                 band,
                 hold,
             } => {
-                if e.abs() <= *hold {
+                if e.abs() <= hold {
                     0.0
                 } else {
-                    self.pin_step_two(p, *close_max, *slowdown, *band, e)
+                    self.pin_step_two(&p, close_max, slowdown, band, e)
                 }
             }
         };
@@ -228,7 +238,7 @@ impl PinCart {
     /// crossing of the cart at the pushing speed too.
     #[inline]
     fn pin_step_two(
-        &self,
+        &mut self,
         p: &PinCart2Params,
         close_max: f64,
         slowdown: f64,
@@ -249,7 +259,12 @@ impl PinCart {
         // crosses the cart.
         let unload = -along(rel) - self.half;
         if pushing || unload > 1e-12 || band {
-            let speed = self.push_speed(p, close_max, slowdown, e);
+            let slow = if slowdown == 0.0 {
+                1.0
+            } else {
+                self.slowed().1
+            };
+            let speed = push_speed(p, close_max, slowdown, slow, e);
             let step = (speed * self.dt).min(e.abs()); // eq. (5)
             along(if pushing {
                 step
@@ -263,7 +278,7 @@ impl PinCart {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
             // its far side. A crossing time of 0 means no apparent backlash. The slower chamber
             // of an opening-dependent slowdown also takes longer to cross the friction band.
-            let t = (p.crossing_time_s(self.v) * (1.0 + slowdown * self.v / 100.0)).max(self.dt);
+            let t = (p.crossing_time_s(self.v) * self.slowed().0).max(self.dt);
             along((2.0 * self.half0 * self.dt / t).min(self.half - along(rel)))
         }
     }
@@ -281,24 +296,28 @@ impl PinCart {
         self.half = half;
     }
 
-    /// Pin-cart II's pushing speed for the error `e` (non-zero) at the cart's opening, %/s:
-    /// eq. (4) saturated by eq. (5). A chamber that grows with opening fills and vents more
-    /// slowly: the response and the stroke speed fall alike (dy_min, the positioner's creep,
-    /// does not).
+    /// `1 + r V / 100` at the cart's opening and its inverse (see [`slowdown_at`]), kept while
+    /// the cart stays where they were computed.
     #[inline]
-    fn push_speed(&self, p: &PinCart2Params, close_max: f64, slowdown: f64, e: f64) -> f64 {
-        let max = if e > 0.0 {
-            p.dy_max_pct_per_s
-        } else {
-            close_max
+    fn slowed(&mut self) -> (f64, f64) {
+        // A NaN position never equals itself: computed afresh, as before the first.
+        if self.v != self.slowed_at {
+            self.slow_down();
+        }
+        (self.grow, self.slow)
+    }
+
+    /// Computes [`PinCart::slowed`]'s factors at the cart's position. Never inlined: inlined,
+    /// the compiler makes the two divisions on every sample and selects, and the simulation
+    /// waits for them even while the cart rests.
+    #[inline(never)]
+    fn slow_down(&mut self) {
+        let slowdown = match self.law {
+            PinLaw::StateDependent { slowdown, .. } => slowdown,
+            PinLaw::Proportional { .. } => 0.0,
         };
-        let (gain, max) = if slowdown == 0.0 {
-            (p.p_gain_per_s, max)
-        } else {
-            let slow = 1.0 / (1.0 + slowdown * self.v / 100.0);
-            (slow * p.p_gain_per_s, slow * max)
-        };
-        (gain * e.abs()).max(p.dy_min_pct_per_s).min(max) // eq. (4)-(5)
+        (self.grow, self.slow) = slowdown_at(slowdown, self.v);
+        self.slowed_at = self.v;
     }
 
     /// Where the cart is and how far the pin still has to go before it pushes the cart
@@ -323,7 +342,13 @@ impl PinCart {
                 slowdown,
                 band: true,
                 ..
-            } if e != 0.0 => Some(self.push_speed(p, *close_max, *slowdown, e)),
+            } if e != 0.0 => Some(push_speed(
+                p,
+                *close_max,
+                *slowdown,
+                slowdown_at(*slowdown, self.v).1,
+                e,
+            )),
             _ => None,
         }
     }
@@ -347,6 +372,33 @@ impl PinCart {
     pub(crate) fn pin_offset(&self) -> f64 {
         self.y - self.v
     }
+}
+
+/// The opening-dependent slowdown `r` at opening `v`: how many times slower than closed the
+/// chamber makes the valve there, `1 + r V / 100`, and its inverse.
+#[inline]
+fn slowdown_at(slowdown: f64, v: f64) -> (f64, f64) {
+    let grow = 1.0 + slowdown * v / 100.0;
+    (grow, 1.0 / grow)
+}
+
+/// Pin-cart II's pushing speed for the error `e` (non-zero) at an opening where the slowdown
+/// `slowdown` gives the factor `slow` (from [`slowdown_at`]), %/s: eq. (4) saturated by eq.
+/// (5). A chamber that grows with opening fills and vents more slowly: the response and the
+/// stroke speed fall alike (dy_min, the positioner's creep, does not).
+#[inline]
+fn push_speed(p: &PinCart2Params, close_max: f64, slowdown: f64, slow: f64, e: f64) -> f64 {
+    let max = if e > 0.0 {
+        p.dy_max_pct_per_s
+    } else {
+        close_max
+    };
+    let (gain, max) = if slowdown == 0.0 {
+        (p.p_gain_per_s, max)
+    } else {
+        (slow * p.p_gain_per_s, slow * max)
+    };
+    (gain * e.abs()).max(p.dy_min_pct_per_s).min(max) // eq. (4)-(5)
 }
 
 /// `a_p, b_p, c_p` of the quadratic through the crossing times `t0`, `t50`, `t100` (s) at 0,
