@@ -236,7 +236,7 @@ impl PinCart {
 
     /// Pin movement of pin-cart II for one sample, eqs. (4)-(7); with a friction `band`, the
     /// crossing of the cart at the pushing speed too.
-    #[inline]
+    #[inline(always)]
     fn pin_step_two(
         &mut self,
         p: &PinCart2Params,
@@ -298,26 +298,18 @@ impl PinCart {
 
     /// `1 + r V / 100` at the cart's opening and its inverse (see [`slowdown_at`]), kept while
     /// the cart stays where they were computed.
-    #[inline]
+    #[inline(always)]
     fn slowed(&mut self) -> (f64, f64) {
         // A NaN position never equals itself: computed afresh, as before the first.
         if self.v != self.slowed_at {
-            self.slow_down();
+            let slowdown = match self.law {
+                PinLaw::StateDependent { slowdown, .. } => slowdown,
+                PinLaw::Proportional { .. } => 0.0,
+            };
+            (self.grow, self.slow) = slowdown_at(slowdown, self.v);
+            self.slowed_at = self.v;
         }
         (self.grow, self.slow)
-    }
-
-    /// Computes [`PinCart::slowed`]'s factors at the cart's position. Never inlined: inlined,
-    /// the compiler makes the two divisions on every sample and selects, and the simulation
-    /// waits for them even while the cart rests.
-    #[inline(never)]
-    fn slow_down(&mut self) {
-        let slowdown = match self.law {
-            PinLaw::StateDependent { slowdown, .. } => slowdown,
-            PinLaw::Proportional { .. } => 0.0,
-        };
-        (self.grow, self.slow) = slowdown_at(slowdown, self.v);
-        self.slowed_at = self.v;
     }
 
     /// Where the cart is and how far the pin still has to go before it pushes the cart
@@ -355,7 +347,7 @@ impl PinCart {
 
     /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart,
     /// or wound up to `windup` beyond it on the side of the stop.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn set_position(&mut self, v: f64) {
         self.v = v;
         let reach = self.half + self.breakaway;
@@ -375,8 +367,10 @@ impl PinCart {
 }
 
 /// The opening-dependent slowdown `r` at opening `v`: how many times slower than closed the
-/// chamber makes the valve there, `1 + r V / 100`, and its inverse.
-#[inline]
+/// chamber makes the valve there, `1 + r V / 100`, and its inverse. Never inlined: inlined
+/// into [`PinCart::slowed`], the compiler makes the two divisions on every sample and selects,
+/// and the simulation waits for them even while the cart rests.
+#[inline(never)]
 fn slowdown_at(slowdown: f64, v: f64) -> (f64, f64) {
     let grow = 1.0 + slowdown * v / 100.0;
     (grow, 1.0 / grow)
@@ -386,7 +380,7 @@ fn slowdown_at(slowdown: f64, v: f64) -> (f64, f64) {
 /// `slowdown` gives the factor `slow` (from [`slowdown_at`]), %/s: eq. (4) saturated by eq.
 /// (5). A chamber that grows with opening fills and vents more slowly: the response and the
 /// stroke speed fall alike (dy_min, the positioner's creep, does not).
-#[inline]
+#[inline(always)]
 fn push_speed(p: &PinCart2Params, close_max: f64, slowdown: f64, slow: f64, e: f64) -> f64 {
     let max = if e > 0.0 {
         p.dy_max_pct_per_s
