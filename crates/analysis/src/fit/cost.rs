@@ -162,16 +162,15 @@ impl Problem {
                 continue;
             }
             valve.reset(self.op[from], first_measured(&self.vp, &self.op, from, end));
-            for ((&u, &m), &keep) in self.op[from..end]
-                .iter()
-                .zip(&self.vp[from..end])
-                .zip(&self.mask[from..end])
-            {
-                let r = m - valve.step(u);
-                if keep {
-                    sum += r * r;
+            let mut measured = self.vp[from..end].iter().zip(&self.mask[from..end]);
+            valve.run(&self.op[from..end], |v| {
+                if let Some((&m, &keep)) = measured.next() {
+                    let r = m - v;
+                    if keep {
+                        sum += r * r;
+                    }
                 }
-            }
+            });
         }
         if sum.is_finite() {
             sum

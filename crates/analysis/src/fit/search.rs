@@ -17,7 +17,7 @@
 //!
 //! Not here: what is minimised (any `Fn(&[f64]) -> f64` over the unit cube).
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 
 use argmin::core::{CostFunction, Error, Executor, State};
 use argmin::solver::neldermead::NelderMead;
@@ -90,9 +90,35 @@ pub fn distinct_best(sorted: &[Scored], k: usize, min_dist: f64) -> Vec<Scored> 
 }
 
 /// The cost on the unit cube, clamped, with a penalty for leaving it; counts evaluations.
+/// Remembers the cost of every point of the cube it was evaluated at: the simplex starts at a
+/// point already evaluated, trial points outside the cube can clamp to the same point, and the
+/// best point is evaluated once more at the end. A cost is a whole simulation, a look-up a few
+/// comparisons.
 struct Boxed<'a, F> {
     f: &'a F,
     evals: Cell<usize>,
+    seen: RefCell<Vec<Scored>>,
+}
+
+impl<F: Fn(&[f64]) -> f64> Boxed<'_, F> {
+    /// `f` at the point `u` of the cube, evaluated once per point.
+    fn at(&self, u: Vec<f64>) -> Scored {
+        // The same bits: a point is the same point (-0 and 0 are two).
+        let same = |s: &&Scored| {
+            s.u.iter()
+                .map(|x| x.to_bits())
+                .eq(u.iter().map(|x| x.to_bits()))
+        };
+        if let Some(s) = self.seen.borrow().iter().find(same) {
+            return s.clone();
+        }
+        let s = Scored {
+            cost: (self.f)(&u),
+            u,
+        };
+        self.seen.borrow_mut().push(s.clone());
+        s
+    }
 }
 
 impl<F: Fn(&[f64]) -> f64> CostFunction for Boxed<'_, F> {
@@ -110,7 +136,7 @@ impl<F: Fn(&[f64]) -> f64> CostFunction for Boxed<'_, F> {
                 c
             })
             .collect();
-        let y = (self.f)(&clamped);
+        let y = self.at(clamped).cost;
         Ok(if y.is_finite() {
             y * (1.0 + outside) + outside
         } else {
@@ -124,7 +150,8 @@ impl<F: Fn(&[f64]) -> f64> CostFunction for Boxed<'_, F> {
 pub struct Local {
     /// Best point found (inside the cube) and its cost.
     pub best: Scored,
-    /// Cost evaluations spent.
+    /// Cost evaluations the search asked for (a point asked for again is looked up, not
+    /// simulated again, and still counts).
     pub evals: usize,
 }
 
@@ -133,10 +160,12 @@ pub struct Local {
 /// than the start.
 pub fn nelder_mead<F: Fn(&[f64]) -> f64>(f: &F, start: &[f64], step: f64, max_iters: u64) -> Local {
     let start: Vec<f64> = start.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-    let fallback = Scored {
-        cost: f(&start),
-        u: start.clone(),
+    let problem = Boxed {
+        f,
+        evals: Cell::new(1),
+        seen: RefCell::new(Vec::new()),
     };
+    let fallback = problem.at(start.clone());
     if start.is_empty() || max_iters == 0 {
         return Local {
             best: fallback,
@@ -153,10 +182,6 @@ pub fn nelder_mead<F: Fn(&[f64]) -> f64>(f: &F, start: &[f64], step: f64, max_it
         };
         simplex.push(p);
     }
-    let problem = Boxed {
-        f,
-        evals: Cell::new(1),
-    };
     let solver = match NelderMead::new(simplex).with_sd_tolerance(1e-12) {
         Ok(s) => s,
         Err(_) => {
@@ -175,10 +200,14 @@ pub fn nelder_mead<F: Fn(&[f64]) -> f64>(f: &F, start: &[f64], step: f64, max_it
             evals: 1,
         };
     };
-    let evals = res.problem.problem.as_ref().map_or(0, |p| p.evals.get());
+    let problem = res.problem.problem.as_ref();
+    let evals = problem.map_or(0, |p| p.evals.get());
     let best = res.state().get_best_param().map(|p| {
         let u: Vec<f64> = p.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-        Scored { cost: f(&u), u }
+        match problem {
+            Some(problem) => problem.at(u),
+            None => Scored { cost: f(&u), u },
+        }
     });
     match best {
         Some(b) if b.cost <= fallback.cost => Local {
@@ -293,5 +322,19 @@ mod tests {
         let flat = |u: &[f64]| if u[0] == 0.3 { 0.0 } else { 1.0 };
         let r = nelder_mead(&flat, &[0.3], 0.2, 20);
         assert_eq!(r.best.cost, 0.0);
+    }
+
+    #[test]
+    fn a_point_asked_for_again_is_not_evaluated_again() {
+        // The start (first vertex of the simplex) and the best point at the end are asked for
+        // twice, and trial points beyond the cube's edge clamp onto the same point.
+        let calls = Cell::new(0);
+        let f = |u: &[f64]| {
+            calls.set(calls.get() + 1);
+            (u[0] - 3.0).powi(2) + (u[1] - 0.5).powi(2)
+        };
+        let r = nelder_mead(&f, &[0.5, 0.2], 0.2, 60);
+        assert!((r.best.u[0] - 1.0).abs() < 1e-6, "{r:?}");
+        assert!(calls.get() + 2 <= r.evals, "{} of {}", calls.get(), r.evals);
     }
 }

@@ -17,6 +17,7 @@
 //! beyond [`ModelSpec::load`]; stepping never allocates. [`composed`] writes any model as
 //! pin-cart II plus named effects ([`composed::Effect`]), the valve diagnosis grows.
 
+mod chain;
 mod checks;
 pub mod composed;
 mod delay;
@@ -40,6 +41,7 @@ pub use pincart::{crossing_poly, PinCart1Params, PinCart2Params, PinReach};
 pub use stiction::StictionParams;
 
 use crate::toml_file::{self, TomlError};
+use chain::{chain_step, physical_step, run_chain, PassThrough};
 use effects::EffectState;
 use fopdt::Fopdt;
 use physical::Physical;
@@ -431,32 +433,38 @@ impl Valve {
     }
 
     /// Advances one sample with wanted opening `op` (%) and returns the valve position V_P (%).
-    // Always inlined: fits call it once per simulated sample, and inside their loops the
-    // compiler can keep the valve's state in registers.
+    // Always inlined: loops that step one sample at a time (the emulator, a compensator) keep
+    // the valve's state close; a loop over a slice known in advance is [`Valve::run`].
     #[inline(always)]
     pub fn step(&mut self, op: f64) -> f64 {
-        let u = self.effects.input(self.delay.push(op));
-        let v = match &mut self.core {
-            Core::PassThrough => u,
-            Core::Fopdt(c) => c.step(u),
-            Core::Stiction(c) => c.step(u),
-            Core::PinCart(c) => c.step(u),
-            // Its stops act on the stem; its sensor reading is reported as it is.
-            Core::Physical(c) => return c.step(u),
-        };
-        let (lo, hi) = (self.spec.travel.min_pct, self.spec.travel.max_pct);
-        if v >= lo && v <= hi {
-            return self.effects.output(v);
-        }
-        let clamped = v.clamp(lo, hi);
+        let travel = self.spec.travel;
+        let (delay, effects) = (&mut self.delay, &mut self.effects);
         match &mut self.core {
-            Core::PassThrough => {}
-            Core::Fopdt(c) => c.set_position(clamped),
-            Core::Stiction(c) => c.set_position(clamped),
-            Core::PinCart(c) => c.set_position(clamped),
-            Core::Physical(_) => {}
+            Core::PassThrough => chain_step(delay, effects, &mut PassThrough, travel, op),
+            Core::Fopdt(c) => chain_step(delay, effects, c, travel, op),
+            Core::Stiction(c) => chain_step(delay, effects, c, travel, op),
+            Core::PinCart(c) => chain_step(delay, effects, c, travel, op),
+            Core::Physical(c) => physical_step(delay, effects, c, op),
         }
-        self.effects.output(clamped)
+    }
+
+    /// Steps the valve once per sample of `op`, in order, handing each V_P to `each`: the
+    /// same as calling [`Valve::step`] on every sample, with the choice of core made once for
+    /// the whole slice, so that the loop keeps the core's state in registers (fits spend
+    /// nearly all their time here).
+    #[inline]
+    pub fn run(&mut self, op: &[f64], mut each: impl FnMut(f64)) {
+        let travel = self.spec.travel;
+        let (delay, effects) = (&mut self.delay, &mut self.effects);
+        match &mut self.core {
+            Core::PassThrough => run_chain(delay, effects, &mut PassThrough, travel, op, each),
+            Core::Fopdt(c) => run_chain(delay, effects, c, travel, op, each),
+            Core::Stiction(c) => run_chain(delay, effects, c, travel, op, each),
+            Core::PinCart(c) => run_chain(delay, effects, c, travel, op, each),
+            Core::Physical(c) => op
+                .iter()
+                .for_each(|&u| each(physical_step(delay, effects, c, u))),
+        }
     }
 
     /// Widens a pin-cart model's cart, its friction band, by `extra_pct` % of travel over the
@@ -499,9 +507,13 @@ impl Valve {
     /// `out` must be as long as `op`; extra entries are left alone.
     pub fn simulate_into(&mut self, op: &[f64], vp0: f64, out: &mut [f64]) {
         self.reset(op.first().copied().unwrap_or(vp0), vp0);
-        for (o, &u) in out.iter_mut().zip(op) {
-            *o = self.step(u);
-        }
+        let n = op.len().min(out.len());
+        let mut slots = out.iter_mut();
+        self.run(&op[..n], |v| {
+            if let Some(o) = slots.next() {
+                *o = v;
+            }
+        });
     }
 
     /// Like [`Valve::simulate_into`] but returns a new vector.

@@ -117,6 +117,12 @@ pub(crate) struct PinCart {
     y: f64,
     /// Cart position (valve position).
     v: f64,
+    /// The opening-dependent slowdown at the cart position `slowed_at` (NaN before the first):
+    /// `1 + r V / 100` and its inverse. A cart at rest keeps them, so the two divisions are
+    /// made only when it has moved.
+    slowed_at: f64,
+    grow: f64,
+    slow: f64,
 }
 
 impl PinCart {
@@ -172,6 +178,9 @@ impl PinCart {
             dt,
             y: 0.0,
             v: 0.0,
+            slowed_at: f64::NAN,
+            grow: 1.0,
+            slow: 1.0,
         }
     }
 
@@ -183,10 +192,11 @@ impl PinCart {
         self.stuck = false;
     }
 
-    #[inline]
+    // Always inlined: [`super::Valve::run`] steps it in a loop that keeps its state in registers.
+    #[inline(always)]
     pub(crate) fn step(&mut self, u: f64) -> f64 {
         let e = u - self.v; // eq. (1)
-        let dy = match &self.law {
+        let dy = match self.law {
             // eq. (2); one sample never carries the pin past the target, which keeps slow
             // sampling (P_k dt > 1, e.g. 1 Hz data) stable and changes nothing at 100 Hz.
             PinLaw::Proportional { k } => (k * self.dt).min(1.0) * e,
@@ -197,10 +207,10 @@ impl PinCart {
                 band,
                 hold,
             } => {
-                if e.abs() <= *hold {
+                if e.abs() <= hold {
                     0.0
                 } else {
-                    self.pin_step_two(p, *close_max, *slowdown, *band, e)
+                    self.pin_step_two(&p, close_max, slowdown, band, e)
                 }
             }
         };
@@ -226,9 +236,9 @@ impl PinCart {
 
     /// Pin movement of pin-cart II for one sample, eqs. (4)-(7); with a friction `band`, the
     /// crossing of the cart at the pushing speed too.
-    #[inline]
+    #[inline(always)]
     fn pin_step_two(
-        &self,
+        &mut self,
         p: &PinCart2Params,
         close_max: f64,
         slowdown: f64,
@@ -249,8 +259,13 @@ impl PinCart {
         // crosses the cart.
         let unload = -along(rel) - self.half;
         if pushing || unload > 1e-12 || band {
-            let speed = self.push_speed(p, close_max, slowdown, e);
-            let step = (speed * self.dt).min(e.abs()); // eq. (5)
+            let slow = if slowdown == 0.0 {
+                1.0
+            } else {
+                self.slowed().1
+            };
+            let speed = push_speed(p, close_max, slowdown, slow, e);
+            let step = at_most(speed * self.dt, e.abs()); // eq. (5)
             along(if pushing {
                 step
             } else if unload > 1e-12 {
@@ -263,7 +278,7 @@ impl PinCart {
             // eq. (7): cross the cart in `crossing_time_s` (at least one sample), never beyond
             // its far side. A crossing time of 0 means no apparent backlash. The slower chamber
             // of an opening-dependent slowdown also takes longer to cross the friction band.
-            let t = (p.crossing_time_s(self.v) * (1.0 + slowdown * self.v / 100.0)).max(self.dt);
+            let t = (p.crossing_time_s(self.v) * self.slowed().0).max(self.dt);
             along((2.0 * self.half0 * self.dt / t).min(self.half - along(rel)))
         }
     }
@@ -281,24 +296,20 @@ impl PinCart {
         self.half = half;
     }
 
-    /// Pin-cart II's pushing speed for the error `e` (non-zero) at the cart's opening, %/s:
-    /// eq. (4) saturated by eq. (5). A chamber that grows with opening fills and vents more
-    /// slowly: the response and the stroke speed fall alike (dy_min, the positioner's creep,
-    /// does not).
-    #[inline]
-    fn push_speed(&self, p: &PinCart2Params, close_max: f64, slowdown: f64, e: f64) -> f64 {
-        let max = if e > 0.0 {
-            p.dy_max_pct_per_s
-        } else {
-            close_max
-        };
-        let (gain, max) = if slowdown == 0.0 {
-            (p.p_gain_per_s, max)
-        } else {
-            let slow = 1.0 / (1.0 + slowdown * self.v / 100.0);
-            (slow * p.p_gain_per_s, slow * max)
-        };
-        (gain * e.abs()).max(p.dy_min_pct_per_s).min(max) // eq. (4)-(5)
+    /// `1 + r V / 100` at the cart's opening and its inverse (see [`slowdown_at`]), kept while
+    /// the cart stays where they were computed.
+    #[inline(always)]
+    fn slowed(&mut self) -> (f64, f64) {
+        // A NaN position never equals itself: computed afresh, as before the first.
+        if self.v != self.slowed_at {
+            let slowdown = match self.law {
+                PinLaw::StateDependent { slowdown, .. } => slowdown,
+                PinLaw::Proportional { .. } => 0.0,
+            };
+            (self.grow, self.slow) = slowdown_at(slowdown, self.v);
+            self.slowed_at = self.v;
+        }
+        (self.grow, self.slow)
     }
 
     /// Where the cart is and how far the pin still has to go before it pushes the cart
@@ -323,14 +334,20 @@ impl PinCart {
                 slowdown,
                 band: true,
                 ..
-            } if e != 0.0 => Some(self.push_speed(p, *close_max, *slowdown, e)),
+            } if e != 0.0 => Some(push_speed(
+                p,
+                *close_max,
+                *slowdown,
+                slowdown_at(*slowdown, self.v).1,
+                e,
+            )),
             _ => None,
         }
     }
 
     /// Overrides the cart position after the travel range clamped it; keeps the pin in the cart,
     /// or wound up to `windup` beyond it on the side of the stop.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn set_position(&mut self, v: f64) {
         self.v = v;
         let reach = self.half + self.breakaway;
@@ -346,6 +363,58 @@ impl PinCart {
     #[cfg(test)]
     pub(crate) fn pin_offset(&self) -> f64 {
         self.y - self.v
+    }
+}
+
+/// The opening-dependent slowdown `r` at opening `v`: how many times slower than closed the
+/// chamber makes the valve there, `1 + r V / 100`, and its inverse. Never inlined: inlined
+/// into [`PinCart::slowed`], the compiler makes the two divisions on every sample and selects,
+/// and the simulation waits for them even while the cart rests.
+#[inline(never)]
+fn slowdown_at(slowdown: f64, v: f64) -> (f64, f64) {
+    let grow = 1.0 + slowdown * v / 100.0;
+    (grow, 1.0 / grow)
+}
+
+/// Pin-cart II's pushing speed for the error `e` (non-zero) at an opening where the slowdown
+/// `slowdown` gives the factor `slow` (from [`slowdown_at`]), %/s: eq. (4) saturated by eq.
+/// (5). A chamber that grows with opening fills and vents more slowly: the response and the
+/// stroke speed fall alike (dy_min, the positioner's creep, does not).
+#[inline(always)]
+fn push_speed(p: &PinCart2Params, close_max: f64, slowdown: f64, slow: f64, e: f64) -> f64 {
+    let max = if e > 0.0 {
+        p.dy_max_pct_per_s
+    } else {
+        close_max
+    };
+    let (gain, max) = if slowdown == 0.0 {
+        (p.p_gain_per_s, max)
+    } else {
+        (slow * p.p_gain_per_s, slow * max)
+    };
+    let speed = gain * e.abs();
+    // eq. (4)-(5): at least dy_min (also for an error that is not a number), at most `max`.
+    let speed = if speed > p.dy_min_pct_per_s {
+        speed
+    } else {
+        p.dy_min_pct_per_s
+    };
+    if speed < max {
+        speed
+    } else {
+        max
+    }
+}
+
+/// `x.min(limit)` for a limit that may be NaN (then `x`) and an `x` that is not: as `f64::min`
+/// there, written as one comparison. `f64::min` also checks `x` for NaN, which lengthens the
+/// serial chain of a simulation by a few cycles a sample.
+#[inline(always)]
+fn at_most(x: f64, limit: f64) -> f64 {
+    if limit < x {
+        limit
+    } else {
+        x
     }
 }
 
