@@ -27,6 +27,7 @@ mod diagnose_blind_score;
 mod diagnose_cases;
 mod diagnose_concealed;
 mod diagnose_physical;
+mod diagnose_smooth_slips;
 mod fleet_cli;
 mod identify_cli;
 mod identify_paper;
