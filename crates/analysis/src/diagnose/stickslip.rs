@@ -505,17 +505,10 @@ pub(crate) fn fit(
         stats::quantile(&mut all, 0.5)
     };
     let gain = composed::get(current, Knob::Gain);
-    let with = |knobs: &[(Knob, f64)]| {
-        let mut spec = current.clone();
-        for &(k, v) in knobs {
-            composed::set(&mut spec, k, v);
-        }
-        spec
-    };
     let (spec, knobs, stick_distance, _) = grid(size, gain)
         .par_iter()
         .map(|knobs| {
-            let spec = with(knobs);
+            let spec = with_knobs(current, knobs);
             let (_, d, sse) = run(&spec);
             let free: Vec<Knob> = knobs.iter().map(|&(k, _)| k).collect();
             (spec, free, fit_on(&d), sse)
@@ -523,12 +516,12 @@ pub(crate) fn fit(
         .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))?;
     let smooth_distance = smooth_grid(size, gain)
         .par_iter()
-        .map(|knobs| fit_on(&run(&with(knobs)).1))
+        .map(|knobs| fit_on(&run(&with_knobs(current, knobs)).1))
         .reduce(|| f64::INFINITY, f64::min);
     tracing::debug!(
         stick_distance,
         smooth_distance,
-        "slips of stick-slip and of smooth friction"
+        "stick-slip against smooth friction"
     );
     if smooth_distance <= stick_distance {
         return None;
@@ -545,9 +538,8 @@ pub(crate) fn fit(
         || (missed.0.min(missed.1) >= per_min
             && size >= tuning.worth.slip_pct.max(1.5 * sigma)
             && held.distance_after < held.distance_before);
-    let sum = |d: &[f64]| d.iter().sum::<f64>();
     let candidate = Candidate {
-        distance_all: (sum(&before), sum(&after)),
+        distance_all: (before.iter().sum(), after.iter().sum()),
         held,
         by_count,
         spec,
@@ -563,6 +555,15 @@ pub(crate) fn fit(
         "stick-slip by slip statistics"
     );
     Some(candidate)
+}
+
+/// `current` with the `knobs` set.
+fn with_knobs(current: &ModelSpec, knobs: &[(Knob, f64)]) -> ModelSpec {
+    let mut spec = current.clone();
+    for &(k, v) in knobs {
+        composed::set(&mut spec, k, v);
+    }
+    spec
 }
 
 /// The recording's sensor, for simulations: seeded Gaussian noise of the noise floor, then the
