@@ -31,38 +31,23 @@ impl ClampedCore for PassThrough {
     fn set_position(&mut self, _: f64) {}
 }
 
-impl ClampedCore for Fopdt {
-    #[inline(always)]
-    fn step(&mut self, u: f64) -> f64 {
-        Fopdt::step(self, u)
-    }
-    #[inline(always)]
-    fn set_position(&mut self, v: f64) {
-        Fopdt::set_position(self, v)
-    }
+/// The cores that step and set themselves: each trait method is the core's own.
+macro_rules! own_core {
+    ($($core:ty),*) => {$(
+        impl ClampedCore for $core {
+            #[inline(always)]
+            fn step(&mut self, u: f64) -> f64 {
+                <$core>::step(self, u)
+            }
+            #[inline(always)]
+            fn set_position(&mut self, v: f64) {
+                <$core>::set_position(self, v)
+            }
+        }
+    )*};
 }
 
-impl ClampedCore for Stiction {
-    #[inline(always)]
-    fn step(&mut self, u: f64) -> f64 {
-        Stiction::step(self, u)
-    }
-    #[inline(always)]
-    fn set_position(&mut self, v: f64) {
-        Stiction::set_position(self, v)
-    }
-}
-
-impl ClampedCore for PinCart {
-    #[inline(always)]
-    fn step(&mut self, u: f64) -> f64 {
-        PinCart::step(self, u)
-    }
-    #[inline(always)]
-    fn set_position(&mut self, v: f64) {
-        PinCart::set_position(self, v)
-    }
-}
+own_core!(Fopdt, Stiction, PinCart);
 
 /// One sample of the chain: dead time, input effects, `core`, travel clamp, sensor.
 #[inline(always)]
