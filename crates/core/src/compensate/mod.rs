@@ -277,11 +277,7 @@ impl Compensator {
         Ok(Compensator {
             parts: Parts {
                 backlash: cfg.backlash && identified.band_pct > 0.0,
-                // A step smaller than the smallest move compensated is below the resolution
-                // and noise the compensator ignores everywhere else: a deadband that small (a
-                // trace a fit puts in a model) is as likely not there, and stepping for it
-                // would hold a valve without one off its target by the step.
-                deadband: cfg.deadband && identified.deadband_pct / 2.0 >= cfg.min_move_pct,
+                deadband: cfg.deadband && steps_for(identified.deadband_pct, cfg.min_move_pct),
                 calibration: cfg.calibration
                     && (identified.calibration_gain != 1.0
                         || identified.calibration_offset_pct != 0.0),
@@ -350,7 +346,7 @@ impl Compensator {
         } else {
             parts.join(", ")
         };
-        if id.deadband_pct > 0.0 && id.deadband_pct / 2.0 < self.parts.min_move {
+        if id.deadband_pct > 0.0 && !steps_for(id.deadband_pct, self.parts.min_move) {
             what += &format!(
                 "; its deadband of {:.3} % is left alone (half of it is less than the smallest move compensated, {:.2} %)",
                 id.deadband_pct, self.parts.min_move
@@ -504,6 +500,14 @@ impl Compensator {
         };
         dir * plan.kick()
     }
+}
+
+/// Whether a deadband of `deadband_pct` is stepped for, given the smallest move compensated
+/// `min_move_pct`: a step smaller than that is below the resolution and noise the compensator
+/// ignores everywhere else; a deadband that small (a trace a fit puts in a model) is as likely
+/// not there, and stepping for it would hold a valve without one off its target by the step.
+fn steps_for(deadband_pct: f64, min_move_pct: f64) -> bool {
+    deadband_pct / 2.0 >= min_move_pct
 }
 
 /// `model` with a stroke speed its log did not determine taken out: no limit but the
