@@ -19,6 +19,9 @@ use vb_core::model::ModelSpec;
 const SLOWEST_PCT_PER_S: f64 = 0.05;
 /// Longest dead time a diagnosis fits, s.
 pub(super) const MAX_DEAD_TIME_S: f64 = 3.0;
+/// Span of O_P (5th to 95th percentile) below which a calibration is fitted as an offset
+/// alone, % of travel: the sensor's gain shows only across a fifth of the travel or more.
+const MIN_GAIN_SPAN_PCT: f64 = 20.0;
 /// Largest wind-up past a travel stop, % of travel: a drive can wind from a stop low in the
 /// travel all the way to its supply.
 pub(super) const MAX_WINDUP_PCT: f64 = 100.0;
@@ -206,10 +209,18 @@ pub(crate) fn variants(
         // The sensor lattice is named from its evidence, not refitted (see `rounds`).
         Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
             let (g, o) = steady_gain_offset(facts);
-            vec![vec![
-                f(Knob::CalGain, 0.7, 1.3, g),
-                f(Knob::CalOffset, -15.0, 15.0, o),
-            ]]
+            let (lo, hi) = facts.op_span_pct;
+            if hi - lo < MIN_GAIN_SPAN_PCT {
+                // Held near one opening, a gain trades against the offset: only the reading
+                // error there is seen, and a gain fitted to it would be applied far beyond.
+                let at_mid = (g - 1.0) * (lo + hi) / 2.0 + o;
+                vec![vec![f(Knob::CalOffset, -15.0, 15.0, at_mid)]]
+            } else {
+                vec![vec![
+                    f(Knob::CalGain, 0.7, 1.3, g),
+                    f(Knob::CalOffset, -15.0, 15.0, o),
+                ]]
+            }
         }
         _ => vec![],
     }
@@ -300,4 +311,37 @@ fn steady_gain_offset(facts: &Facts) -> (f64, f64) {
         .sum::<f64>()
         / sxx;
     (g.clamp(0.7, 1.3), my - g.clamp(0.7, 1.3) * mx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vb_core::model::{bundled, ModelKind};
+    use vb_core::testkit::{steps, Columns};
+
+    /// The knobs the calibration candidate frees on O_P stepping through `levels`, read 0.5 %
+    /// high, and the start of the offset.
+    fn calibration_knobs(levels: &[f64]) -> (Vec<Knob>, f64) {
+        let dt = 0.01;
+        let op = steps(20_000, 500, levels);
+        let vp: Vec<f64> = op.iter().map(|x| x + 0.5).collect();
+        let rec = Columns::new(op, vp, dt);
+        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
+        let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        let variants = variants(Effect::Calibration, &spec, &facts, 1.0);
+        assert_eq!(variants.len(), 1);
+        let offset = (variants[0].iter())
+            .find(|f| f.knob == Knob::CalOffset)
+            .map_or(f64::NAN, |f| f.init);
+        (variants[0].iter().map(|f| f.knob).collect(), offset)
+    }
+
+    #[test]
+    fn a_calibration_seen_near_one_opening_is_an_offset_alone() {
+        let (knobs, offset) = calibration_knobs(&[48.0, 51.0, 49.5, 52.0, 47.0]);
+        assert_eq!(knobs, [Knob::CalOffset]);
+        assert!((offset - 0.5).abs() < 1e-9, "{offset}");
+        let (knobs, _) = calibration_knobs(&[20.0, 70.0, 45.0, 85.0, 30.0]);
+        assert_eq!(knobs, [Knob::CalGain, Knob::CalOffset]);
+    }
 }
