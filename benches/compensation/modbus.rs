@@ -6,8 +6,9 @@
 //! (per-mille set-points and positions, an 8 ms deadline, one reply in 20 late by 3 ms, one
 //! request in 500 unanswered), in real time.
 //!
-//! Each valve first logs its own small steps ([`LOG_SEED`]; 0.2-2 %, held 2-10 s, around
-//! 50 %), and `valve-bridge diagnose` writes its model from that log. Then, all at once (one
+//! Each valve first logs its own small steps ([`LOG_SEED`]; 0.2-2 %, held 2-10 s, staying
+//! around 50 % and reversing often: [`SmallSteps::staying`]), and `valve-bridge diagnose`
+//! writes its model from that log. Then, all at once (one
 //! device serving a unit per run, one daemon driving them all, the same O_P to each):
 //!
 //! - other small steps (seed 1), each valve without compensation, with it (default guard) and
@@ -182,9 +183,9 @@ fn binaries() -> Result<(PathBuf, PathBuf), Error> {
     Ok((vb, sim))
 }
 
-/// Small steps around 50 % for `secs`, `seed`.
+/// Small steps staying around 50 % for `secs`, `seed`.
 fn small_steps(secs: f64, seed: u64) -> Vec<f64> {
-    let mut s = SmallSteps::new(50.0, seed);
+    let mut s = SmallSteps::staying(50.0, seed);
     (0..(secs / DT).round() as usize)
         .map(|k| s.op_at(k as f64 * DT))
         .collect()

@@ -17,6 +17,8 @@ use vb_core::signal::{RandomSteps, RandomStepsParams};
 pub struct SmallSteps {
     rng: ChaCha8Rng,
     around: f64,
+    /// How far the level it heads for wanders from `around`, %.
+    wander: f64,
     level: f64,
     target: f64,
     next_step_s: f64,
@@ -26,10 +28,21 @@ pub struct SmallSteps {
 impl SmallSteps {
     /// Small steps starting at `around_pct` (taken within 15-85 %; the level stays in 5-95 %).
     pub fn new(around_pct: f64, seed: u64) -> Self {
+        Self::wandering(around_pct, 30.0, seed)
+    }
+
+    /// Small steps that stay around `around_pct` (the level they head for does not wander):
+    /// many reversals at one opening, as a log for sizing a valve's lost motion there needs.
+    pub fn staying(around_pct: f64, seed: u64) -> Self {
+        Self::wandering(around_pct, 0.0, seed)
+    }
+
+    fn wandering(around_pct: f64, wander: f64, seed: u64) -> Self {
         let around = around_pct.clamp(15.0, 85.0);
         SmallSteps {
             rng: ChaCha8Rng::seed_from_u64(seed),
             around,
+            wander,
             level: around,
             target: around,
             next_step_s: 0.0,
@@ -40,7 +53,8 @@ impl SmallSteps {
     /// The O_P at `t_s`.
     pub fn op_at(&mut self, t_s: f64) -> f64 {
         while t_s >= self.next_target_s {
-            self.target = (self.around + self.rng.gen_range(-30.0..=30.0)).clamp(10.0, 90.0);
+            self.target =
+                (self.around + self.rng.gen_range(-self.wander..=self.wander)).clamp(10.0, 90.0);
             self.next_target_s += self.rng.gen_range(60.0..=180.0);
         }
         while t_s >= self.next_step_s {
@@ -205,6 +219,22 @@ mod tests {
             steps.len()
         );
         assert!(op.iter().all(|v| (15.0..=65.0).contains(v)));
+    }
+
+    #[test]
+    fn small_steps_that_stay_reverse_around_their_level() {
+        let op = series(&mut OpenLoop::Small(SmallSteps::staying(50.0, 1000)), 200.0);
+        let steps: Vec<f64> = (op.windows(2).map(|w| w[1] - w[0]))
+            .filter(|d| *d != 0.0)
+            .collect();
+        let reversals = steps.windows(2).filter(|w| w[0] * w[1] < 0.0).count();
+        // Within a step or two of the level, and a reversal every other step or so.
+        assert!(op.iter().all(|v| (46.0..=54.0).contains(v)));
+        assert!(
+            reversals * 3 >= steps.len(),
+            "{reversals} of {}",
+            steps.len()
+        );
     }
 
     #[test]
