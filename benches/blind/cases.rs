@@ -215,6 +215,8 @@ pub(crate) struct Case {
     pub plan: Plan,
     pub physics: Physics,
     pub excitation: Excitation,
+    /// Seed of the excitation's O_P (and of a closed loop's controller noise).
+    pub op_seed: u64,
     pub noise_pct: f64,
     pub lattice_pct: f64,
     /// Each planned effect with the size it was drawn at (its family's units).

@@ -71,8 +71,11 @@ pub(crate) const HEALTHY_PULSE_BAND_PCT: (f64, f64) = (0.03, 0.12);
 pub(crate) const HEALTHY_STROKE_PCT_PER_S: (f64, f64) = (45.0, 80.0);
 /// Volume growth over the stroke.
 pub(crate) const HEALTHY_GROWTH: (f64, f64) = (0.03, 0.15);
-/// LuGre Coulomb level, % of travel, and the static level's excess over it.
-pub(crate) const HEALTHY_COULOMB_PCT: (f64, f64) = (0.05, 0.4);
+/// LuGre Coulomb level, % of travel, and the static level's excess over it. A reversal has to
+/// cross twice the Coulomb level, so the stem's friction band is 0.04-0.2 %: like the physical
+/// family's healthy band (at most 0.15 %), below the 0.3 % `diagnose` calls worth maintenance
+/// and well below the 0.5-0.8 % bands that are faults.
+pub(crate) const HEALTHY_COULOMB_PCT: (f64, f64) = (0.02, 0.1);
 pub(crate) const HEALTHY_STATIC_EXCESS_PCT: (f64, f64) = (0.0, 0.02);
 /// Linkage play, %.
 pub(crate) const HEALTHY_PLAY_PCT: (f64, f64) = (0.0, 0.1);
@@ -130,6 +133,7 @@ pub(crate) fn draw_case(
         plan: plan.clone(),
         physics: Physics::Digital(params),
         excitation,
+        op_seed,
         noise_pct: noise,
         lattice_pct: lattice,
         sizes,

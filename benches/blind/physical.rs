@@ -64,6 +64,7 @@ pub(crate) fn draw_case(
         plan: plan.clone(),
         physics: Physics::Physical(spec),
         excitation,
+        op_seed,
         noise_pct: noise,
         lattice_pct: lattice,
         sizes,
