@@ -10,15 +10,15 @@
 //! | effect | physics built in | labelled when | truth |
 //! |---|---|---|---|
 //! | `dead_time` | set-point transport delay | delay + half a sample + line delay >= `DEAD_TIME_S` | that sum, s (the mean wait from O_P to the first flow) |
-//! | `backlash` | play of the feedback linkage | play >= `BACKLASH_PCT` | the play (V_P's lost motion on a reversal), % |
+//! | `backlash` | play of the linkage to the potentiometer, inside the positioner's loop | play >= `BACKLASH_PCT` | the play (the stem's lost motion on a reversal beyond its friction), % |
 //! | `stiction` | LuGre static level above Coulomb | the noise-free reading slips by >= `STICTION_PCT` within 0.1 s after 0.2 s still, where the same stem with static = Coulomb moves less than half as much, >= `STICK_SLIPS` times | median slip, % |
 //! | `slew_rate` | both orifices small | both stroke speeds at half travel <= `SLEW_PCT_PER_S`, and the valve with its healthy orifices moves 1.5 times faster than the limit at that opening for 3 s | geometric mean of the two speeds at half travel, %/s |
 //! | `asymmetry` | one orifice smaller | faster / slower speed at half travel >= `ASYMMETRY_RATIO`, exercised on the slow side as above | that ratio |
 //! | `min_speed` | minimum pulse raised | the error below which it takes over, `min_pulse / (duty_per_pct * sample)`, >= `MIN_SPEED_BAND_PCT`, and the noise-free reading with it stands 3 noise sigmas (>= 0.1 %) from the same valve's without it for 3 s, while the valve moves 1.5 times faster than the floor for 3 s | the floor (one minimum pulse a sample at half travel), %/s |
 //! | `deadband` | tolerance band | band width (twice the tolerance) >= `DEADBAND_PCT` | the width, % |
-//! | `saturation` | stem stop below 100 % or above 0 % | O_P passes it by >= 1 % for >= 10 s | the stop as V_P reads it (through the linkage's play and lever), % |
+//! | `saturation` | stem stop below 100 % or above 0 % | O_P passes it by >= 1 % for >= 10 s | the stop as V_P reads it (the arm half the play short of the stem, through the transmitter), % |
 //! | `quantization` | the feedback ADC's lattice | lattice >= `QUANTIZATION_PCT` and >= the noise | the lattice, % |
-//! | `calibration` | lever error of the linkage | `|(a - 1) x + b| >= CALIBRATION_PCT` at the 5th or 95th percentile of O_P | that error, % |
+//! | `calibration` | the feedback transmitter's error | `|(a - 1) x + b| >= CALIBRATION_PCT` at the 5th or 95th percentile of O_P | that error, % |
 //!
 //! The chamber's volume growth is kept healthy (no `state_dependent_delay`): the family is
 //! never drawn with one, and a healthy valve's stroke at 95 % is at most 1.4 times slower than

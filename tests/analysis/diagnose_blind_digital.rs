@@ -43,6 +43,20 @@ fn stem(case: &Case) -> Vec<f64> {
         .simulate(&case.rec.op, vp0, true)
 }
 
+/// The case's noise-free, continuous reading (the potentiometer's arm, beyond the linkage's
+/// play), re-run on its O_P.
+fn reading(case: &Case) -> Vec<f64> {
+    let p = DigitalParams {
+        noise_pct: 0.0,
+        lattice_pct: 0.0,
+        ..params(case)
+    };
+    let vp0 = case.rec.vp[0];
+    DigitalValve::new(&p, DT)
+        .unwrap()
+        .simulate(&case.rec.op, vp0, false)
+}
+
 /// Jumps of `x`: moves of at least `size` within 0.1 s after 0.2 s still (within 0.01 %),
 /// O_P unchanged all the while.
 fn jumps(op: &[f64], x: &[f64], size: f64) -> usize {
@@ -74,7 +88,9 @@ fn a_healthy_valve_has_no_label_and_rests_without_jumps() {
         let errors = rest_errors(&case.rec.op, &x);
         assert!(errors.len() > 5, "{excitation}: {} holds", errors.len());
         assert!(
-            errors.iter().all(|e| e.abs() <= p.tolerance_pct + 0.02),
+            errors
+                .iter()
+                .all(|e| e.abs() <= p.tolerance_pct + p.play_pct / 2.0 + 0.02),
             "{excitation}: tolerance {}, {errors:?}",
             p.tolerance_pct
         );
@@ -93,7 +109,9 @@ fn a_tolerance_band_is_a_deadband_and_the_valve_rests_anywhere_inside_it() {
     assert_eq!(jumps(&case.rec.op, &x, 0.1), 0);
     let errors = rest_errors(&case.rec.op, &x);
     assert!(
-        errors.iter().all(|e| e.abs() <= p.tolerance_pct + 0.02),
+        errors
+            .iter()
+            .all(|e| e.abs() <= p.tolerance_pct + p.play_pct / 2.0 + 0.02),
         "tolerance {}, {errors:?}",
         p.tolerance_pct
     );
@@ -116,7 +134,9 @@ fn a_static_level_above_the_coulomb_one_is_stiction_and_the_valve_slips() {
     assert!(excess > digital::HEALTHY_STATIC_EXCESS_PCT.1, "{excess}");
     let slip = case.truth[0].value;
     assert!(slip >= cases::STICTION_PCT, "{slip}");
-    let x = stem(&case);
+    // The stem creeps on its bristles while it sticks, inside the linkage's play: the reading
+    // stands still, then jumps.
+    let x = reading(&case);
     assert!(
         jumps(&case.rec.op, &x, cases::STICTION_PCT) >= 3,
         "excess {excess}, slip {slip}"

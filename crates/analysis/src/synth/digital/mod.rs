@@ -5,7 +5,8 @@
 //! at), pressures in bar, times in s.
 //!
 //! - **Positioner** (sampled, pulse-width modulated, Bürkert-style). Every `sample_s` it reads
-//!   its travel sensor on the stem (noise and lattice of its own) and takes the set-point, O_P
+//!   its travel sensor, the potentiometer on the linkage below (noise and lattice of its own,
+//!   no lever error: the positioner is calibrated to it), and takes the set-point, O_P
 //!   `input_delay_s` ago. With `e` = set-point - reading: inside the tolerance band
 //!   `|e| <= tolerance_pct` nothing fires; outside it the PD law
 //!   `d = duty_per_pct * (e + derivative_s * de/dt)` (de/dt over the last sample) opens the fill
@@ -24,11 +25,14 @@
 //!   they stick; a constant `s1` would damp a sliding stem many times over). Static above
 //!   Coulomb makes the stem stick, then slip. Travel stops at `stop_low_pct` and
 //!   `stop_high_pct` stop it dead.
-//! - **Position feedback** (what the log reads as V_P): a potentiometer driven from the stem
-//!   through a linkage with play `play_pct` (the arm stays put until the stem takes the play
-//!   up: lost motion on every reversal) and a lever error (`gain`, `offset_pct`), read by an ADC
-//!   on a lattice `lattice_pct` with Gaussian noise `noise_pct`. The positioner does not use it,
-//!   so the four shape V_P and not the valve.
+//! - **Linkage and position feedback**: the potentiometer's arm is driven from the stem through
+//!   a linkage with play `play_pct` (the arm stays put until the stem takes the play up: lost
+//!   motion on every reversal). The positioner closes its loop on the arm, so the play is
+//!   inside the loop: the arm comes to rest at the set-point and the stem half the play beyond
+//!   it, and a reversal waits while the stem crosses the play unseen (as an independent
+//!   positioner's linkage does). The transmitted V_P is the arm through the transmitter's
+//!   error (`gain`, `offset_pct`), an ADC on a lattice `lattice_pct` and Gaussian noise
+//!   `noise_pct`; the positioner does not use those four, so they shape V_P and not the valve.
 //!
 //! Each sample is integrated in whole internal steps of at most `internal_step_s`: chamber
 //! explicitly, stem semi-implicitly (viscous and bristle damping implicit, the bristle
@@ -103,9 +107,10 @@ pub struct DigitalParams {
     /// Travel stops of the stem, %.
     pub stop_low_pct: f64,
     pub stop_high_pct: f64,
-    /// Play of the feedback linkage, % (lost motion on a reversal).
+    /// Play of the linkage from the stem to the potentiometer, % (the stem's lost motion on a
+    /// reversal, inside the positioner's loop).
     pub play_pct: f64,
-    /// Lever error of the feedback: V_P = gain * arm + offset.
+    /// The feedback transmitter's error: V_P = gain * arm + offset.
     pub gain: f64,
     pub offset_pct: f64,
     /// Noise (standard deviation) and lattice of the feedback's ADC, %.
@@ -118,16 +123,17 @@ pub struct DigitalParams {
 }
 
 impl Default for DigitalParams {
-    /// A valve in good order: a 10 ms positioner with a 0.08 % tolerance band, a 2 ms minimum
-    /// pulse, an actuator of 1.2-2.8 bar on a 6 bar supply stroking at about 60 %/s, light
-    /// friction, a calibrated feedback with 0.02 % noise.
+    /// A valve in good order: a 10 ms positioner of gain 20 /s with a 0.08 % tolerance band and
+    /// a 0.5 ms minimum pulse (0.03 % of travel), an actuator of 1.2-2.8 bar on a 6 bar supply
+    /// stroking at about 60 %/s, light friction (a 0.1 % band), 0.03 % of linkage play, a
+    /// calibrated feedback with 0.02 % noise.
     fn default() -> Self {
         let mut p = DigitalParams {
             sample_s: 0.01,
             tolerance_pct: 0.08,
-            duty_per_pct: 0.8,
+            duty_per_pct: 0.33,
             derivative_s: 0.01,
-            min_pulse_s: 0.002,
+            min_pulse_s: 0.0005,
             input_delay_s: 0.03,
             line_delay_s: 0.005,
             travel_noise_pct: 0.01,
@@ -140,8 +146,8 @@ impl Default for DigitalParams {
             critical_ratio: 0.45,
             volume_growth: 0.15,
             natural_freq_hz: 15.0,
-            coulomb_pct: 0.5,
-            static_pct: 0.52,
+            coulomb_pct: 0.05,
+            static_pct: 0.06,
             stribeck_pct_per_s: 1.0,
             viscous_s: 0.0,
             bristle_stiffness: 150.0,

@@ -129,7 +129,7 @@ impl DigitalValve {
     fn read(&mut self, t: f64) {
         let noise: f64 = StandardNormal.sample(&mut self.travel_rng);
         let reading = on_lattice(
-            self.x + self.p.travel_noise_pct * noise,
+            self.arm + self.p.travel_noise_pct * noise,
             self.p.travel_lattice_pct,
         );
         let ts = self.p.sample_s;
