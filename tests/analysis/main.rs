@@ -26,6 +26,7 @@ mod diagnose_blind_digital;
 mod diagnose_blind_score;
 mod diagnose_cases;
 mod diagnose_concealed;
+mod diagnose_linkage_play;
 mod diagnose_physical;
 mod diagnose_smooth_slips;
 mod fleet_cli;
