@@ -34,18 +34,10 @@ fn params(case: &Case) -> DigitalParams {
     }
 }
 
-/// The case's stem, re-run on its O_P with a noise-free feedback: (stem, set-point) per sample.
-fn stem(case: &Case) -> Vec<f64> {
-    let p = params(case);
-    let vp0 = case.rec.vp[0];
-    DigitalValve::new(&p, DT)
-        .unwrap()
-        .simulate(&case.rec.op, vp0, true)
-}
-
-/// The case's noise-free, continuous reading (the potentiometer's arm, beyond the linkage's
-/// play), re-run on its O_P.
-fn reading(case: &Case) -> Vec<f64> {
+/// The case re-run on its O_P with a noise-free, continuous feedback (which the positioner does
+/// not use, so the stem is the recording's): the stem's positions when `stem`, else the reading
+/// (the potentiometer's arm, beyond the linkage's play).
+fn replay(case: &Case, stem: bool) -> Vec<f64> {
     let p = DigitalParams {
         noise_pct: 0.0,
         lattice_pct: 0.0,
@@ -54,7 +46,7 @@ fn reading(case: &Case) -> Vec<f64> {
     let vp0 = case.rec.vp[0];
     DigitalValve::new(&p, DT)
         .unwrap()
-        .simulate(&case.rec.op, vp0, false)
+        .simulate(&case.rec.op, vp0, stem)
 }
 
 /// Jumps of `x`: moves of at least `size` within 0.1 s after 0.2 s still (within 0.01 %),
@@ -82,7 +74,7 @@ fn a_healthy_valve_has_no_label_and_rests_without_jumps() {
     for (seed, excitation) in [(11, "small_steps"), (12, "random_steps")] {
         let case = build(&plan(seed, Vec::new(), excitation), SHORT_S).unwrap();
         assert!(case.labels.is_empty(), "{excitation}: {:?}", case.labels);
-        let x = stem(&case);
+        let x = replay(&case, true);
         assert_eq!(jumps(&case.rec.op, &x, 0.1), 0, "{excitation}");
         let p = params(&case);
         let errors = rest_errors(&case.rec.op, &x);
@@ -105,7 +97,7 @@ fn a_tolerance_band_is_a_deadband_and_the_valve_rests_anywhere_inside_it() {
     assert!(2.0 * p.tolerance_pct >= cases::DEADBAND_PCT);
     assert_eq!(case.truth[0].name, "deadband_pct");
     assert_eq!(case.truth[0].value, 2.0 * p.tolerance_pct);
-    let x = stem(&case);
+    let x = replay(&case, true);
     assert_eq!(jumps(&case.rec.op, &x, 0.1), 0);
     let errors = rest_errors(&case.rec.op, &x);
     assert!(
@@ -136,7 +128,7 @@ fn a_static_level_above_the_coulomb_one_is_stiction_and_the_valve_slips() {
     assert!(slip >= cases::STICTION_PCT, "{slip}");
     // The stem creeps on its bristles while it sticks, inside the linkage's play: the reading
     // stands still, then jumps.
-    let x = reading(&case);
+    let x = replay(&case, false);
     assert!(
         jumps(&case.rec.op, &x, cases::STICTION_PCT) >= 3,
         "excess {excess}, slip {slip}"
