@@ -102,11 +102,12 @@ pub fn verdict(d: &Diagnosis) -> String {
             opening_pct_per_s,
             closing_pct_per_s,
             largest_step_pct,
+            asked_pct_per_s,
             worth_pct_per_s,
         } => Some(capitalised(&slow_strokes(
-            opening_pct_per_s,
-            closing_pct_per_s,
+            (opening_pct_per_s, closing_pct_per_s),
             largest_step_pct,
+            asked_pct_per_s,
             worth_pct_per_s,
         ))),
         _ => None,
@@ -140,11 +141,11 @@ pub fn verdict(d: &Diagnosis) -> String {
 }
 
 /// That the valve strokes slowly ([`Note::SlowStrokes`]), with the speeds measured each way
-/// it was asked to go fast, and what to check.
+/// it was asked to go fast (`speeds`: opening, closing), what asked it, and what to check.
 pub fn slow_strokes(
-    opening_pct_per_s: Option<f64>,
-    closing_pct_per_s: Option<f64>,
+    (opening_pct_per_s, closing_pct_per_s): (Option<f64>, Option<f64>),
     largest_step_pct: f64,
+    asked_pct_per_s: f64,
     worth_pct_per_s: f64,
 ) -> String {
     let each = |what: &str, v: Option<f64>| v.map(|v| format!("{} %/s {what}", num(v)));
@@ -155,13 +156,22 @@ pub fn slow_strokes(
     .into_iter()
     .flatten()
     .collect();
+    let asked = if asked_pct_per_s < worth_pct_per_s {
+        format!(
+            ", where a valve in good order would have moved at {} %/s on the same O_P",
+            num(asked_pct_per_s)
+        )
+    } else {
+        format!(
+            " on steps of up to {} %, where a valve in good order strokes at {} %/s or faster",
+            num(largest_step_pct),
+            num(worth_pct_per_s)
+        )
+    };
     format!(
-        "the valve strokes slowly: at most {} on steps of up to {} %, where a valve in good order \
-         strokes at {} %/s or faster; check the supply pressure, the pilot or booster and the air \
-         path (tubing, filters, exhaust), and the actuator size",
+        "the valve strokes slowly: at most {}{asked}; check the supply pressure, the pilot or \
+         booster and the air path (tubing, filters, exhaust), and the actuator size",
         speeds.join(" and "),
-        num(largest_step_pct),
-        num(worth_pct_per_s)
     )
 }
 

@@ -126,14 +126,17 @@ pub enum Note {
     },
     /// Too few reversals of O_P to test the effects that show at reversals.
     FewReversals { reversals: usize },
-    /// The valve strokes slower than a valve in good order (`worth_pct_per_s`) in a direction
-    /// a step of the recording (up to `largest_step_pct`) asked it to go fast in: its fastest
-    /// speed each way, measured on the recording (`None` where no step asked), whether or not
-    /// the model needed a speed limit.
+    /// The valve strokes slower than a valve in good order in a direction the recording asked
+    /// it to go fast in: its fastest speed each way, measured on the recording (`None` where
+    /// nothing asked), whether or not the model needed a speed limit. A step of O_P (up to
+    /// `largest_step_pct`) of 20 % or more asks for `worth_pct_per_s` (`asked_pct_per_s` is
+    /// then that too); otherwise `asked_pct_per_s` is the fastest a valve in good order moves
+    /// on the same O_P (a ramp asks for its own rate).
     SlowStrokes {
         opening_pct_per_s: Option<f64>,
         closing_pct_per_s: Option<f64>,
         largest_step_pct: f64,
+        asked_pct_per_s: f64,
         worth_pct_per_s: f64,
     },
     /// The reading's calibration, too small to name, was put in the model before the effects

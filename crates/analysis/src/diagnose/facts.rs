@@ -5,7 +5,7 @@
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
-use super::speeds::speeds;
+use super::speeds::{speeds, WINDOWS_S};
 use vb_core::metrics::stats::{self, median, quantile, Differences};
 use vb_core::metrics::steps::{self, StepOptions};
 use vb_core::recording::RecordingView;
@@ -79,7 +79,7 @@ pub struct Facts {
 /// `lattice_pct` (0 = none, see [`lattice`]).
 pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
-    let (open_speed, close_speed) = speeds(vp, dt, sigma, &[0.1, 0.3, 1.0, 3.0]);
+    let (open_speed, close_speed) = speeds(vp, dt, sigma, &WINDOWS_S);
     let (open_held, close_held) = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     let vp_span_pct = span(vp);

@@ -214,7 +214,8 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     let speed_found =
         (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
     let worth_speed = data.tuning.worth.stroke_speed_pct_per_s / data.tuning.materiality;
-    if let Some(slow) = slow::slow_strokes(data.facts, worth_speed).filter(|_| !speed_found) {
+    if let Some(slow) = slow::slow_strokes(data.facts, rec.op, worth_speed).filter(|_| !speed_found)
+    {
         notes.push(slow);
     }
     let sim_after = scorer.simulate(&final_spec);

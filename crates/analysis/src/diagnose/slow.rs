@@ -4,38 +4,92 @@
 //! A planner needs to hear that a valve is slow whether or not the model needed a new term
 //! for it: a baseline whose time constant stretches to the valve's slowness fits a
 //! rate-limited valve well enough that no speed limit is worth adding, and its figures then
-//! say nothing about the stroke. The recording says it directly when O_P asked for speed: a
-//! step of [`ASKED_STEP_PCT`] or more asks a valve in good order (positioner gain 2 /s or
-//! more) for at least the stroke speed worth maintenance, so V_P's fastest move in that
-//! direction ([`Facts::open_speed`], noise taken out) is the valve's stroke speed or less.
+//! say nothing about the stroke. The recording says it directly when O_P asked for speed, and
+//! V_P's fastest move in that direction ([`Facts::open_speed`], noise taken out) is the
+//! valve's stroke speed or less:
+//!
+//! - a step of [`ASKED_STEP_PCT`] or more asks a valve in good order (positioner gain 2 /s or
+//!   more) for at least the stroke speed worth maintenance: slower than that is slow;
+//! - any O_P (ramps, smaller steps) asks for what a valve in good order would do with it: a
+//!   first-order follower of O_P at [`GOOD_GAIN_PER_S`] and no speed limit, its fastest move
+//!   each way measured like V_P's. Where that is at least [`LEAST_ASKED_PCT_PER_S`], a valve
+//!   that moves less than [`SLOW_SHARE`] of it (or of the speed worth maintenance, if lower)
+//!   could not keep up: a ramp of 10 %/s followed at 1 %/s.
 //!
 //! Not here: the speed limits a model is given (`candidates`) or judged by (`judge`).
 
 use super::diagnosis::Note;
 use super::facts::Facts;
+use super::speeds::{speeds, WINDOWS_S};
 
 /// Smallest O_P step, %, that asks a valve in good order for the stroke speed worth
 /// maintenance: the slowest healthy positioner gain (2 /s) times this is 40 %/s.
 pub(super) const ASKED_STEP_PCT: f64 = 20.0;
+/// The slowest positioner gain of a valve in good order, 1/s.
+const GOOD_GAIN_PER_S: f64 = 2.0;
+/// Least speed, %/s, a valve in good order must reach on O_P for it to ask anything (a
+/// controller's noise moves such a valve by a fraction of this).
+const LEAST_ASKED_PCT_PER_S: f64 = 4.0;
+/// Share of what a valve in good order reaches below which a valve could not keep up.
+const SLOW_SHARE: f64 = 0.5;
 
-/// The note that the valve strokes slower than `worth_pct_per_s` in a direction some step of
-/// the recording asked it to go fast in, with the fastest speed measured each way (`None`
-/// where no step asked); `None` when no asked direction is slow.
-pub(super) fn slow_strokes(facts: &Facts, worth_pct_per_s: f64) -> Option<Note> {
+/// The fastest opening and closing moves of a valve in good order following `op` (sampled
+/// every `dt` s), %/s: a first-order follower at [`GOOD_GAIN_PER_S`], no speed limit.
+fn good_speeds(op: &[f64], dt: f64) -> (f64, f64) {
+    let k = (GOOD_GAIN_PER_S * dt).min(1.0);
+    let mut x = op.first().copied().unwrap_or(0.0);
+    let follower: Vec<f64> = (op.iter())
+        .map(|&u| {
+            x += k * (u - x);
+            x
+        })
+        .collect();
+    speeds(&follower, dt, 0.0, &WINDOWS_S)
+}
+
+/// The note that the valve strokes slower than a valve in good order in a direction the
+/// recording (`facts`, on `op`) asked it to go fast in, with the fastest speed measured each
+/// way (`None` where nothing asked); `None` when no asked direction is slow. `worth_pct_per_s`
+/// is the stroke speed worth maintenance.
+pub(super) fn slow_strokes(facts: &Facts, op: &[f64], worth_pct_per_s: f64) -> Option<Note> {
     let largest = |sign: f64| {
         (facts.steps.iter())
             .map(|s| sign * s.size_pct)
             .fold(0.0f64, f64::max)
     };
     let (up, down) = (largest(1.0), largest(-1.0));
-    let asked = |step: f64, speed: f64| (step >= ASKED_STEP_PCT).then_some(speed);
-    let opening = asked(up, facts.open_speed);
-    let closing = asked(down, facts.close_speed);
-    let slow = |s: Option<f64>| s.is_some_and(|v| v < worth_pct_per_s);
-    (slow(opening) || slow(closing)).then_some(Note::SlowStrokes {
-        opening_pct_per_s: opening,
-        closing_pct_per_s: closing,
+    let (good_up, good_down) = good_speeds(op, facts.dt);
+    // What O_P asked for that way (0: nothing), and the least speed that keeps up with it.
+    let asked = |step: f64, good: f64| {
+        if step >= ASKED_STEP_PCT {
+            (worth_pct_per_s, worth_pct_per_s)
+        } else if good >= LEAST_ASKED_PCT_PER_S {
+            let asked = good.min(worth_pct_per_s);
+            (asked, SLOW_SHARE * asked)
+        } else {
+            (0.0, 0.0)
+        }
+    };
+    let ((ask_up, need_up), (ask_down, need_down)) = (asked(up, good_up), asked(down, good_down));
+    let (open, close) = (facts.open_speed, facts.close_speed);
+    if open >= need_up && close >= need_down {
+        return None;
+    }
+    // A speed is told where a step asked for it, or where the valve fell short.
+    let told = |step: f64, speed: f64, need: f64| {
+        (step >= ASKED_STEP_PCT || speed < need).then_some(speed)
+    };
+    let (slow_up, slow_down) = (open < need_up, close < need_down);
+    let asked_pct_per_s = match (slow_up, slow_down) {
+        (true, false) => ask_up,
+        (false, true) => ask_down,
+        _ => ask_up.max(ask_down),
+    };
+    Some(Note::SlowStrokes {
+        opening_pct_per_s: told(up, open, need_up),
+        closing_pct_per_s: told(down, close, need_down),
         largest_step_pct: up.max(down),
+        asked_pct_per_s,
         worth_pct_per_s,
     })
 }
@@ -65,7 +119,7 @@ mod tests {
         let op = steps(12_000, 1_000, levels);
         let rec = Columns::new(op.clone(), follow(&op, gain, limit), DT);
         let f = facts::measure(&rec.view(), 0.1, 0.0);
-        slow_strokes(&f, 40.0)
+        slow_strokes(&f, &op, 40.0)
     }
 
     #[test]
@@ -75,6 +129,7 @@ mod tests {
             opening_pct_per_s: Some(open),
             closing_pct_per_s: Some(close),
             largest_step_pct,
+            asked_pct_per_s,
             worth_pct_per_s,
         }) = note(&[30.0, 60.0], 10.0, 8.0)
         else {
@@ -83,7 +138,7 @@ mod tests {
         assert!((open - 8.0).abs() < 0.8, "{open}");
         assert!((close - 8.0).abs() < 0.8, "{close}");
         assert!((largest_step_pct - 30.0).abs() < 1e-9);
-        assert_eq!(worth_pct_per_s, 40.0);
+        assert_eq!((asked_pct_per_s, worth_pct_per_s), (40.0, 40.0));
         // Opening by 25 % but closing in 5 % steps: only the opening speed is measured.
         let up = note(&[50.0, 75.0, 70.0, 65.0, 60.0, 55.0, 50.0], 10.0, 8.0);
         assert!(
@@ -105,5 +160,50 @@ mod tests {
         assert_eq!(note(&[30.0, 60.0], 10.0, 60.0), None);
         // 5 % steps never ask for 40 %/s: a slow valve is not told from a healthy one.
         assert_eq!(note(&[50.0, 55.0], 10.0, 8.0), None);
+    }
+
+    /// O_P ramping between 30 % and 60 % at `rate` %/s, held 5 s at each end, for 120 s.
+    fn ramps(rate: f64) -> Vec<f64> {
+        let ramp = (30.0 / rate / DT) as usize;
+        let hold = (5.0 / DT) as usize;
+        let cycle: Vec<f64> = (0..ramp)
+            .map(|k| 30.0 + rate * k as f64 * DT)
+            .chain(std::iter::repeat_n(60.0, hold))
+            .chain((0..ramp).map(|k| 60.0 - rate * k as f64 * DT))
+            .chain(std::iter::repeat_n(30.0, hold))
+            .collect();
+        cycle.iter().copied().cycle().take(12_000).collect()
+    }
+
+    fn ramp_note(rate: f64, limit: f64) -> Option<Note> {
+        let op = ramps(rate);
+        let rec = Columns::new(op.clone(), follow(&op, 10.0, limit), DT);
+        let f = facts::measure(&rec.view(), 0.1, 0.0);
+        slow_strokes(&f, &op, 40.0)
+    }
+
+    #[test]
+    fn a_valve_that_cannot_keep_up_with_a_ramp_is_slow() {
+        // Ramps of 10 %/s (no step at all) followed at 2 %/s: slow each way, where a valve in
+        // good order moves at about 10 %/s.
+        let Some(Note::SlowStrokes {
+            opening_pct_per_s: Some(open),
+            closing_pct_per_s: Some(close),
+            asked_pct_per_s,
+            ..
+        }) = ramp_note(10.0, 2.0)
+        else {
+            panic!("a valve stroking at 2 %/s on ramps of 10 %/s is slow");
+        };
+        assert!(
+            (open - 2.0).abs() < 0.6 && (close - 2.0).abs() < 0.6,
+            "{open} {close}"
+        );
+        assert!((9.0..=10.5).contains(&asked_pct_per_s), "{asked_pct_per_s}");
+        // The same ramps followed at up to 60 %/s, or at 6 %/s (more than half of 10 %/s).
+        assert_eq!(ramp_note(10.0, 60.0), None);
+        assert_eq!(ramp_note(10.0, 6.0), None);
+        // Ramps of 2 %/s ask too little to tell a 0.5 %/s valve from a healthy one.
+        assert_eq!(ramp_note(2.0, 0.5), None);
     }
 }

@@ -9,6 +9,9 @@ use vb_core::metrics::stats::quantile;
 use vb_core::model::composed::{self, Knob};
 use vb_core::model::{ModelKind, ModelSpec};
 
+/// The window lengths the fastest speeds of a recording are measured over, s.
+pub(super) const WINDOWS_S: [f64; 4] = [0.1, 0.3, 1.0, 3.0];
+
 /// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
 /// taken out: for a window of h samples, the speed is the mean of the h/2 differences of V_P
 /// over h samples that end in the window's second half (pairs with a reading missing left

@@ -334,11 +334,12 @@ pub fn note(n: &Note) -> String {
             opening_pct_per_s,
             closing_pct_per_s,
             largest_step_pct,
+            asked_pct_per_s,
             worth_pct_per_s,
         } => slow_strokes(
-            opening_pct_per_s,
-            closing_pct_per_s,
+            (opening_pct_per_s, closing_pct_per_s),
             largest_step_pct,
+            asked_pct_per_s,
             worth_pct_per_s,
         ),
         Note::FewReversals { reversals } => format!(
