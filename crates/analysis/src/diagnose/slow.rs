@@ -21,6 +21,7 @@
 use super::diagnosis::Note;
 use super::facts::Facts;
 use super::speeds::{speeds, WINDOWS_S};
+use vb_core::model::{bundled, FopdtParams, ModelKind, ModelSpec, Valve};
 
 /// Smallest O_P step, %, that asks a valve in good order for the stroke speed worth
 /// maintenance: the slowest healthy positioner gain (2 /s) times this is 40 %/s.
@@ -34,16 +35,20 @@ const LEAST_ASKED_PCT_PER_S: f64 = 4.0;
 const SLOW_SHARE: f64 = 0.5;
 
 /// The fastest opening and closing moves of a valve in good order following `op` (sampled
-/// every `dt` s), %/s: a first-order follower at [`GOOD_GAIN_PER_S`], no speed limit.
+/// every `dt` s), %/s: the project's first-order model at [`GOOD_GAIN_PER_S`] (a time
+/// constant of its inverse), no dead time, no speed limit.
 fn good_speeds(op: &[f64], dt: f64) -> (f64, f64) {
-    let k = (GOOD_GAIN_PER_S * dt).min(1.0);
-    let mut x = op.first().copied().unwrap_or(0.0);
-    let follower: Vec<f64> = (op.iter())
-        .map(|&u| {
-            x += k * (u - x);
-            x
-        })
-        .collect();
+    let spec = ModelSpec {
+        dead_time_s: 0.0,
+        fopdt: Some(FopdtParams {
+            time_constant_s: 1.0 / GOOD_GAIN_PER_S,
+        }),
+        ..bundled(ModelKind::Fopdt)
+    };
+    let Ok(mut valve) = Valve::new(&spec, dt) else {
+        return (0.0, 0.0);
+    };
+    let follower = valve.simulate(op, op.first().copied().unwrap_or(0.0));
     speeds(&follower, dt, 0.0, &WINDOWS_S)
 }
 
@@ -115,11 +120,15 @@ mod tests {
             .collect()
     }
 
-    fn note(levels: &[f64], gain: f64, limit: f64) -> Option<Note> {
-        let op = steps(12_000, 1_000, levels);
-        let rec = Columns::new(op.clone(), follow(&op, gain, limit), DT);
+    /// The note on a valve following `op` at `gain` /s, no faster than `limit` %/s.
+    fn note_on(op: &[f64], gain: f64, limit: f64) -> Option<Note> {
+        let rec = Columns::new(op.to_vec(), follow(op, gain, limit), DT);
         let f = facts::measure(&rec.view(), 0.1, 0.0);
-        slow_strokes(&f, &op, 40.0)
+        slow_strokes(&f, op, 40.0)
+    }
+
+    fn note(levels: &[f64], gain: f64, limit: f64) -> Option<Note> {
+        note_on(&steps(12_000, 1_000, levels), gain, limit)
     }
 
     #[test]
@@ -176,10 +185,7 @@ mod tests {
     }
 
     fn ramp_note(rate: f64, limit: f64) -> Option<Note> {
-        let op = ramps(rate);
-        let rec = Columns::new(op.clone(), follow(&op, 10.0, limit), DT);
-        let f = facts::measure(&rec.view(), 0.1, 0.0);
-        slow_strokes(&f, &op, 40.0)
+        note_on(&ramps(rate), 10.0, limit)
     }
 
     #[test]
