@@ -40,7 +40,12 @@
 //!   factor of 2.5, by the same size within a factor of 1.5. Or, when the candidate matches
 //!   only in part (it still comes closer than the current model), by number: the current
 //!   model misses at least fifteen slips a minute in the fit and in the held-out blocks alike,
-//!   of a median size worth naming; no smooth valve slips like that.
+//!   of a median size worth naming, or at least twenty evident slips (V_P at rest before and
+//!   after, half as large again as the threshold) that the current model does not make; and
+//!   the measured evident slips are five times as many as the best smooth rival's (a pulsing
+//!   positioner following a noisy controller output rests and steps too).
+//! - **Sticks, then jumps**: with fewer than ten evident slips stick-slip is not judged at
+//!   all, whatever the histograms say.
 //!
 //! Quantization (a lattice step is not a slip), sensor spikes (no level change), O_P steps and
 //! smooth moves or slewing (no rest before and after) cannot produce slips, so they cannot be
@@ -77,9 +82,16 @@ const EVIDENT_FACTOR: f64 = 1.5;
 /// Fewest evident slips the current model must miss over the whole recording, and how many
 /// times as many as the model makes (read through the same sensor), for stick-slip to be named
 /// by them even where they fall unevenly between the fit and the held-out blocks (a valve that
-/// hunts at some openings only).
+/// hunts at some openings only). Named by their number (not by a close match of the slip
+/// histograms), the measured evident slips must also be that many times what the best smooth
+/// rival makes: a pulsing positioner in a closed or noisy loop rests and moves in quick
+/// steps too, and a friction band or tolerance band makes those.
 const EVIDENT_SLIPS: usize = 20;
 const EVIDENT_RATIO: f64 = 5.0;
+/// Fewest evident slips of V_P for stick-slip to be judged at all: a stem that sticks and then
+/// jumps rests before and after each jump; moves without those rests (a valve following a
+/// noisy O_P, slewing, a reading stepping on its lattice) are no evidence of it.
+const MIN_EVIDENT: usize = 10;
 
 type Histogram = [f64; BINS];
 
@@ -333,7 +345,7 @@ fn total(per_piece: &[f64], pieces: &Pieces, held: bool) -> f64 {
         .sum()
 }
 
-/// What makes a slip evident besides its size: V_P at rest on both sides of the move.
+/// What makes a slip evident: its size, and V_P at rest on both sides of the move.
 struct Rest {
     /// Samples the move may take (the slip detector's span).
     span: usize,
@@ -341,6 +353,8 @@ struct Rest {
     sigma: f64,
     /// Samples of the initial transient, not counted.
     skip: usize,
+    /// Smallest evident slip, % ([`EVIDENT_FACTOR`]).
+    least: f64,
 }
 
 impl Rest {
@@ -349,7 +363,8 @@ impl Rest {
     /// quarter of the slip plus what five noise sigmas spread over. A valve that jitters
     /// after a noisy controller output moves all the time; a stuck stem stands still, then
     /// slips.
-    fn evident(&self, slips: &[Slip], y: &[f64], least: f64) -> usize {
+    fn evident(&self, slips: &[Slip], y: &[f64]) -> usize {
+        let least = self.least;
         let h = self.span;
         let still = |a: usize, b: usize, size: f64| {
             let (lo, hi) = y[a..b]
@@ -371,6 +386,15 @@ impl Rest {
             })
             .count()
     }
+}
+
+/// Median size of the `slips` in the fit blocks (`fit_only`), or in the whole recording.
+fn median_slip(slips: &[Slip], scorer: &Scorer, fit_only: bool) -> f64 {
+    let mut all: Vec<f64> = (slips.iter())
+        .filter(|s| !fit_only || (s.k >= scorer.skip && !scorer.held(s.k)))
+        .map(|s| s.size_pct.abs())
+        .collect();
+    stats::quantile(&mut all, 0.5)
 }
 
 /// Number and median size of the slips in the fit (`held` false) or held-out blocks.
@@ -461,33 +485,29 @@ pub(crate) fn fit(
         total(&before, &pieces, false),
         total(&before, &pieces, true),
     );
-    tracing::debug!(
-        measured = measured_slips.len(),
-        model = slips_before.len(),
-        missed_fit = missed.0,
-        missed_held = missed.1,
-        size_fit = count_and_size(&measured_slips, scorer, false).1,
-        size_held = count_and_size(&measured_slips, scorer, true).1,
-        threshold,
-        "slips of V_P"
-    );
-    let least = (EVIDENT_FACTOR * threshold)
-        .max(tuning.worth.friction_band_pct)
-        .max(1.5 * sigma);
+    let (measured_n, model_n) = (measured_slips.len(), slips_before.len());
+    tracing::debug!(measured_n, model_n, ?missed, threshold, "slips of V_P");
     let rest = Rest {
         span: scale.span,
         sigma,
         skip: scorer.skip,
+        least: (EVIDENT_FACTOR * threshold)
+            .max(tuning.worth.friction_band_pct)
+            .max(1.5 * sigma),
+    };
+    let evident_of = |y: &[f64]| {
+        let read = sensor.read(y);
+        rest.evident(&facts::slips(&reference, &read, scale), &read)
     };
     let (evident, evident_model) = (
-        rest.evident(&measured_slips, scorer.vp, least),
-        rest.evident(&slips_before, &sensor.read(&reference), least),
+        rest.evident(&measured_slips, scorer.vp),
+        evident_of(&reference),
     );
     let by_evidence =
         evident >= EVIDENT_SLIPS && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
-    tracing::debug!(evident, evident_model, least, by_evidence, "evident slips");
+    tracing::debug!(evident, evident_model, by_evidence, "evident slips");
     let both_halves = missed.0 >= MIN_MISSED && missed.1 >= MIN_MISSED;
-    if !both_halves && !by_evidence {
+    if evident < MIN_EVIDENT || !(both_halves || by_evidence) {
         return None;
     }
     // Fitted on the fit blocks; on all of them when those hold too few slips to fit.
@@ -498,29 +518,25 @@ pub(crate) fn fit(
             d.iter().sum()
         }
     };
-    let size = if missed.0 >= MIN_MISSED {
-        count_and_size(&measured_slips, scorer, false).1
-    } else {
-        let mut all: Vec<f64> = measured_slips.iter().map(|s| s.size_pct.abs()).collect();
-        stats::quantile(&mut all, 0.5)
-    };
+    let size = median_slip(&measured_slips, scorer, missed.0 >= MIN_MISSED);
     let gain = composed::get(current, Knob::Gain);
-    let (spec, knobs, stick_distance, _) = grid(size, gain)
-        .par_iter()
-        .map(|knobs| {
-            let spec = with_knobs(current, knobs);
-            let (_, d, sse) = run(&spec);
-            let free: Vec<Knob> = knobs.iter().map(|&(k, _)| k).collect();
-            (spec, free, fit_on(&d), sse)
-        })
-        .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))?;
-    let smooth_distance = smooth_grid(size, gain)
-        .par_iter()
-        .map(|knobs| fit_on(&run(&with_knobs(current, knobs)).1))
-        .reduce(|| f64::INFINITY, f64::min);
+    let closest = |grid: Vec<Vec<(Knob, f64)>>| {
+        grid.par_iter()
+            .map(|knobs| {
+                let spec = with_knobs(current, knobs);
+                let (_, d, sse) = run(&spec);
+                let free: Vec<Knob> = knobs.iter().map(|&(k, _)| k).collect();
+                (spec, free, fit_on(&d), sse)
+            })
+            .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
+    };
+    let (spec, knobs, stick_distance, _) = closest(grid(size, gain))?;
+    let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain))?;
+    let evident_smooth = evident_of(&scorer.simulate(&smooth_spec));
     tracing::debug!(
         stick_distance,
         smooth_distance,
+        evident_smooth,
         "stick-slip against smooth friction"
     );
     if smooth_distance <= stick_distance {
@@ -534,10 +550,13 @@ pub(crate) fn fit(
         (&measured_slips, &slips_after),
     );
     let per_min = EVIDENT_PER_MIN * scorer.n_fit() as f64 * scorer.dt / 60.0;
-    let by_count = by_evidence
-        || (missed.0.min(missed.1) >= per_min
-            && size >= tuning.worth.slip_pct.max(1.5 * sigma)
-            && held.distance_after < held.distance_before);
+    let beyond_smooth =
+        evident as f64 >= EVIDENT_RATIO * evident_model.max(evident_smooth).max(1) as f64;
+    let by_count = beyond_smooth
+        && (by_evidence
+            || (missed.0.min(missed.1) >= per_min
+                && size >= tuning.worth.slip_pct.max(1.5 * sigma)
+                && held.distance_after < held.distance_before));
     let candidate = Candidate {
         distance_all: (before.iter().sum(), after.iter().sum()),
         held,
