@@ -142,7 +142,7 @@ impl Judge<'_> {
         );
         let size = size::size(effect, &spec, self.facts, self.scorer.op, tuning);
         let significant = beyond_chance(t_stat, excess_share, delta_bic, tuning);
-        let plausible = !pinned(own, &spec)
+        let plausible = !pinned(own, &spec, effect)
             && plausible(effect, &spec, self.facts)
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
             && (effect != Effect::Saturation || self.stop_seen(&spec, ya));
@@ -243,13 +243,19 @@ pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64, z_min: f64) -> f6
 /// 2 % of the box on its own scale. The gain and dead time are left out (they are refitted with
 /// every effect and may rest on a bound), and so are the jump fraction (a jump as large as the
 /// stickband is Choudhury's classic case) and the wind-up at a stop (none is a plain stop).
-fn pinned(free: &[Free], spec: &ModelSpec) -> bool {
+/// A stroke-speed limit refitted with an effect other than `slew_rate` or `asymmetry` is
+/// pinned at its slowest only.
+fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
     free.iter().any(|f| {
         let v = composed::get(spec, f.knob);
         // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
         // of 74-78 % is not pinned at 75 %.
         let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs().min(f.def.hi - f.def.lo);
-        let at_high = f.def.to_unit(v) > 0.98;
+        // A stroke-speed limit refitted with another effect (an opening-dependent slowdown)
+        // may sit at the fastest a fit considers: the recording never asks for it. At its
+        // slowest it is pinned: the valve is slow even closed, which is `slew_rate`'s to say.
+        let subject = matches!(effect, Effect::SlewRate | Effect::Asymmetry);
+        let at_high = f.def.to_unit(v) > 0.98 && (f.knob != Knob::Slew || subject);
         !matches!(
             f.knob,
             Knob::Gain | Knob::DeadTime | Knob::JumpFraction | Knob::Windup
@@ -375,13 +381,32 @@ mod tests {
         };
         // A travel stop in a box of 74-78 %: pinned at 74.05 %, not at 75 %.
         let stop = [Free::new(Knob::TravelMax, 74.0, 78.0, 76.0)];
-        assert!(pinned(&stop, &at(Knob::TravelMax, 74.05)));
-        assert!(!pinned(&stop, &at(Knob::TravelMax, 75.0)));
-        assert!(pinned(&stop, &at(Knob::TravelMax, 77.99)));
+        assert!(pinned(
+            &stop,
+            &at(Knob::TravelMax, 74.05),
+            Effect::Saturation
+        ));
+        assert!(!pinned(
+            &stop,
+            &at(Knob::TravelMax, 75.0),
+            Effect::Saturation
+        ));
+        assert!(pinned(
+            &stop,
+            &at(Knob::TravelMax, 77.99),
+            Effect::Saturation
+        ));
         // A deadband near its small lower bound: within 2 % of it.
         let band = [Free::new(Knob::Deadband, 0.05, 5.0, 0.5)];
-        assert!(pinned(&band, &at(Knob::Deadband, 0.0505)));
-        assert!(!pinned(&band, &at(Knob::Deadband, 0.06)));
+        assert!(pinned(&band, &at(Knob::Deadband, 0.0505), Effect::Deadband));
+        assert!(!pinned(&band, &at(Knob::Deadband, 0.06), Effect::Deadband));
+        // The stroke-speed limit refitted with a slowdown: free to sit at the fastest, not at
+        // the slowest; an asymmetry's own limit is pinned at either end.
+        let limit = [Free::new(Knob::Slew, 40.0, 1000.0, 100.0)];
+        let slowdown = Effect::StateDependentDelay;
+        assert!(!pinned(&limit, &at(Knob::Slew, 995.0), slowdown));
+        assert!(pinned(&limit, &at(Knob::Slew, 40.2), slowdown));
+        assert!(pinned(&limit, &at(Knob::Slew, 995.0), Effect::Asymmetry));
     }
 
     #[test]
