@@ -355,13 +355,14 @@ impl<'a> Search<'a> {
     /// the one that removes the most held-out error, unless another removes nearly as much
     /// ([`TIE_SHARE`]) with the support of more held-out blocks: an effect that explains the
     /// error across the recording is better supported than one that helps a few blocks a lot.
+    /// Then the smaller BIC: of two alike, the one with fewer parameters (a tolerance band).
     fn winner<'t>(&self, best: &[&'t Trial]) -> Option<&'t Trial> {
         let first = *best.iter().find(|t| t.passes())?;
         let gain = |t: &Trial| self.cur.held - t.errors.held;
         best.iter()
             .filter(|t| t.passes() && gain(t) >= TIE_SHARE * gain(first))
             .max_by(|a, b| {
-                (a.t_stat.total_cmp(&b.t_stat)).then(b.errors.held.total_cmp(&a.errors.held))
+                (a.t_stat.total_cmp(&b.t_stat)).then(b.delta_bic.total_cmp(&a.delta_bic))
             })
             .copied()
     }

@@ -20,16 +20,18 @@ pub struct Size {
     pub name: &'static str,
     pub unit: &'static str,
     pub value: f64,
-    /// 90 % interval (block bootstrap over the held-out blocks); the value itself when none
-    /// was computed.
+    /// 90 % interval (block bootstrap over the held-out blocks, widened by diagnosis to at
+    /// least the model's error the blind bench measured); the value itself when none was
+    /// computed.
     pub low: f64,
     pub high: f64,
     /// How the size compares with what is worth maintenance: 1 at the threshold, above 1
     /// beyond it (for a stroke speed, the threshold over the speed).
     pub worth: f64,
-    /// `worth` at the less material end of the interval (its 5 % quantile over the same
-    /// resamples): at least 1 when the recording is sure the effect is worth maintenance.
-    /// `worth` itself when no interval was computed.
+    /// `worth` at the less material end of the held-out blocks' evidence (its 5 % quantile
+    /// over the same resamples, before the interval is widened by the model's spread): at
+    /// least 1 when the recording is sure the effect is worth maintenance. `worth` itself when
+    /// no interval was computed.
     pub worth_low: f64,
 }
 
@@ -94,7 +96,7 @@ impl Effect {
     pub fn look_alikes(self) -> &'static [Effect] {
         match self {
             Effect::Backlash => &[Effect::Deadband, Effect::StateDependentDelay],
-            Effect::Deadband => &[Effect::Backlash, Effect::Calibration],
+            Effect::Deadband => &[Effect::Backlash, Effect::Calibration, Effect::Stiction],
             Effect::Quantization => &[],
             Effect::Stiction => &[Effect::Deadband],
             Effect::SlewRate => &[Effect::Asymmetry, Effect::MinSpeed],

@@ -30,6 +30,9 @@ pub fn experiment(effect: Effect, other: Option<Effect>) -> &'static str {
     if pair(Effect::SlewRate, Effect::MinSpeed) {
         return "the response test's steps of 0.25 to 10 % (`valve-bridge response-test --plan quick`): a slew limit lengthens only the large steps' T86, a minimum speed the small ones'";
     }
+    if pair(Effect::Stiction, Effect::Deadband) {
+        return "the response test's slow ramp out and back (`valve-bridge response-test --plan quick`, its signature): stiction moves in jumps larger than the sensor step, a valve in a deadband follows the ramp smoothly once past the band";
+    }
     match effect {
         Effect::Backlash | Effect::Deadband | Effect::StateDependentDelay => {
             "the standard response test (`valve-bridge response-test --plan standard`): reversals of every size at 25, 50 and 75 %, where lost motion delays the small reversals, a deadband stops short of every step (its final error) and a state-dependent delay grows with the opening, and the signature's dead band"
