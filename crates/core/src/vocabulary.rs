@@ -281,7 +281,7 @@ impl Advice {
             name: e.plain.into(),
             does: does(size),
             sure: format!(
-                "{} times what is worth maintenance, at least {} times (90 % interval)",
+                "{} times what is worth maintenance, at least {} times on the recording's evidence (95 % of resamples of its held-out blocks)",
                 sig3(size.worth),
                 sig3(size.worth_low)
             ),
