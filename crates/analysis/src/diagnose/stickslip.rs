@@ -390,10 +390,10 @@ impl Rest {
 
 /// Median size of the `slips` in the fit blocks (`fit_only`), or in the whole recording.
 fn median_slip(slips: &[Slip], scorer: &Scorer, fit_only: bool) -> f64 {
-    let mut all: Vec<f64> = (slips.iter())
-        .filter(|s| !fit_only || (s.k >= scorer.skip && !scorer.held(s.k)))
-        .map(|s| s.size_pct.abs())
-        .collect();
+    if fit_only {
+        return count_and_size(slips, scorer, false).1;
+    }
+    let mut all: Vec<f64> = slips.iter().map(|s| s.size_pct.abs()).collect();
     stats::quantile(&mut all, 0.5)
 }
 
@@ -501,7 +501,7 @@ pub(crate) fn fit(
     };
     let (evident, evident_model) = (
         rest.evident(&measured_slips, scorer.vp),
-        evident_of(&reference),
+        rest.evident(&slips_before, &sensor.read(&reference)),
     );
     let by_evidence =
         evident >= EVIDENT_SLIPS && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
