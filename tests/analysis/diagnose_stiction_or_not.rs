@@ -22,7 +22,7 @@ use valve_bridge::synth::logged;
 use crate::cases::{self, Case};
 
 /// Valve `index` of the bench's `seed` and its diagnosis as the daemon logs it.
-fn diagnosed(seed: u64, index: usize) -> (Case, Diagnosis) {
+pub(crate) fn diagnosed(seed: u64, index: usize) -> (Case, Diagnosis) {
     let plan = (cases::plans(seed, 220).into_iter())
         .find(|p| p.index == index)
         .unwrap();
@@ -32,7 +32,7 @@ fn diagnosed(seed: u64, index: usize) -> (Case, Diagnosis) {
     (case, d)
 }
 
-fn named(d: &Diagnosis) -> Vec<Effect> {
+pub(crate) fn named(d: &Diagnosis) -> Vec<Effect> {
     d.findings.iter().map(|f| f.effect).collect()
 }
 

@@ -30,6 +30,7 @@ mod diagnose_linkage_play;
 mod diagnose_physical;
 mod diagnose_smooth_slips;
 mod diagnose_stiction_or_not;
+mod diagnose_stop_windup;
 mod fleet_cli;
 mod identify_cli;
 mod identify_paper;

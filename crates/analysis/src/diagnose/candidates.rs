@@ -22,9 +22,15 @@ pub(super) const MAX_DEAD_TIME_S: f64 = 3.0;
 /// Span of O_P (5th to 95th percentile) below which a calibration is fitted as an offset
 /// alone, % of travel: the sensor's gain shows only across a fifth of the travel or more.
 const MIN_GAIN_SPAN_PCT: f64 = 20.0;
-/// Largest wind-up past a travel stop, % of travel: a drive can wind from a stop low in the
-/// travel all the way to its supply.
+/// Largest wind-up past a travel stop the first fit of a stop searches, % of travel: a drive
+/// winds from a stop low in the travel up to its supply, most within a travel; its few starts
+/// stay where most stops are.
 pub(super) const MAX_WINDUP_PCT: f64 = 100.0;
+/// Largest wind-up the stop's own refit searches ([`super::rounds`]), % of travel: a
+/// spring-diaphragm chamber winds on to its supply, several spring ranges above the pressure
+/// that holds the stem at a stop (a 6 bar supply on a 0.4-2 bar spring is 250 % beyond a stop
+/// at half travel), and must vent all that before the valve leaves the stop.
+pub(super) const WINDUP_RANGE_PCT: f64 = 400.0;
 
 /// One effect to refit, from several starts (the knobs and boxes are the same in all).
 #[derive(Debug, Clone)]

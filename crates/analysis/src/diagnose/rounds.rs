@@ -21,7 +21,7 @@
 use rayon::prelude::*;
 use serde_json::{Map, Value};
 
-use super::candidates::{self, MAX_DEAD_TIME_S, MAX_WINDUP_PCT};
+use super::candidates::{self, MAX_DEAD_TIME_S, WINDUP_RANGE_PCT};
 use super::diagnosis::{Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
@@ -51,8 +51,8 @@ const DOMINANT_LEFT: f64 = 0.5;
 /// Share of the fit error the refit of the model's own knobs before a round must remove to be
 /// kept (less is rounding, and would only blur what the round's candidates are judged against).
 const REST_GAIN: f64 = 1e-3;
-/// Where the stop's wind-up restarts, as shares of its range (see [`Search::wind_up`]).
-const WINDUP_STARTS: [f64; 5] = [0.05, 0.2, 0.4, 0.7, 0.95];
+/// Where the stop's wind-up restarts, % of travel ([`Search::wind_up`]).
+const WINDUP_STARTS: [f64; 7] = [5.0, 20.0, 40.0, 70.0, 100.0, 180.0, 320.0];
 /// Share of the best candidate's held-out gain another must reach to win the round by the
 /// support of more held-out blocks.
 const TIE_SHARE: f64 = 0.95;
@@ -501,22 +501,21 @@ impl<'a> Search<'a> {
         }
     }
 
-    /// The travel stop's wind-up refitted from starts spread over its whole range, each with
-    /// the stroke speed where it is and at the fastest speed the recording shows (the other
-    /// knobs from where they are): how long the drive takes to leave a stop is a narrow valley
-    /// the round's few starts can miss, it is set by the wind-up and the speed the drive
-    /// unwinds at together, and what it leaves, later effects (a slowdown of the open valve)
-    /// would be stretched to cover. Kept only if neither error rises.
+    /// The stop's wind-up refitted from starts up to [`WINDUP_RANGE_PCT`] (its box from then
+    /// on), each with the stroke speed where it is and at the fastest speed seen (the other
+    /// knobs where they are): the time to leave a stop, set by the wind-up and the speed the
+    /// drive unwinds at together, is a narrow valley the round's few starts miss, and later
+    /// effects (a slowdown of the open valve) would stretch to cover it. Kept if no error rises.
     fn wind_up(&mut self) {
+        let wide = Free::new(Knob::Windup, 0.0, WINDUP_RANGE_PCT, 0.0);
         let here = starting_at(&self.freed, &self.current);
-        let facts = self.data.facts;
-        let seen = facts.open_speed.max(facts.close_speed);
+        let seen = (self.data.facts.open_speed).max(self.data.facts.close_speed);
         let starts: Vec<Vec<Free>> = (WINDUP_STARTS.iter())
-            .flat_map(|&share| [false, true].map(|at_seen| (share, at_seen)))
-            .map(|(share, at_seen)| {
+            .flat_map(|&start| [false, true].map(|at_seen| (start, at_seen)))
+            .map(|(start, at_seen)| {
                 (here.iter())
                     .map(|f| match f.knob {
-                        Knob::Windup => f.from(share * MAX_WINDUP_PCT),
+                        Knob::Windup => wide.from(start),
                         Knob::Slew if at_seen => f.from(seen.clamp(f.def.lo, f.def.hi)),
                         _ => *f,
                     })
@@ -533,6 +532,7 @@ impl<'a> Search<'a> {
         if errors.fit < self.cur.fit && errors.held <= self.cur.held {
             self.current = polished;
             self.cur = errors;
+            self.free(&[wide]);
         }
     }
 

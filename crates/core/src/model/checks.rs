@@ -356,11 +356,11 @@ fn effects_friction_and_sensor(c: &mut Checks, e: &Effects) {
         "a friction band in %, 0-20 (0 = none)",
     );
     c.need(
-        (0.0..=100.0).contains(&e.stop_windup_pct),
+        (0.0..=400.0).contains(&e.stop_windup_pct),
         t,
         "stop_windup_pct",
         e.stop_windup_pct,
-        "a wind-up past a travel stop in %, 0-100 (0 = none)",
+        "a wind-up past a travel stop in %, 0-400 (0 = none)",
     );
     c.need(
         (0.0..=10.0).contains(&e.positioner_deadband_pct),
