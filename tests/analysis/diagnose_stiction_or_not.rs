@@ -1,5 +1,5 @@
-//! When stick-slip is named and when its look-alikes are, on valves of the blind bench's
-//! digital family as the daemon logs them.
+//! When stick-slip is named and when its look-alikes are, on valves of the blind bench
+//! (its digital family unless said) as the daemon logs them.
 //!
 //! - A pulsing positioner under a noisy controller output rests and steps; that is not
 //!   stick-slip. Three healthy valves in level loops under a noisy controller (seed 5 valve
@@ -7,9 +7,15 @@
 //!   tolerance band and then moves in a quick step, dozens of times, which a smooth model
 //!   without a band never does; a friction band or a tolerance band makes such steps too, so
 //!   no stiction is named.
+//! - A fast positioner following a noisy controller output in a closed loop moves in quick
+//!   steps too (seed 9: valve 264, healthy, and valve 269, a dead time of 0.63 s): a fitted
+//!   stick-slip comes closer to those steps than the current model, and on the fit blocks a
+//!   little closer than the smooth rival, but on the held-out pieces the rival matches them
+//!   better as often as not, so no stiction is named.
 //! - A valve that does stick and jump in a closed loop (seed 5 valve 270, stiction alone),
 //!   whose slips a fitted stick-slip matches only in part, is still named stiction by their
-//!   number: its evident slips outnumber the smooth rival's many times over.
+//!   number: its evident slips outnumber the smooth rival's many times over. One whose slips
+//!   stick-slip matches (seed 9 valve 205, of the physical family) is named by the match.
 //! - A tolerance band that stick-slip explains as well is named a deadband (seed 5 valve 285,
 //!   a 0.94 % band alone, random steps, sensor noise 0.25 %): stick-slip on the valve's input
 //!   (a band and a jump) and a positioner deadband remove the same half of the held-out error;
@@ -50,15 +56,31 @@ fn a_pulsing_positioner_in_a_noisy_loop_is_not_named_stiction() {
 }
 
 #[test]
+fn a_fast_positioner_following_a_noisy_controller_is_not_named_stiction() {
+    for index in [264, 269] {
+        let (case, d) = diagnosed(9, index);
+        assert!(!case.labels.contains(&Effect::Stiction), "valve {index}");
+        assert!(
+            named(&d).iter().all(|e| case.labels.contains(e)),
+            "valve {index}: labels {:?}, found {:?}",
+            case.labels,
+            named(&d)
+        );
+    }
+}
+
+#[test]
 fn stick_slip_in_a_closed_loop_is_still_named_by_its_slips() {
-    let (case, d) = diagnosed(5, 270);
-    assert_eq!(case.labels, [Effect::Stiction]);
-    assert_eq!(
-        named(&d).first(),
-        Some(&Effect::Stiction),
-        "{:?}",
-        named(&d)
-    );
+    for (seed, index) in [(5, 270), (9, 205)] {
+        let (case, d) = diagnosed(seed, index);
+        assert_eq!(case.labels, [Effect::Stiction], "seed {seed} valve {index}");
+        assert_eq!(
+            named(&d).first(),
+            Some(&Effect::Stiction),
+            "seed {seed} valve {index}: {:?}",
+            named(&d)
+        );
+    }
 }
 
 #[test]
