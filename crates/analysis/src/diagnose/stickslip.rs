@@ -495,13 +495,13 @@ pub(crate) fn fit(
     let measured_slips = facts::slips(&reference, scorer.vp, scale);
     let measured = histograms(&measured_slips, threshold, &pieces);
     let sensor = Sensor::new(scorer.vp, sigma, facts.lattice_pct);
-    let run = |spec: &ModelSpec| {
-        let y = scorer.simulate(spec);
-        let slips = facts::slips(&reference, &sensor.read(&y), scale);
+    // A simulated V_P's slips, their per-piece distances and its fit error.
+    let score = |y: &[f64]| {
+        let slips = facts::slips(&reference, &sensor.read(y), scale);
         let d = distances(&measured, &histograms(&slips, threshold, &pieces));
-        (slips, d, scorer.errors_of(&y).fit)
+        (slips, d, scorer.errors_of(y).fit)
     };
-    let (slips_before, before, _) = run(current);
+    let (slips_before, before, _) = score(&reference);
     let missed = (
         total(&before, &pieces, false),
         total(&before, &pieces, true),
@@ -515,10 +515,6 @@ pub(crate) fn fit(
         least: (EVIDENT_FACTOR * threshold)
             .max(tuning.worth.friction_band_pct)
             .max(1.5 * sigma),
-    };
-    let evident_of = |y: &[f64]| {
-        let read = sensor.read(y);
-        rest.evident(&facts::slips(&reference, &read, scale), &read)
     };
     let (evident, evident_model) = (
         rest.evident(&measured_slips, scorer.vp),
@@ -545,7 +541,7 @@ pub(crate) fn fit(
         grid.par_iter()
             .map(|knobs| {
                 let spec = with_knobs(current, knobs);
-                let (_, d, sse) = run(&spec);
+                let (_, d, sse) = score(&scorer.simulate(&spec));
                 let free: Vec<Knob> = knobs.iter().map(|&(k, _)| k).collect();
                 (spec, free, fit_on(&d), sse)
             })
@@ -553,8 +549,9 @@ pub(crate) fn fit(
     };
     let (spec, knobs, stick_distance, _) = closest(grid(size, gain))?;
     let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain))?;
-    let (_, smooth, _) = run(&smooth_spec);
-    let evident_smooth = evident_of(&scorer.simulate(&smooth_spec));
+    let y_smooth = scorer.simulate(&smooth_spec);
+    let (slips_smooth, smooth, _) = score(&y_smooth);
+    let evident_smooth = rest.evident(&slips_smooth, &sensor.read(&y_smooth));
     tracing::debug!(
         stick_distance,
         smooth_distance,
@@ -564,7 +561,7 @@ pub(crate) fn fit(
     if smooth_distance <= stick_distance {
         return None;
     }
-    let (slips_after, after, _) = run(&spec);
+    let (slips_after, after, _) = score(&scorer.simulate(&spec));
     let held = Match::new(
         &pieces,
         scorer,
