@@ -286,10 +286,14 @@ impl Candidate {
             .iter()
             .map(|&k| composed::get(&self.spec, k))
             .fold(0.0, f64::max);
-        let Measure::SlipDistance { before, after, .. } = self.distance() else {
+        let Measure::SlipDistance {
+            heldout,
+            before,
+            after,
+        } = self.distance()
+        else {
             return false;
         };
-        let heldout = matches!(self.distance(), Measure::SlipDistance { heldout: true, .. });
         let lean = (self.smooth_lean).map_or(0.0, |(h, all)| if heldout { h } else { all });
         (self.held.slips_alike() || self.by_count)
             && lean < SMOOTH_LEAN_P
@@ -495,13 +499,15 @@ pub(crate) fn fit(
     let measured_slips = facts::slips(&reference, scorer.vp, scale);
     let measured = histograms(&measured_slips, threshold, &pieces);
     let sensor = Sensor::new(scorer.vp, sigma, facts.lattice_pct);
-    // A simulated V_P's slips, their per-piece distances and its fit error.
+    // A simulated V_P as the sensor reads it, its slips, their per-piece distances and its
+    // fit error.
     let score = |y: &[f64]| {
-        let slips = facts::slips(&reference, &sensor.read(y), scale);
+        let read = sensor.read(y);
+        let slips = facts::slips(&reference, &read, scale);
         let d = distances(&measured, &histograms(&slips, threshold, &pieces));
-        (slips, d, scorer.errors_of(y).fit)
+        (read, slips, d, scorer.errors_of(y).fit)
     };
-    let (slips_before, before, _) = score(&reference);
+    let (read_before, slips_before, before, _) = score(&reference);
     let missed = (
         total(&before, &pieces, false),
         total(&before, &pieces, true),
@@ -518,7 +524,7 @@ pub(crate) fn fit(
     };
     let (evident, evident_model) = (
         rest.evident(&measured_slips, scorer.vp),
-        rest.evident(&slips_before, &sensor.read(&reference)),
+        rest.evident(&slips_before, &read_before),
     );
     let by_evidence =
         evident >= EVIDENT_SLIPS && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
@@ -541,7 +547,7 @@ pub(crate) fn fit(
         grid.par_iter()
             .map(|knobs| {
                 let spec = with_knobs(current, knobs);
-                let (_, d, sse) = score(&scorer.simulate(&spec));
+                let (_, _, d, sse) = score(&scorer.simulate(&spec));
                 let free: Vec<Knob> = knobs.iter().map(|&(k, _)| k).collect();
                 (spec, free, fit_on(&d), sse)
             })
@@ -549,9 +555,8 @@ pub(crate) fn fit(
     };
     let (spec, knobs, stick_distance, _) = closest(grid(size, gain))?;
     let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain))?;
-    let y_smooth = scorer.simulate(&smooth_spec);
-    let (slips_smooth, smooth, _) = score(&y_smooth);
-    let evident_smooth = rest.evident(&slips_smooth, &sensor.read(&y_smooth));
+    let (read_smooth, slips_smooth, smooth, _) = score(&scorer.simulate(&smooth_spec));
+    let evident_smooth = rest.evident(&slips_smooth, &read_smooth);
     tracing::debug!(
         stick_distance,
         smooth_distance,
@@ -561,7 +566,7 @@ pub(crate) fn fit(
     if smooth_distance <= stick_distance {
         return None;
     }
-    let (slips_after, after, _) = score(&scorer.simulate(&spec));
+    let (_, slips_after, after, _) = score(&scorer.simulate(&spec));
     let held = Match::new(
         &pieces,
         scorer,
