@@ -73,21 +73,34 @@ pub fn sig3(x: f64) -> String {
 /// `Size::words` words it.
 pub fn size_text(name: &str, value: f64, low: f64, high: f64) -> String {
     let (what, unit) = size_label(name);
-    if low < high {
-        format!(
-            "{what} {}{unit} ({}-{})",
-            sig3(value),
-            sig3(low),
-            sig3(high)
-        )
+    format!("{what} {}{unit}{}", sig3(value), interval_text(low, high))
+}
+
+/// The interval `low`-`high` of a size, as its words follow the value: ` (1.38-1.46)`,
+/// ` (1.92 or more)` without an upper end, nothing when none was computed.
+pub fn interval_text(low: f64, high: f64) -> String {
+    if high == f64::INFINITY {
+        format!(" ({} or more)", sig3(low))
+    } else if low < high {
+        format!(" ({}-{})", sig3(low), sig3(high))
     } else {
-        format!("{what} {}{unit}", sig3(value))
+        String::new()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_interval_without_an_upper_end_is_a_lower_bound() {
+        assert_eq!(
+            size_text("speed_ratio", 5.37, 1.92, f64::INFINITY),
+            "one direction faster than the other by 5.37 times (1.92 or more)"
+        );
+        assert_eq!(interval_text(1.38, 1.46), " (1.38-1.46)");
+        assert_eq!(interval_text(2.0, 2.0), "");
+    }
 
     #[test]
     fn three_figures() {

@@ -20,7 +20,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::human::sig3;
+use crate::human::{interval_text, sig3};
 use crate::model::composed::{Effect, Size};
 
 /// What an effect does to the control loop, from worst to mildest.
@@ -198,16 +198,7 @@ pub fn words(effect: Effect) -> Words {
 /// The size's value in `unit` with its interval: `1.42 % (1.38-1.46)`, or the value alone
 /// when no interval was computed.
 fn sized(s: &Size, unit: &str) -> String {
-    if s.low < s.high {
-        format!(
-            "{} {unit} ({}-{})",
-            sig3(s.value),
-            sig3(s.low),
-            sig3(s.high)
-        )
-    } else {
-        format!("{} {unit}", sig3(s.value))
-    }
+    format!("{} {unit}{}", sig3(s.value), interval_text(s.low, s.high))
 }
 
 /// What an effect of size `s` does to the valve, in words with the size, its unit and its

@@ -189,7 +189,8 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
         // A stick-slip finding judged by its slips is sized by the measured slips.
         if matches!(f.measure, Measure::HeldoutSse { .. }) {
             let now = size::size(f.effect, &final_spec, data.facts, rec.op, data.tuning);
-            f.size = size::interval(now, f.effect, &final_spec, scorer, sized);
+            let now = size::interval(now, f.effect, &final_spec, scorer, sized);
+            f.size = size::open_ended(f.effect, now, &final_spec, scorer);
             f.params = rounds::params(&final_spec, f.knobs.iter().copied());
             f.facts
                 .in_final(f.effect, &final_spec, data.facts, data.sigma);

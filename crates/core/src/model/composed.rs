@@ -22,7 +22,8 @@ pub struct Size {
     pub value: f64,
     /// 90 % interval (block bootstrap over the held-out blocks, widened by diagnosis to at
     /// least the model's error the blind bench measured); the value itself when none was
-    /// computed.
+    /// computed. `high` is infinite (`null` in JSON) when the recording bounds the size from
+    /// below only (a speed ratio whose faster side no move asked for).
     pub low: f64,
     pub high: f64,
     /// How the size compares with what is worth maintenance: 1 at the threshold, above 1
