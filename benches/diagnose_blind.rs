@@ -40,9 +40,6 @@ use serde_json::json;
 use valve_bridge::diagnose::{self, Effect};
 use valve_bridge::report::diagnose as report;
 
-/// Length of every recording, s.
-const DURATION_S: f64 = 600.0;
-
 struct Options {
     seed: u64,
     cases: usize,
@@ -58,9 +55,6 @@ struct Options {
     stride: usize,
 }
 
-/// Share of the rows a logged recording lacks V_P in (`--as-logged`).
-const LOST_SHARE: f64 = 0.005;
-
 fn env_number(name: &str) -> Result<Option<u64>, String> {
     match std::env::var(name) {
         Ok(v) => v
@@ -74,7 +68,7 @@ fn env_number(name: &str) -> Result<Option<u64>, String> {
 fn options() -> Result<Options, String> {
     let mut o = Options {
         seed: env_number("VB_BLIND_SEED")?.unwrap_or(1),
-        cases: env_number("VB_BLIND_CASES")?.map_or(220, |n| n as usize),
+        cases: env_number("VB_BLIND_CASES")?.map_or(cases::PLAN_VALVES, |n| n as usize),
         family: None,
         only: None,
         case: None,
@@ -198,9 +192,10 @@ fn run() -> Result<(), String> {
         None => None,
     };
     println!(
-        "diagnose_blind: seed {}, {} valves, {DURATION_S} s at 100 Hz each{}; materiality x{}, held-out share {}",
+        "diagnose_blind: seed {}, {} valves, {} s at 100 Hz each{}; materiality x{}, held-out share {}",
         o.seed,
         plans.len(),
+        cases::DURATION_S,
         if o.as_logged {
             ", as the daemon logs them (per mille, 0.5 % of rows without V_P)"
         } else {
@@ -211,11 +206,8 @@ fn run() -> Result<(), String> {
     );
     let mut outcomes = Vec::new();
     for (k, plan) in plans.iter().enumerate() {
-        let mut case =
-            cases::build(plan, DURATION_S).map_err(|e| format!("case {}: {e}", plan.index))?;
-        if o.as_logged {
-            case.rec = valve_bridge::synth::logged::as_logged(&case.rec, LOST_SHARE, plan.seed);
-        }
+        let case =
+            cases::build_as(plan, o.as_logged).map_err(|e| format!("case {}: {e}", plan.index))?;
         let rec = &case.rec;
         if let Some(dir) = &o.csv {
             write_case(dir, &case)?;
@@ -287,13 +279,13 @@ fn run() -> Result<(), String> {
 fn report(name: &str, group: &[score::Outcome], share: f64) {
     println!("\n======== {name}: {} valves ========", group.len());
     score::print_confusion(group);
-    let (precision, recall) = score::print_precision_recall(group);
+    score::print_precision_recall(group);
     score::print_smallest_found(group, &cases::EXCITATIONS);
     let mut excitations = cases::EXCITATIONS.to_vec();
     excitations.push(cases::NOISY_LOOP);
     score::print_curve(group, &excitations, share);
     score::print_coverage(group);
-    score::print_overall(group, precision, recall);
+    score::print_overall(group);
 }
 
 /// The findings and traces of `d`, weighed (see [`score::Item`]).

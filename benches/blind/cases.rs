@@ -40,6 +40,12 @@ use valve_bridge::synth::{Excitation, SynthError};
 
 /// Sample period of every recording, s (100 Hz).
 pub(crate) const DT: f64 = 0.01;
+/// Length of every recording of the bench, s.
+pub(crate) const DURATION_S: f64 = 600.0;
+/// Share of the rows a logged recording lacks V_P in (`--as-logged`).
+pub(crate) const LOST_SHARE: f64 = 0.005;
+/// Valves of the physical family a seed's plan draws (the digital family: half as many).
+pub(crate) const PLAN_VALVES: usize = 220;
 
 // Label thresholds: an effect is labelled when its physics reaches these (how each family
 // measures it: `physical.rs` and `digital.rs`).
@@ -350,6 +356,16 @@ pub(crate) fn build(plan: &Plan, duration_s: f64) -> Result<Case, SynthError> {
         }
         draw += 1;
     }
+}
+
+/// The bench's case of `plan` ([`DURATION_S`] long), recorded intact or as the daemon logs it
+/// (per mille, [`LOST_SHARE`] of the rows without V_P in bursts).
+pub(crate) fn build_as(plan: &Plan, as_logged: bool) -> Result<Case, SynthError> {
+    let mut case = build(plan, DURATION_S)?;
+    if as_logged {
+        case.rec = valve_bridge::synth::logged::as_logged(&case.rec, LOST_SHARE, plan.seed);
+    }
+    Ok(case)
 }
 
 fn same_set(a: &[Effect], b: &[Effect]) -> bool {

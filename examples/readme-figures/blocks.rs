@@ -55,6 +55,8 @@ pub(crate) const TABLE1_CASE: &str = "pub_sdd_paper_rs";
 pub(crate) const FLEET_CASES: &str = "fleet-cases";
 /// The block of the vocabulary's words.
 pub(crate) const VOCABULARY: &str = "vocabulary";
+/// The block of the blind bench's figures (`benches/blind/record.rs`).
+pub(crate) const BLIND_BENCH: &str = "blind-bench";
 
 /// The fleet ranking of a `summary.json` document `summary` as a Markdown table: rank, valve,
 /// severity, priority, what is wrong (each finding's plain name and what it does) and what to

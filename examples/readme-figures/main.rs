@@ -1,11 +1,13 @@
 //! Generates the deterministic figures README and docs/ quote: diagnoses the nine shared
 //! recordings (their table, and their fleet ranking as `valve-bridge fleet` makes it),
-//! identifies the paper-like one, runs the standard response test on the emulated valve and
-//! writes the vocabulary's table, then prints the generated blocks, or with `--write` puts each
-//! into its page (`blocks::page`). Tests compare the pages with
-//! the same rows, made by this example's own `blocks.rs` (`tests/analysis/diagnose_cases.rs`,
-//! `tests/analysis/fleet_cli.rs`, `tests/analysis/identify_cli.rs`,
-//! `tests/analysis/response_test.rs`; the vocabulary in `tests.rs`), so a stale figure fails CI.
+//! identifies the paper-like one, runs the standard response test on the emulated valve,
+//! writes the vocabulary's table and the blind bench's figures from its records, then prints
+//! the generated blocks, or with `--write` puts each into its page (`blocks::page`). Tests
+//! compare the pages with the same rows, made by this example's own `blocks.rs`
+//! (`tests/analysis/diagnose_cases.rs`, `tests/analysis/fleet_cli.rs`,
+//! `tests/analysis/identify_cli.rs`, `tests/analysis/response_test.rs`,
+//! `tests/analysis/diagnose_blind_readme.rs`; the vocabulary in `tests.rs`), so a stale figure
+//! fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
 //! optimised in debug builds too, and the tests that check the pages are debug builds).
@@ -15,6 +17,16 @@
 // The checks of `blocks.rs` are the tests' (they include the file), not the generator's.
 #[allow(dead_code)]
 mod blocks;
+// The blind bench's records and how its figures are made, shared with `benches/` (only the
+// records' figures are used here; which plan they hold is the tests').
+#[path = "../../benches/blind/cases.rs"]
+mod cases;
+#[allow(dead_code)]
+#[path = "../../benches/blind/record.rs"]
+mod record;
+#[allow(dead_code)]
+#[path = "../../benches/blind/score.rs"]
+mod score;
 #[cfg(test)]
 mod tests;
 
@@ -77,6 +89,7 @@ fn main() -> anyhow::Result<()> {
         (blocks::IDENTIFY_TABLE1, table1),
         (blocks::VOCABULARY, blocks::vocabulary_table()),
         (blocks::RESPONSE_EMULATED, response),
+        (blocks::BLIND_BENCH, blind_bench(root)?),
     ];
     if write {
         for (name, content) in &blocks {
@@ -94,6 +107,17 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// README's figures of the blind bench, from its records ([`record::README_RECORDS`]).
+fn blind_bench(root: &Path) -> anyhow::Result<String> {
+    let runs = (record::README_RECORDS.iter())
+        .map(|(kind, path)| {
+            let outcomes = record::read(&root.join(path)).map_err(anyhow::Error::msg)?;
+            Ok((*kind, outcomes.into_iter().map(|(_, o)| o).collect()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(record::readme_block(&runs))
 }
 
 /// README's response test: the standard plan on `config/emulated.toml`, as fast as possible.

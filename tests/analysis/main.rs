@@ -10,7 +10,9 @@ mod common;
 // The blind benchmark's cases and its coverage table, shared with `benches/`.
 #[path = "../../benches/blind/cases.rs"]
 mod cases;
-// Only the coverage of the bench's tables is checked here.
+// Only the coverage of the bench's tables and README's figures from its records are checked here.
+#[path = "../../benches/blind/record.rs"]
+mod record;
 #[allow(dead_code)]
 #[path = "../../benches/blind/score.rs"]
 mod score;
@@ -23,6 +25,7 @@ mod blocks;
 mod compensation_trial;
 mod diagnose_blind_cases;
 mod diagnose_blind_digital;
+mod diagnose_blind_readme;
 mod diagnose_blind_score;
 mod diagnose_cases;
 mod diagnose_concealed;
