@@ -581,7 +581,13 @@ mod tests {
             let tuning = Tuning::default();
             let s = size(Effect::Asymmetry, &truth, &facts, &op, &tuning);
             assert_eq!((s.name, s.value), ("speed_ratio", 10.0));
-            let s = interval(s, Effect::Asymmetry, &truth, &scorer, (&facts, &op, &tuning));
+            let s = interval(
+                s,
+                Effect::Asymmetry,
+                &truth,
+                &scorer,
+                (&facts, &op, &tuning),
+            );
             with_model_spread(open_ended(Effect::Asymmetry, s, &truth, &scorer))
         };
         // Steps of 2-6 % ask the positioner for 30 %/s at most: the opening limit is never
