@@ -1,10 +1,12 @@
 //! What a diagnosis concludes, in the shape of `--json`: the [`Diagnosis`] with its
-//! [`Finding`]s, [`Trace`]s, [`Note`]s, [`Outcome`] and the final model's [`Figures`].
+//! [`Finding`]s, [`Trace`]s, [`Note`]s, [`Outcome`] and the final model's [`Figures`], and a
+//! model's knobs as they are quoted ([`params`]).
 //!
 //! Not here: how they are reached (the parent module and [`super::rounds`]) or worded
 //! (`report::diagnose`).
 
 use serde::Serialize;
+use serde_json::{Map, Value};
 
 use super::evidence::Evidence;
 use super::facts;
@@ -12,7 +14,7 @@ use super::locate::Window;
 use super::measure::Measure;
 use super::size::Size;
 use vb_core::metrics::Scores;
-use vb_core::model::composed::{self, Effect};
+use vb_core::model::composed::{self, Effect, Knob};
 use vb_core::model::ModelSpec;
 
 /// The starting point, scored.
@@ -207,4 +209,17 @@ pub struct Diagnosis {
     /// The step responses measured in the recording (evidence for delays).
     #[serde(skip)]
     pub steps: Vec<facts::StepResponse>,
+}
+
+/// The values of `knobs` in `spec`, by label, rounded to four decimals as reported.
+pub(crate) fn params(spec: &ModelSpec, knobs: impl Iterator<Item = Knob>) -> Map<String, Value> {
+    knobs
+        .map(|k| {
+            let v = composed::get(spec, k);
+            (
+                k.label().to_string(),
+                serde_json::json!((v * 1e4).round() / 1e4),
+            )
+        })
+        .collect()
 }

@@ -191,7 +191,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
             let now = size::size(f.effect, &final_spec, data.facts, rec.op, data.tuning);
             let now = size::interval(now, f.effect, &final_spec, scorer, sized);
             f.size = size::open_ended(f.effect, now, &final_spec, scorer);
-            f.params = rounds::params(&final_spec, f.knobs.iter().copied());
+            f.params = diagnosis::params(&final_spec, f.knobs.iter().copied());
             f.facts
                 .in_final(f.effect, &final_spec, data.facts, data.sigma);
         }

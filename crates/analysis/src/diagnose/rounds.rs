@@ -19,13 +19,13 @@
 //! evidence ([`super::evidence`]).
 
 use rayon::prelude::*;
-use serde_json::{Map, Value};
+use serde_json::Value;
 
 use super::candidates::{self, MAX_DEAD_TIME_S, WINDUP_RANGE_PCT};
-use super::diagnosis::{Finding, Note, Support, Trace};
+use super::diagnosis::{params, Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{bic_change, Judge, Trial};
+use super::judge::{best_per_effect, bic_change, Judge, Trial};
 use super::locate::Window;
 use super::measure::Measure;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
@@ -356,15 +356,36 @@ impl<'a> Search<'a> {
     /// ([`TIE_SHARE`]) with the support of more held-out blocks: an effect that explains the
     /// error across the recording is better supported than one that helps a few blocks a lot.
     /// Then the smaller BIC: of two alike, the one with fewer parameters (a tolerance band).
+    /// Stiction with a deadband nearly as good ([`LOOK_ALIKE_SHARE`]) needs V_P to jump
+    /// ([`stickslip::jumps`]); else the deadband wins.
     fn winner<'t>(&self, best: &[&'t Trial]) -> Option<&'t Trial> {
         let first = *best.iter().find(|t| t.passes())?;
         let gain = |t: &Trial| self.cur.held - t.errors.held;
-        best.iter()
+        let winner = (best.iter())
             .filter(|t| t.passes() && gain(t) >= TIE_SHARE * gain(first))
             .max_by(|a, b| {
                 (a.t_stat.total_cmp(&b.t_stat)).then(b.delta_bic.total_cmp(&a.delta_bic))
             })
-            .copied()
+            .copied()?;
+        let d = &self.data;
+        let band = (best.iter()).find(|t| {
+            t.effect == Effect::Deadband && t.passes() && gain(t) >= LOOK_ALIKE_SHARE * gain(winner)
+        });
+        match band {
+            Some(band)
+                if winner.effect == Effect::Stiction
+                    && !stickslip::jumps(
+                        d.scorer,
+                        (&self.current, &band.spec),
+                        d.facts,
+                        d.sigma,
+                        d.tuning,
+                    ) =>
+            {
+                Some(band)
+            }
+            _ => Some(winner),
+        }
     }
 
     /// The look-alikes of the winner that pass too and remove nearly as much held-out error,
@@ -664,38 +685,6 @@ fn pick_nuisance<'t>(
                         cur_held - t.errors.held >= DISPLACING_GAIN * (cur_held - w.errors.held)
                     })))
     })
-}
-
-/// The best variant of each effect (lowest held-out error among the material ones, when any
-/// is), best effect first. A variant that cannot be kept (pinned at the edge of its box, or
-/// too small to matter) does not hide one that can: lost motion of 1.2 % in a valve moving
-/// at 60 %/s is a crossing time of 0.02 s, on the edge of that form's box, and a friction band
-/// well inside its own.
-fn best_per_effect(trials: &[Trial]) -> Vec<&Trial> {
-    let better = |t: &Trial, b: &Trial| (t.material, -t.errors.held) > (b.material, -b.errors.held);
-    let mut best: Vec<&Trial> = Vec::new();
-    for trial in trials {
-        match best.iter_mut().find(|b| b.effect == trial.effect) {
-            Some(b) if better(trial, b) => *b = trial,
-            Some(_) => {}
-            None => best.push(trial),
-        }
-    }
-    best.sort_by(|a, b| a.errors.held.total_cmp(&b.errors.held));
-    best
-}
-
-/// The values of `knobs` in `spec`, by label, rounded to four decimals as reported.
-pub(crate) fn params(spec: &ModelSpec, knobs: impl Iterator<Item = Knob>) -> Map<String, Value> {
-    knobs
-        .map(|k| {
-            let v = composed::get(spec, k);
-            (
-                k.label().to_string(),
-                serde_json::json!((v * 1e4).round() / 1e4),
-            )
-        })
-        .collect()
 }
 
 #[cfg(test)]

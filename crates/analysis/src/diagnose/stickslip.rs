@@ -383,6 +383,19 @@ struct Rest {
 }
 
 impl Rest {
+    /// Evident slips for a reading of noise `sigma` with the slips of `scale`, the first `skip`
+    /// samples not counted.
+    fn new(scale: &facts::SlipScale, sigma: f64, skip: usize, tuning: &Tuning) -> Rest {
+        Rest {
+            span: scale.span,
+            sigma,
+            skip,
+            least: (EVIDENT_FACTOR * scale.threshold_pct)
+                .max(tuning.worth.friction_band_pct)
+                .max(1.5 * sigma),
+        }
+    }
+
     /// Number of `slips` of the reading `y` at least `least` in size, outside the initial
     /// transient, with `y` at rest for a span just before and just after the move: within a
     /// quarter of the slip plus what five noise sigmas spread over. A valve that jitters
@@ -514,14 +527,7 @@ pub(crate) fn fit(
     );
     let (measured_n, model_n) = (measured_slips.len(), slips_before.len());
     tracing::debug!(measured_n, model_n, ?missed, threshold, "slips of V_P");
-    let rest = Rest {
-        span: scale.span,
-        sigma,
-        skip: scorer.skip,
-        least: (EVIDENT_FACTOR * threshold)
-            .max(tuning.worth.friction_band_pct)
-            .max(1.5 * sigma),
-    };
+    let rest = Rest::new(scale, sigma, scorer.skip, tuning);
     let (evident, evident_model) = (
         rest.evident(&measured_slips, scorer.vp),
         rest.evident(&slips_before, &read_before),
@@ -605,6 +611,33 @@ pub(crate) fn fit(
 }
 
 /// `current` with the `knobs` set.
+/// Whether V_P sticks, then jumps, beyond what the smooth model `smooth` makes (a deadband
+/// that removes nearly as much held-out error as stiction): its evident slips, against the
+/// current model `current`, number at least [`MIN_EVIDENT`] and [`EVIDENT_RATIO`] times those
+/// of `smooth` read through a sensor like the recording's. A valve in a deadband rests
+/// anywhere in the band around its target and is moved back into it at the positioner's
+/// speed; stick-slip jumps.
+pub(crate) fn jumps(
+    scorer: &Scorer,
+    (current, smooth): (&ModelSpec, &ModelSpec),
+    facts: &Facts,
+    sigma: f64,
+    tuning: &Tuning,
+) -> bool {
+    let scale = &facts.slip_scale;
+    let reference = scorer.simulate(current);
+    let rest = Rest::new(scale, sigma, scorer.skip, tuning);
+    let evident = rest.evident(&facts::slips(&reference, scorer.vp, scale), scorer.vp);
+    let read = Sensor::new(scorer.vp, sigma, facts.lattice_pct).read(&scorer.simulate(smooth));
+    let evident_smooth = rest.evident(&facts::slips(&reference, &read, scale), &read);
+    tracing::debug!(
+        evident,
+        evident_smooth,
+        "jumps of V_P against a smooth look-alike"
+    );
+    evident >= MIN_EVIDENT && evident as f64 >= EVIDENT_RATIO * evident_smooth.max(1) as f64
+}
+
 fn with_knobs(current: &ModelSpec, knobs: &[(Knob, f64)]) -> ModelSpec {
     let mut spec = current.clone();
     for &(k, v) in knobs {
