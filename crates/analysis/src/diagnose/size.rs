@@ -57,9 +57,9 @@ const MODEL_SPREAD: [(&str, f64); 11] = [
 ];
 
 /// `size` with its interval widened to at least its model spread ([`MODEL_SPREAD`]) either
-/// side of its value (a ratio's no lower than 1). Its `worth_low` stays the held-out blocks' own: whether the recording
-/// shows an effect worth maintenance is judged on its evidence, the spread says how far the
-/// number may be from the valve's.
+/// side of its value (a ratio's no lower than 1). Its `worth_low` stays the held-out blocks'
+/// own: whether the recording shows an effect worth maintenance is judged on its evidence, the
+/// spread says how far the number may be from the valve's.
 pub(crate) fn with_model_spread(size: Size) -> Size {
     let w = (MODEL_SPREAD.iter())
         .find(|(name, _)| *name == size.name)
@@ -105,7 +105,7 @@ pub(crate) fn open_ended(effect: Effect, size: Size, spec: &ModelSpec, scorer: &
     let mut rng = ChaCha8Rng::seed_from_u64(0xfa57);
     let no_worse = (0..RESAMPLES)
         .filter(|_| {
-            let pick: Vec<usize> = (0..blocks).map(|_| rng.gen_range(0..blocks)).collect();
+            let pick = resample(&mut rng, blocks);
             let sum = |e: &[f64]| pick.iter().map(|&b| e[b]).sum::<f64>();
             sum(&tried) <= sum(&fitted)
         })
@@ -437,7 +437,7 @@ fn along(
     let mut rng = ChaCha8Rng::seed_from_u64(0x512e);
     let (mut best, mut best_worth): (Vec<f64>, Vec<f64>) = (0..RESAMPLES)
         .map(|_| {
-            let pick: Vec<usize> = (0..blocks).map(|_| rng.gen_range(0..blocks)).collect();
+            let pick = resample(&mut rng, blocks);
             let sse: Vec<f64> = (profile.iter())
                 .map(|p| pick.iter().map(|&b| p.blocks[b]).sum())
                 .collect();
@@ -455,6 +455,12 @@ fn along(
         worth_low: stats::quantile(&mut best_worth, 0.05).min(size.worth),
         ..size
     }
+}
+
+/// One resample of `blocks` held-out blocks (a block bootstrap): as many drawn with
+/// replacement.
+fn resample(rng: &mut ChaCha8Rng, blocks: usize) -> Vec<usize> {
+    (0..blocks).map(|_| rng.gen_range(0..blocks)).collect()
 }
 
 /// A grid point of a profile: its size and worth, and the squared error of each held-out
