@@ -16,6 +16,10 @@
 //!   whose slips a fitted stick-slip matches only in part, is still named stiction by their
 //!   number: its evident slips outnumber the smooth rival's many times over. One whose slips
 //!   stick-slip matches (seed 9 valve 205, of the physical family) is named by the match.
+//! - A valve that hunts in slips the sensor's noise hides one by one (seed 12 valve 270: slips
+//!   of 0.51 % on small steps under 0.25 % of noise) shows too few evident slips to be judged
+//!   by them, but the current model misses hundreds in the fit and the held-out blocks alike:
+//!   it is named stiction, and the slip's interval holds the drawn one.
 //! - A tolerance band that stick-slip explains as well is named a deadband (seed 5 valve 285,
 //!   a 0.94 % band alone, random steps, sensor noise 0.25 %): stick-slip on the valve's input
 //!   (a band and a jump) and a positioner deadband remove the same half of the held-out error;
@@ -85,6 +89,20 @@ fn stick_slip_in_a_closed_loop_is_still_named_by_its_slips() {
             named(&d)
         );
     }
+}
+
+#[test]
+fn stick_slip_the_noise_hides_one_slip_at_a_time_is_named_by_their_number() {
+    let (case, d) = diagnosed(12, 270);
+    assert_eq!(case.labels, [Effect::Stiction]);
+    assert_eq!(named(&d), [Effect::Stiction]);
+    let (slip, truth) = (&d.findings[0].size, &case.truth[0]);
+    assert_eq!(slip.name, truth.name);
+    assert!(
+        (slip.low..=slip.high).contains(&truth.value),
+        "{slip:?}, drawn {}",
+        truth.value
+    );
 }
 
 #[test]

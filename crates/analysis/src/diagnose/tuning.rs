@@ -40,7 +40,9 @@ pub struct Worth {
     pub min_speed_band_pct: f64,
     /// Slip of stick-slip, % (also at least one and a half noise sigmas).
     pub slip_pct: f64,
-    /// Deadband, %: the valve then stops short by a tenth of a percent or more.
+    /// Deadband, %: the valve then stops short by 0.15 % or more. As large as a healthy stem's
+    /// friction band (above), since in a loop that never reverses sharply a healthy stem that
+    /// stops short by its lost motion looks like a deadband of that size.
     pub deadband_pct: f64,
     /// Distance of a travel stop from its end of travel, %.
     pub stop_pct: f64,
@@ -63,7 +65,7 @@ impl Default for Worth {
             speed_ratio_excess: 0.3,
             min_speed_band_pct: 0.2,
             slip_pct: 0.2,
-            deadband_pct: 0.2,
+            deadband_pct: 0.3,
             stop_pct: 0.5,
             lattice_pct: 0.15,
             calibration_pct: 0.3,
