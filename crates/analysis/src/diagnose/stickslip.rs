@@ -590,7 +590,7 @@ pub(crate) fn fit(
         evident as f64 >= EVIDENT_RATIO * evident_model.max(evident_smooth).max(1) as f64;
     let by_count = beyond_smooth
         && (by_evidence
-            || (missed.0.min(missed.1) >= per_min
+            || (hunting
                 && size >= tuning.worth.slip_pct.max(1.5 * sigma)
                 && held.distance_after < held.distance_before));
     let candidate = Candidate {
