@@ -14,6 +14,7 @@ mod daemon_hil;
 mod daemon_hil_valves;
 mod daemon_links;
 mod daemon_modbus;
+mod daemon_startup;
 mod modbus_configs;
 mod probe;
 mod profiles;
