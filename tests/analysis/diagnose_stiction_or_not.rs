@@ -25,6 +25,10 @@
 //!   (a band and a jump) and a positioner deadband remove the same half of the held-out error;
 //!   with as much support from the held-out blocks, the one with fewer parameters wins on BIC,
 //!   the other is named its look-alike, and the deadband's interval holds the band.
+//! - A healthy stem in a noisy level loop stops short by its lost motion, which looks like a
+//!   deadband (seed 12 valve 222, of the physical family: Coulomb band 0.12 %, positioner
+//!   deadband 0.006 %, fitted as a deadband of 0.26 %): a deadband no larger than a healthy
+//!   friction band is not worth maintenance, so nothing is named.
 //! - A tolerance band whose stick-slip look-alike removes a little more of the held-out error
 //!   is named a deadband when V_P never sticks and then jumps (seed 11 valves 321 and 330,
 //!   bands of 0.55 % beside a 1 % sensor lattice on random steps and 0.75 % on mixed
@@ -103,6 +107,13 @@ fn stick_slip_the_noise_hides_one_slip_at_a_time_is_named_by_their_number() {
         "{slip:?}, drawn {}",
         truth.value
     );
+}
+
+#[test]
+fn a_healthy_stem_in_a_noisy_loop_is_not_named_a_deadband() {
+    let (case, d) = diagnosed(12, 222);
+    assert!(case.labels.is_empty());
+    assert_eq!(named(&d), []);
 }
 
 #[test]
