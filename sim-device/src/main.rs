@@ -154,7 +154,7 @@ struct Args {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     disconnect_after: Option<u64>,
     /// TCP connections open at once; at the limit one makes room for a new one (first from the
-    /// host holding the most, one that never sent a request, then the longest idle).
+    /// host holding the most, one silent for 100 ms since it opened, then the longest idle).
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1000))]
     max_connections: u64,
     /// Close a TCP connection that sends no request for this long, s.

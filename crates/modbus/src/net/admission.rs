@@ -6,8 +6,11 @@
 //! another client's connection. When the server is full, the connection closed for the new one
 //! is taken from the host (IP address) holding the most connections that are not a
 //! controller's, so a host that floods the server loses its own first; within that host an
-//! ordinary connection goes before a preferred one (a Prometheus scraper's), one that never
-//! sent a request before one that did, and then the one idle longest. Configured controllers
+//! ordinary connection goes before a preferred one (a Prometheus scraper's); a socket that has
+//! sent no request for [`NEWCOMER_GRACE`] since it opened goes before one that did, and one
+//! that did before a newcomer still within that grace (its first request is on its way: a
+//! client that reconnects is not pushed out before it can say who it is); then the one idle
+//! longest. Configured controllers
 //! also have slots kept for them: the other connections hold at most `max_connections` minus
 //! their number. With every slot held by controllers, a configured controller's new
 //! connection takes the place of the idle-longest one of its own host (it reconnected), and
@@ -18,6 +21,10 @@
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::time::Duration;
+
+/// Time a new connection has to send its first request before it counts as one that never
+/// does (a client on a network sends it within milliseconds of connecting).
+pub(super) const NEWCOMER_GRACE: Duration = Duration::from_millis(100);
 
 /// How firmly a connection keeps its place when the server is full (ordered: a higher standing
 /// gives way later).
@@ -100,8 +107,8 @@ pub(super) fn room(
 }
 
 /// The index of the connection that is not a controller's to close: of the host holding the
-/// most such connections, the lowest standing, never a request, then idle longest. `open` must
-/// hold one.
+/// most such connections, the lowest standing, a silent one past its grace before one that
+/// talked and one that talked before a newcomer, then idle longest. `open` must hold one.
 fn giving_way(open: &[Held]) -> usize {
     let mut per_host: HashMap<IpAddr, usize> = HashMap::new();
     for c in open.iter().filter(|c| c.standing != Standing::Controller) {
@@ -111,9 +118,19 @@ fn giving_way(open: &[Held]) -> usize {
         .filter(|(_, c)| c.standing != Standing::Controller)
         .max_by_key(|(_, c)| {
             let held = per_host.get(&c.ip).copied().unwrap_or(0);
-            (held, std::cmp::Reverse(c.standing), c.silent, c.idle)
+            (held, std::cmp::Reverse(c.standing), doubt(c), c.idle)
         })
         .map_or(0, |(i, _)| i)
+}
+
+/// How little a connection has shown it is wanted, within its standing: 2 for a socket silent
+/// past [`NEWCOMER_GRACE`], 1 for one that sent a request, 0 for a newcomer within the grace.
+fn doubt(c: &Held) -> u8 {
+    match (c.silent, c.idle >= NEWCOMER_GRACE) {
+        (true, true) => 2,
+        (false, _) => 1,
+        (true, false) => 0,
+    }
 }
 
 #[cfg(test)]
@@ -164,7 +181,23 @@ mod tests {
 
     #[test]
     fn a_socket_that_never_sent_a_request_goes_before_a_busy_one() {
-        let open = [held(1, Ordinary, false, 50), held(1, Ordinary, true, 10)];
+        let open = [held(1, Ordinary, false, 50), held(1, Ordinary, true, 150)];
+        assert_eq!(room(&open, (ip(1), Ordinary), 2, 0), Room::Close(1));
+    }
+
+    #[test]
+    fn a_newcomer_gets_its_first_request_in_before_it_can_be_closed() {
+        // Just opened, its request on the way: the busy one idle longest goes instead, and a
+        // newcomer goes only for an older newcomer, or once silent past its grace.
+        let open = [
+            held(1, Ordinary, false, 2),
+            held(1, Ordinary, true, 1),
+            held(1, Ordinary, false, 3),
+        ];
+        assert_eq!(room(&open, (ip(1), Ordinary), 3, 0), Room::Close(2));
+        let open = [held(1, Ordinary, true, 1), held(1, Ordinary, true, 30)];
+        assert_eq!(room(&open, (ip(1), Ordinary), 2, 0), Room::Close(1));
+        let open = [held(1, Ordinary, false, 2), held(1, Ordinary, true, 100)];
         assert_eq!(room(&open, (ip(1), Ordinary), 2, 0), Room::Close(1));
     }
 

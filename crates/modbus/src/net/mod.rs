@@ -8,8 +8,8 @@
 //! a flood of clients cannot use up the file descriptors; a new connection is not turned away
 //! for another client's, though: at the limit one open connection is closed to make room, chosen
 //! by the `admission` module: never a process controller's, first from the host holding the most
-//! connections, a socket that never sent a request before one that did, then the one idle
-//! longest. A controller is a configured address ([`Limits::controllers`], with slots kept for
+//! connections, a socket that never sent a request in its first 100 ms before one that did, and
+//! one that did before a newcomer still within those 100 ms, then the one idle longest. A controller is a configured address ([`Limits::controllers`], with slots kept for
 //! it) or a connection its handler raised to [`Standing::Controller`] (the HIL server does on an
 //! accepted set-point write); the metrics endpoint raises a scraper's to
 //! [`Standing::Preferred`]. Only when every slot is a controller's is a new connection refused.
@@ -438,11 +438,12 @@ mod tests {
             idle.push(TcpStream::connect(addr).await.unwrap());
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
-        // Ten more arrive, each while the controller keeps talking: each takes the place of
-        // the socket that has waited longest without a request; the controller stays.
+        // Ten more arrive, each while the controller keeps talking and after the silent ones'
+        // grace: each takes the place of the socket that has waited longest without a request;
+        // the controller stays.
         for _ in 0..10 {
             controller.write_all(b"x").await.unwrap();
-            tokio::time::sleep(Duration::from_millis(20)).await;
+            tokio::time::sleep(Duration::from_millis(120)).await;
             idle.push(TcpStream::connect(addr).await.unwrap());
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
