@@ -1,5 +1,6 @@
 //! Small statistics shared by identification and diagnosis: quantiles, the median, mean and
-//! spread, a robust noise estimate and the correlation length of a residual.
+//! spread, a robust noise estimate, the correlation length of a residual and Wilcoxon's
+//! signed-rank test.
 //!
 //! Written here rather than taken from a crate because each is a few lines over `f64` slices
 //! with the exact conventions the analysis relies on (a quantile is an order statistic found
@@ -102,6 +103,44 @@ pub fn correlation_length(r: &[f64]) -> f64 {
     (1.0 + rho) / (1.0 - rho)
 }
 
+/// One-sided p-value of Wilcoxon's signed-rank test that the paired differences `x` lean
+/// positive: zeros are dropped, tied magnitudes share their mean rank, and the p-value is exact
+/// (the share of the 2^n sign patterns whose positive rank sum reaches the observed one).
+pub fn signed_rank_p(x: &[f64]) -> f64 {
+    let tie = 1e-9;
+    let mut v: Vec<f64> = x.iter().copied().filter(|d| d.abs() > tie).collect();
+    v.sort_by(|a, b| a.abs().total_cmp(&b.abs()));
+    // Twice the mean ranks, so they stay integers.
+    let n = v.len();
+    let mut rank2 = vec![0usize; n];
+    let mut i = 0;
+    while i < n {
+        let mut j = i;
+        while j + 1 < n && v[j + 1].abs() - v[i].abs() <= tie {
+            j += 1;
+        }
+        rank2[i..=j].fill(i + j + 2);
+        i = j + 1;
+    }
+    let observed: usize = v
+        .iter()
+        .zip(&rank2)
+        .filter(|(d, _)| **d > 0.0)
+        .map(|(_, r)| r)
+        .sum();
+    let total: usize = rank2.iter().sum();
+    // ways[s]: sign patterns whose positive ranks sum to s.
+    let mut ways = vec![0.0f64; total + 1];
+    ways[0] = 1.0;
+    for &r in &rank2 {
+        for s in (r..=total).rev() {
+            ways[s] += ways[s - r];
+        }
+    }
+    let all: f64 = ways.iter().sum();
+    ways[observed..].iter().sum::<f64>() / all
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -167,5 +206,19 @@ mod tests {
         holed.iter_mut().step_by(10).for_each(|v| *v = f64::NAN);
         let h = correlation_length(&holed);
         assert!((h - l).abs() < 0.05 * l, "{h} {l}");
+    }
+
+    #[test]
+    fn signed_rank_test_is_exact() {
+        // All five positive: 1 pattern in 32.
+        assert!((signed_rank_p(&[1.0, 2.0, 3.0, 4.0, 5.0]) - 1.0 / 32.0).abs() < 1e-12);
+        // Zeros are dropped; nothing left means no evidence.
+        assert_eq!(signed_rank_p(&[0.0, 0.0]), 1.0);
+        // Ranks 1-4, only rank 1 negative: W+ = 9 of 10; patterns with W+ >= 9: {2,3,4}, all.
+        assert!((signed_rank_p(&[-1.0, 2.0, 3.0, 4.0]) - 2.0 / 16.0).abs() < 1e-12);
+        // Ties share a rank: |1|, |1| -> 1.5 each; W+ = 1.5 + 3 of 6; patterns reaching it: {1, 2}, {1', 2}, all.
+        assert!((signed_rank_p(&[1.0, -1.0, 2.0]) - 3.0 / 8.0).abs() < 1e-12);
+        // Leaning negative: large p.
+        assert!(signed_rank_p(&[-3.0, -2.0, -1.0, 0.5]) > 0.9);
     }
 }
