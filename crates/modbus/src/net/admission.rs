@@ -10,11 +10,10 @@
 //! sent no request for [`NEWCOMER_GRACE`] since it opened goes before one that did, and one
 //! that did before a newcomer still within that grace (its first request is on its way: a
 //! client that reconnects is not pushed out before it can say who it is); then the one idle
-//! longest. Configured controllers
-//! also have slots kept for them: the other connections hold at most `max_connections` minus
-//! their number. With every slot held by controllers, a configured controller's new
-//! connection takes the place of the idle-longest one of its own host (it reconnected), and
-//! anyone else's is refused.
+//! longest. Configured controllers also have slots kept for them: the other connections hold
+//! at most `max_connections` minus their number. With every slot held by controllers, a
+//! configured controller's new connection takes the place of the idle-longest one of its own
+//! host (it reconnected), and anyone else's is refused.
 //!
 //! Not here: closing or counting anything, logging (see [`super::serve`]).
 

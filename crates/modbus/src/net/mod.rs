@@ -9,8 +9,9 @@
 //! for another client's, though: at the limit one open connection is closed to make room, chosen
 //! by the `admission` module: never a process controller's, first from the host holding the most
 //! connections, a socket that never sent a request in its first 100 ms before one that did, and
-//! one that did before a newcomer still within those 100 ms, then the one idle longest. A controller is a configured address ([`Limits::controllers`], with slots kept for
-//! it) or a connection its handler raised to [`Standing::Controller`] (the HIL server does on an
+//! one that did before a newcomer still within those 100 ms, then the one idle longest. A
+//! controller is a configured address ([`Limits::controllers`], with slots kept for it) or a
+//! connection its handler raised to [`Standing::Controller`] (the HIL server does on an
 //! accepted set-point write); the metrics endpoint raises a scraper's to
 //! [`Standing::Preferred`]. Only when every slot is a controller's is a new connection refused.
 //! The closings and refusals are logged through a [`PeerLog`]: one line per host a minute, with
