@@ -135,12 +135,16 @@ pub(crate) fn variants(
     let slew = get(Knob::Slew);
     let speed = facts.open_speed.max(facts.close_speed).max(0.5);
     match effect {
-        Effect::DeadTime if td_max < MAX_DEAD_TIME_S => vec![vec![f(
-            Knob::DeadTime,
-            0.0,
-            MAX_DEAD_TIME_S,
-            get(Knob::DeadTime).max(0.3),
-        )]],
+        // From the baseline's dead time, and from its whole lag (dead time and time
+        // constant): a baseline that took a long delay for a slow positioner has the lag
+        // right and its parts wrong, and a simplex from its dead time does not find the delay.
+        Effect::DeadTime if td_max < MAX_DEAD_TIME_S => {
+            let td = get(Knob::DeadTime);
+            let lag = td + 1.0 / get(Knob::Gain).max(0.05);
+            [td.max(0.3), lag.clamp(0.3, 0.9 * MAX_DEAD_TIME_S)]
+                .map(|start| vec![f(Knob::DeadTime, 0.0, MAX_DEAD_TIME_S, start)])
+                .to_vec()
+        }
         // Lost motion either as pin-cart II's crossing time (eq. 7) or as a friction band the
         // positioner crosses at its own speed (the lost time then depends on the move); the
         // error surface of either has many valleys, so each starts from several sizes.
