@@ -34,6 +34,7 @@ mod diagnose_physical;
 mod diagnose_smooth_slips;
 mod diagnose_stiction_or_not;
 mod diagnose_stop_windup;
+mod diagnose_uneven_and_slow;
 mod fleet_cli;
 mod identify_cli;
 mod identify_paper;

@@ -156,6 +156,9 @@ pub enum Detail {
         open_speed: f64,
         close_speed: f64,
         slew_pct_per_s: f64,
+        /// The closing limit of a model with a limit each way (`slew_pct_per_s` opens), %/s.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        closing_slew_pct_per_s: Option<f64>,
     },
     Asymmetry {
         open_speed: f64,
@@ -382,6 +385,7 @@ fn detail(
             open_speed: facts.open_speed,
             close_speed: facts.close_speed,
             slew_pct_per_s: g(Knob::Slew),
+            closing_slew_pct_per_s: Some(g(Knob::ClosingSlew)).filter(|&c| c > 0.0),
         },
         Effect::Asymmetry => Detail::Asymmetry {
             open_speed: facts.open_speed,

@@ -170,7 +170,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     let base_errors = scorer.errors_of(&sim_before);
     baseline.heldout_sse = base_errors.held;
     baseline.sse = base_errors.fit + base_errors.held;
-    let held_noise = search.held_noise();
+    let (held_noise, corr_len) = (search.held_noise(), search.corr_len());
     let Search {
         current,
         mut findings,
@@ -196,6 +196,12 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
                 .in_final(f.effect, &final_spec, data.facts, data.sigma);
         }
     }
+    findings.extend(slow::slow_both_ways(
+        &findings,
+        &final_spec,
+        data,
+        (held_noise, corr_len),
+    ));
     for t in traces.iter_mut() {
         t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
     }

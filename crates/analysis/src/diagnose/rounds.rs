@@ -121,6 +121,11 @@ impl<'a> Search<'a> {
         self.held_noise
     }
 
+    /// Correlation length of the current residual, samples.
+    pub(super) fn corr_len(&self) -> f64 {
+        self.corr_len
+    }
+
     /// Runs the rounds; `progress(done, total)` after each.
     pub(super) fn run(&mut self, progress: &(dyn Fn(usize, usize) + Sync)) {
         self.sensor_lattice();

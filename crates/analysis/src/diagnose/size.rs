@@ -6,9 +6,11 @@
 //! `friction_band_pct` (a pin-cart II crossing time is converted to the band it means: the
 //! O_P travel over that time after the recording's reversals, at most what the valve strokes
 //! in it; see [`lost_motion`] for when the recording cannot tell a band and the crossing time
-//! itself is quoted as `crossing_half_open_s`), `open_vs_closed` (times slower fully open), `stroke_speed_pct_per_s`,
-//! `speed_ratio` (the faster over the slower direction; stroke speeds at half travel), `min_speed_pct_per_s`, `slip_pct`,
-//! `deadband_pct`, `stop_pct`, `lattice_pct`, `reading_error_pct`.
+//! itself is quoted as `crossing_half_open_s`), `open_vs_closed` (times slower fully open),
+//! `stroke_speed_pct_per_s` (at half travel; of a valve with a limit each way, their geometric
+//! mean), `speed_ratio` (the faster over the slower direction; stroke speeds at half travel),
+//! `min_speed_pct_per_s`, `slip_pct`, `deadband_pct`, `stop_pct`, `lattice_pct`,
+//! `reading_error_pct`.
 //!
 //! **Intervals** ([`interval`]): the profile of the held-out error along the effect's own
 //! knob (the others at their fitted values), resampled over the held-out blocks (a block
@@ -162,7 +164,11 @@ pub(crate) fn size(
         Effect::Backlash => lost_motion(spec, facts, op).band_bound_pct() / w.friction_band_pct,
         Effect::StateDependentDelay if g(Knob::Slowdown) > 0.0 => (value - 1.0) / w.open_slowdown,
         Effect::StateDependentDelay => (100.0 * g(Knob::CrossingSlope)).abs() / w.crossing_growth_s,
-        Effect::SlewRate => w.stroke_speed_pct_per_s / value.max(1e-9),
+        // A valve with a limit each way strokes as slowly as its faster side lets it.
+        Effect::SlewRate => {
+            let faster = g(Knob::Slew).max(g(Knob::ClosingSlew)) / composed::half_open(spec);
+            w.stroke_speed_pct_per_s / value.max(faster).max(1e-9)
+        }
         Effect::Asymmetry => (value - 1.0) / w.speed_ratio_excess,
         Effect::MinSpeed => value / g(Knob::Gain).max(1e-9) / w.min_speed_band_pct,
         Effect::Stiction => value / w.slip_pct.max(1.5 * facts.noise_pct),
@@ -205,12 +211,21 @@ fn measure(
             g(Knob::Crossing) + 100.0 * g(Knob::CrossingSlope),
         ),
         // At half travel: a slowdown of the open valve lowers it there (the limit itself is
-        // where the valve is fastest, closed).
-        Effect::SlewRate => (
-            "stroke_speed_pct_per_s",
-            "%/s",
-            g(Knob::Slew) / composed::half_open(spec),
-        ),
+        // where the valve is fastest, closed). Of a valve with a limit each way, the geometric
+        // mean of the two: the one speed whose ratio to either is the same.
+        Effect::SlewRate => {
+            let (open, close) = (g(Knob::Slew), g(Knob::ClosingSlew));
+            let limit = if close > 0.0 {
+                (open * close).sqrt()
+            } else {
+                open
+            };
+            (
+                "stroke_speed_pct_per_s",
+                "%/s",
+                limit / composed::half_open(spec),
+            )
+        }
         Effect::Asymmetry => {
             let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
             ("speed_ratio", "times", a.max(b) / a.min(b).max(1e-9))
@@ -339,7 +354,8 @@ fn profiled(effect: Effect, spec: &ModelSpec) -> Option<(Knob, bool)> {
         Effect::Backlash => (either(Knob::FrictionBand, Knob::Crossing), false),
         Effect::StateDependentDelay if g(Knob::Slowdown) > 0.0 => (Knob::Slowdown, false),
         Effect::StateDependentDelay => (Knob::CrossingSlope, false),
-        Effect::SlewRate => (Knob::Slew, false),
+        // Of a valve with a limit each way, the faster: the one a recording leaves looser.
+        Effect::SlewRate => (speed_knobs(spec).1, false),
         Effect::Asymmetry => (speed_knobs(spec).0, false),
         Effect::MinSpeed => (Knob::MinSpeed, false),
         Effect::Stiction => (either(Knob::Breakaway, Knob::Stickband), false),

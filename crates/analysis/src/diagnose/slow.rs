@@ -16,11 +16,20 @@
 //!   that moves less than [`SLOW_SHARE`] of it (or of the speed worth maintenance, if lower)
 //!   could not keep up: a ramp of 10 %/s followed at 1 %/s.
 //!
+//! A valve whose model holds a speed limit each way (an asymmetry finding) is slow too when
+//! the faster of them is: [`slow_both_ways`] names the slew-rate limit that model already has.
+//!
 //! Not here: the speed limits a model is given (`candidates`) or judged by (`judge`).
 
-use super::diagnosis::Note;
+use super::diagnosis::{self, Note, Support};
+use super::evidence::Evidence;
 use super::facts::Facts;
+use super::judge::{bic_change, blocks_helped};
+use super::rounds::Data;
+use super::size;
 use super::speeds::{speeds, WINDOWS_S};
+use super::{Finding, Measure};
+use vb_core::model::composed::{self, Effect, Knob};
 use vb_core::model::{bundled, FopdtParams, ModelKind, ModelSpec, Valve};
 
 /// Smallest O_P step, %, that asks a valve in good order for the stroke speed worth
@@ -96,6 +105,107 @@ pub(super) fn slow_strokes(facts: &Facts, op: &[f64], worth_pct_per_s: f64) -> O
         largest_step_pct: up.max(down),
         asked_pct_per_s,
         worth_pct_per_s,
+    })
+}
+
+/// The slew-rate finding of a valve uneven and slow both ways, or `None`.
+///
+/// An asymmetry finding puts a speed limit each way in the model (`spec`, the final one), and
+/// the rounds never try a slew-rate limit on a model that has one each way already; when the
+/// faster of the two is itself slower than the speed worth maintenance, the valve is slow
+/// whichever way it moves, not only uneven, and a planner needs to hear both. Its size is the
+/// stroke speed at half travel (the geometric mean of the two limits), with its interval. It
+/// is named when the recording shows it: the asymmetry's ratio is bounded above (the recording
+/// asked the faster side for its speed), and on the held-out blocks `spec` beats the valve
+/// slow one way only (the faster limit raised to the speed worth maintenance, the slower as
+/// it is) by what a finding must: beyond noise in
+/// `min_blocks` blocks, a real share of the error above the noise floor (`held_noise`), BIC
+/// (with the residual's correlation length `corr_len`) agreeing.
+pub(super) fn slow_both_ways(
+    findings: &[Finding],
+    spec: &ModelSpec,
+    data: Data,
+    (held_noise, corr_len): (f64, f64),
+) -> Option<Finding> {
+    let (scorer, tuning) = (data.scorer, data.tuning);
+    let uneven = findings.iter().find(|f| f.effect == Effect::Asymmetry)?;
+    let named = findings.iter().any(|f| f.effect == Effect::SlewRate);
+    if named || !uneven.size.high.is_finite() {
+        return None;
+    }
+    let worth_speed = tuning.worth.stroke_speed_pct_per_s / tuning.materiality;
+    let (open, close) = (
+        composed::get(spec, Knob::Slew),
+        composed::get(spec, Knob::ClosingSlew),
+    );
+    let faster = open.max(close) / composed::half_open(spec);
+    if close <= 0.0 || faster >= worth_speed {
+        return None;
+    }
+    let mut not_slow = spec.clone();
+    let knob = if open >= close {
+        Knob::Slew
+    } else {
+        Knob::ClosingSlew
+    };
+    composed::set(&mut not_slow, knob, worth_speed * composed::half_open(spec));
+    let (sim_before, sim_after) = (scorer.simulate(&not_slow), scorer.simulate(spec));
+    let (before, after) = (scorer.errors_of(&sim_before), scorer.errors_of(&sim_after));
+    let helped = blocks_helped(
+        &scorer.paired(&sim_before, &sim_after),
+        data.sigma,
+        tuning.block_z,
+    );
+    let excess = (before.held - held_noise)
+        .max(0.05 * before.held)
+        .max(1e-12);
+    let excess_share = (before.held - after.held) / excess;
+    let heldout_share = (before.held - after.held) / before.held.max(1e-12);
+    let delta_bic = bic_change(&before, &after, 0, scorer.n_scored(), corr_len);
+    let sized = (data.facts, data.rec.op, tuning);
+    let now = size::size(Effect::SlewRate, spec, data.facts, data.rec.op, tuning);
+    let size = size::interval(now, Effect::SlewRate, spec, scorer, sized);
+    tracing::debug!(
+        faster,
+        held_before = before.held,
+        held_after = after.held,
+        helped,
+        excess_share,
+        delta_bic,
+        worth_low = size.worth_low,
+        "slow both ways"
+    );
+    let shown = helped >= tuning.min_blocks
+        && excess_share >= tuning.min_excess_share
+        && heldout_share >= tuning.min_heldout_share
+        && delta_bic < tuning.max_delta_bic
+        && size.worth_low >= tuning.materiality;
+    let knobs = vec![Knob::Slew, Knob::ClosingSlew];
+    shown.then(|| Finding {
+        effect: Effect::SlewRate,
+        facts: Evidence::of(
+            Effect::SlewRate,
+            spec,
+            &not_slow,
+            data.facts,
+            data.windows,
+            data.sigma,
+        ),
+        params: diagnosis::params(spec, knobs.iter().copied()),
+        knobs,
+        alternatives: Vec::new(),
+        heldout_sse_before: before.held,
+        heldout_sse_after: after.held,
+        delta_bic,
+        support: Some(Support {
+            excess_share,
+            blocks_helped: helped,
+        }),
+        size,
+        measure: Measure::HeldoutSse {
+            before: before.held,
+            after: after.held,
+        },
     })
 }
 

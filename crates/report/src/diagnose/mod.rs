@@ -224,9 +224,18 @@ pub fn evidence(f: &Finding) -> String {
             open_speed,
             close_speed,
             slew_pct_per_s,
-        } => format!(
-            "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): a slew-rate limit of {slew_pct_per_s:.1} %/s"
-        ),
+            closing_slew_pct_per_s,
+        } => {
+            let limit = match closing_slew_pct_per_s {
+                Some(close) => format!(
+                    "slew-rate limits of {slew_pct_per_s:.1} %/s opening and {close:.1} %/s closing, both slow"
+                ),
+                None => format!("a slew-rate limit of {slew_pct_per_s:.1} %/s"),
+            };
+            format!(
+                "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): {limit}"
+            )
+        }
         Detail::Asymmetry {
             open_speed,
             close_speed,
