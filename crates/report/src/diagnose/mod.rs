@@ -164,8 +164,7 @@ fn slips_text(s: &Slips, f: &Finding) -> String {
 
 /// The evidence of a finding, as a sentence a person can follow against the plots.
 pub fn evidence(f: &Finding) -> String {
-    let e = &f.facts;
-    let l = &e.located;
+    let (e, l) = (&f.facts, &f.facts.located);
     let rev = share(&l.after_reversals, "after direction reversals");
     let moves = share(&l.during_moves, "during moves of O_P");
     let rest = share(&l.at_rest, "at rest");
@@ -225,17 +224,10 @@ pub fn evidence(f: &Finding) -> String {
             close_speed,
             slew_pct_per_s,
             closing_slew_pct_per_s,
-        } => {
-            let limit = match closing_slew_pct_per_s {
-                Some(close) => format!(
-                    "slew-rate limits of {slew_pct_per_s:.1} %/s opening and {close:.1} %/s closing, both slow"
-                ),
-                None => format!("a slew-rate limit of {slew_pct_per_s:.1} %/s"),
-            };
-            format!(
-                "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): {limit}"
-            )
-        }
+        } => format!(
+            "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): {}",
+            slew_limits(*slew_pct_per_s, *closing_slew_pct_per_s)
+        ),
         Detail::Asymmetry {
             open_speed,
             close_speed,
@@ -289,6 +281,16 @@ pub fn evidence(f: &Finding) -> String {
             "{rest}settled V_P sits {mean_offset_pct:+.2} % from O_P on average over {holds} holds; the fit gives V_P = {gain:.3} × O_P {offset_pct:+.2} %: \
              a gain or offset between command and position"
         ),
+    }
+}
+
+/// The slew-rate limit a finding's model has: one, or one each way (a valve slow both ways).
+fn slew_limits(opening: f64, closing: Option<f64>) -> String {
+    match closing {
+        Some(close) => format!(
+            "slew-rate limits of {opening:.1} %/s opening and {close:.1} %/s closing, both slow"
+        ),
+        None => format!("a slew-rate limit of {opening:.1} %/s"),
     }
 }
 
