@@ -211,7 +211,12 @@ impl Judge<'_> {
 /// Whether a candidate that helped `t_stat` held-out blocks beyond noise, removed
 /// `excess_share` of the error above the noise floor and changed BIC by `delta_bic` explains
 /// the recording beyond chance.
-fn beyond_chance(t_stat: f64, excess_share: f64, delta_bic: f64, tuning: &Tuning) -> bool {
+pub(crate) fn beyond_chance(
+    t_stat: f64,
+    excess_share: f64,
+    delta_bic: f64,
+    tuning: &Tuning,
+) -> bool {
     t_stat >= tuning.min_blocks
         && excess_share >= tuning.min_excess_share
         && delta_bic < tuning.max_delta_bic
@@ -354,8 +359,9 @@ pub(super) fn best_per_effect(trials: &[Trial]) -> Vec<&Trial> {
 /// in the model before the winner is kept ([`pick_nuisance`]).
 const DISPLACING_GAIN: f64 = 4.0;
 
-/// The nuisance of a round (the trace a search puts in its model before judging again): among `best` (sorted by held-out error),
-/// with `winner` the round's winner if any and `cur_held` the current model's held-out error,
+/// The nuisance of a round (the trace a search puts in its model before judging again): among
+/// `best` (sorted by held-out error), with `winner` the round's winner if any and `cur_held`
+/// the current model's held-out error,
 /// the first not yet `absorbed` that removes more than the winner, holds no `dead_zone` worth
 /// `materiality` (a stickband with no jump is a deadband, whatever its slip), and either is a
 /// trace or is too small to name (real beyond chance, worth less than `materiality`, whether

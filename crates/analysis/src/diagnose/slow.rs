@@ -24,7 +24,7 @@
 use super::diagnosis::{self, Note, Support};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{bic_change, blocks_helped};
+use super::judge::{beyond_chance, bic_change, blocks_helped};
 use super::rounds::Data;
 use super::size;
 use super::speeds::{speeds, WINDOWS_S};
@@ -175,10 +175,8 @@ pub(super) fn slow_both_ways(
         worth_low = size.worth_low,
         "slow both ways"
     );
-    let shown = helped >= tuning.min_blocks
-        && excess_share >= tuning.min_excess_share
+    let shown = beyond_chance(helped, excess_share, delta_bic, tuning)
         && heldout_share >= tuning.min_heldout_share
-        && delta_bic < tuning.max_delta_bic
         && size.worth_low >= tuning.materiality;
     let knobs = vec![Knob::Slew, Knob::ClosingSlew];
     shown.then(|| Finding {
