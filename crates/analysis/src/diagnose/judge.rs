@@ -125,9 +125,7 @@ impl Judge<'_> {
         let yb = self.scorer.simulate(&spec);
         let blocks = self.scorer.paired(ya, &yb);
         let t_stat = blocks_helped(&blocks, self.sigma, tuning.block_z);
-        let excess = (self.cur.held - self.held_noise).max(1e-12);
-        let excess_share = (self.cur.held - errors.held) / excess.max(0.05 * self.cur.held);
-        let heldout_share = (self.cur.held - errors.held) / self.cur.held.max(1e-12);
+        let (excess_share, heldout_share) = shares(self.cur.held, errors.held, self.held_noise);
         let own = &free[..own.min(free.len())];
         let k_new = own
             .iter()
@@ -206,6 +204,16 @@ impl Judge<'_> {
         let (lo, hi) = (spec.travel.min_pct, spec.travel.max_pct);
         (hi >= 100.0 || seen(hi, true)) && (lo <= 0.0 || seen(lo, false))
     }
+}
+
+/// The shares of the held-out error a model removes going from `before` to `after` %²: of
+/// the error above what noise alone leaves (`held_noise`; at least a twentieth of `before`),
+/// and of the whole.
+pub(crate) fn shares(before: f64, after: f64, held_noise: f64) -> (f64, f64) {
+    let excess = (before - held_noise).max(1e-12);
+    let excess_share = (before - after) / excess.max(0.05 * before);
+    let heldout_share = (before - after) / before.max(1e-12);
+    (excess_share, heldout_share)
 }
 
 /// Whether a candidate that helped `t_stat` held-out blocks beyond noise, removed

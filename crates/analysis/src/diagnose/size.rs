@@ -166,7 +166,7 @@ pub(crate) fn size(
         Effect::StateDependentDelay => (100.0 * g(Knob::CrossingSlope)).abs() / w.crossing_growth_s,
         // A valve with a limit each way strokes as slowly as its faster side lets it.
         Effect::SlewRate => {
-            let faster = g(Knob::Slew).max(g(Knob::ClosingSlew)) / composed::half_open(spec);
+            let faster = g(speed_knobs(spec).1) / composed::half_open(spec);
             w.stroke_speed_pct_per_s / value.max(faster).max(1e-9)
         }
         Effect::Asymmetry => (value - 1.0) / w.speed_ratio_excess,
@@ -335,7 +335,7 @@ pub(crate) fn friction_band(spec: &ModelSpec, facts: &Facts, op: &[f64]) -> f64 
 }
 
 /// The slower and the faster of the speed limits of `spec` (opening `Slew`, `ClosingSlew`).
-fn speed_knobs(spec: &ModelSpec) -> (Knob, Knob) {
+pub(crate) fn speed_knobs(spec: &ModelSpec) -> (Knob, Knob) {
     if composed::get(spec, Knob::ClosingSlew) < composed::get(spec, Knob::Slew) {
         (Knob::ClosingSlew, Knob::Slew)
     } else {

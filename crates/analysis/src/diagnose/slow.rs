@@ -24,7 +24,7 @@
 use super::diagnosis::{self, Note, Support};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{beyond_chance, bic_change, blocks_helped};
+use super::judge::{beyond_chance, bic_change, blocks_helped, shares};
 use super::rounds::Data;
 use super::size;
 use super::speeds::{speeds, WINDOWS_S};
@@ -134,21 +134,13 @@ pub(super) fn slow_both_ways(
         return None;
     }
     let worth_speed = tuning.worth.stroke_speed_pct_per_s / tuning.materiality;
-    let (open, close) = (
-        composed::get(spec, Knob::Slew),
-        composed::get(spec, Knob::ClosingSlew),
-    );
-    let faster = open.max(close) / composed::half_open(spec);
-    if close <= 0.0 || faster >= worth_speed {
+    let fast = size::speed_knobs(spec).1;
+    let faster = composed::get(spec, fast) / composed::half_open(spec);
+    if composed::get(spec, Knob::ClosingSlew) <= 0.0 || faster >= worth_speed {
         return None;
     }
     let mut not_slow = spec.clone();
-    let knob = if open >= close {
-        Knob::Slew
-    } else {
-        Knob::ClosingSlew
-    };
-    composed::set(&mut not_slow, knob, worth_speed * composed::half_open(spec));
+    composed::set(&mut not_slow, fast, worth_speed * composed::half_open(spec));
     let (sim_before, sim_after) = (scorer.simulate(&not_slow), scorer.simulate(spec));
     let (before, after) = (scorer.errors_of(&sim_before), scorer.errors_of(&sim_after));
     let helped = blocks_helped(
@@ -156,11 +148,7 @@ pub(super) fn slow_both_ways(
         data.sigma,
         tuning.block_z,
     );
-    let excess = (before.held - held_noise)
-        .max(0.05 * before.held)
-        .max(1e-12);
-    let excess_share = (before.held - after.held) / excess;
-    let heldout_share = (before.held - after.held) / before.held.max(1e-12);
+    let (excess_share, heldout_share) = shares(before.held, after.held, held_noise);
     let delta_bic = bic_change(&before, &after, 0, scorer.n_scored(), corr_len);
     let sized = (data.facts, data.rec.op, tuning);
     let now = size::size(Effect::SlewRate, spec, data.facts, data.rec.op, tuning);
