@@ -221,6 +221,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     let speed_found =
         (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
     let worth_speed = data.tuning.worth.stroke_speed_pct_per_s / data.tuning.materiality;
+    slow::slowdown_first(&mut findings, &final_spec, worth_speed);
     if let Some(slow) = slow::slow_strokes(data.facts, rec.op, worth_speed).filter(|_| !speed_found)
     {
         notes.push(slow);
@@ -356,19 +357,23 @@ fn outcome(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vb_core::model::composed::Knob;
     use vb_core::model::{bundled, ModelKind};
-    use vb_core::testkit::{steps, Columns};
+    use vb_core::testkit::Columns;
 
-    #[test]
-    fn a_finding_shrunk_below_worth_or_unsure_of_it_is_a_trace() {
-        let dt = 0.01;
-        let op = steps(3000, 500, &[40.0, 50.0]);
-        let rec = Columns::new(op.clone(), op, dt);
+    /// A finding of `effect` on `spec` worth `worth` (at its value) and `worth_low` (at its
+    /// interval's low end), judged by `measure`.
+    fn finding(
+        effect: Effect,
+        spec: &ModelSpec,
+        (worth, worth_low): (f64, f64),
+        measure: Measure,
+    ) -> Finding {
+        let rec = Columns::new(vec![40.0; 200], vec![40.0; 200], 0.01);
         let facts = facts::measure(&rec.view(), 0.05, 0.0);
-        let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
-        let finding = |effect, (worth, worth_low), measure| Finding {
+        Finding {
             effect,
-            facts: evidence::Evidence::of(effect, &spec, &spec, &facts, &[], 0.05),
+            facts: evidence::Evidence::of(effect, spec, spec, &facts, &[], 0.05),
             params: serde_json::Map::new(),
             alternatives: vec![],
             heldout_sse_before: 100.0,
@@ -386,7 +391,13 @@ mod tests {
             },
             measure,
             knobs: vec![],
-        };
+        }
+    }
+
+    #[test]
+    fn a_finding_shrunk_below_worth_or_unsure_of_it_is_a_trace() {
+        let spec = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        let finding = |effect, worth, measure| finding(effect, &spec, worth, measure);
         let sse = Measure::HeldoutSse {
             before: 100.0,
             after: 80.0,
@@ -408,5 +419,47 @@ mod tests {
         let traced: Vec<(Effect, f64)> = traces.iter().map(|t| (t.effect, t.size.worth)).collect();
         assert_eq!(traced, [(Effect::Stiction, 0.6), (Effect::Deadband, 1.5)]);
         assert!((traces[0].heldout_share - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_valve_slow_at_half_travel_only_through_its_slowdown_has_the_slowdown_first() {
+        let sse = Measure::HeldoutSse {
+            before: 100.0,
+            after: 80.0,
+        };
+        let order = |slew: f64, slowdown: f64| {
+            let mut spec = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+            composed::set(&mut spec, Knob::Slew, slew);
+            composed::set(&mut spec, Knob::Slowdown, slowdown);
+            let mut found: Vec<Finding> = [
+                Effect::SlewRate,
+                Effect::DeadTime,
+                Effect::StateDependentDelay,
+            ]
+            .map(|e| finding(e, &spec, (2.0, 2.0), sse))
+            .into();
+            slow::slowdown_first(&mut found, &spec, 40.0);
+            found.iter().map(|f| f.effect).collect::<Vec<_>>()
+        };
+        // Fast closed (60 %/s), three times slower fully open: the slowdown makes it slow.
+        assert_eq!(
+            order(60.0, 2.0),
+            [
+                Effect::DeadTime,
+                Effect::StateDependentDelay,
+                Effect::SlewRate
+            ]
+        );
+        // Slow even closed (20 %/s), or no slowdown in the model: the order stays.
+        for (slew, slowdown) in [(20.0, 2.0), (60.0, 0.0)] {
+            assert_eq!(
+                order(slew, slowdown),
+                [
+                    Effect::SlewRate,
+                    Effect::DeadTime,
+                    Effect::StateDependentDelay
+                ]
+            );
+        }
     }
 }

@@ -18,6 +18,8 @@
 //!
 //! A valve whose model holds a speed limit each way (an asymmetry finding) is slow too when
 //! the faster of them is: [`slow_both_ways`] names the slew-rate limit that model already has.
+//! A valve slow at half travel only because its opening slows it has the slowdown named first
+//! ([`slowdown_first`]).
 //!
 //! Not here: the speed limits a model is given (`candidates`) or judged by (`judge`).
 
@@ -193,6 +195,21 @@ pub(super) fn slow_both_ways(
             after: after.held,
         },
     })
+}
+
+/// Puts a `slew_rate` finding after the others when the valve is slow at half travel only
+/// because its opening slows it: the model's speed limit where the valve is fastest (closed,
+/// the faster way) is as fast as a valve in good order (`worth_pct_per_s`), and an
+/// opening-dependent slowdown (`state_dependent_delay`, a slowdown in `spec`) is among the
+/// `findings`. The growing chamber, not the air supply, then makes the stroke slow, and the
+/// finding that names it comes first.
+pub(super) fn slowdown_first(findings: &mut [Finding], spec: &ModelSpec, worth_pct_per_s: f64) {
+    let slowdown = composed::get(spec, Knob::Slowdown) > 0.0
+        && (findings.iter()).any(|f| f.effect == Effect::StateDependentDelay);
+    let limit = composed::get(spec, size::speed_knobs(spec).1);
+    if slowdown && limit >= worth_pct_per_s {
+        findings.sort_by_key(|f| f.effect == Effect::SlewRate);
+    }
 }
 
 #[cfg(test)]
