@@ -10,6 +10,14 @@
 //!   slow, the other at a healthy speed the recording never asks for in full. Only the
 //!   unevenness is named: the valve given a healthy speed on its faster side fits the
 //!   held-out blocks about as well.
+//! - seed 17 valve 0 and seed 18 valve 117 (physical, busy closed loops, sensor noise 0.02 %):
+//!   both sides slow (0.3-0.8 %/s), one up to 2.6 times faster. The valve turns back long
+//!   before it reaches its faster limit, so its fastest moves each way differ by less than a
+//!   fifth; where it rests (below O_P when it closes faster) shows the unevenness. Both are
+//!   named, the ratio's interval holding the drawn one, rather than a calibration offset.
+//! - seed 18 valves 24 and 144 (physical): a healthy flow limit (about 50 %/s closed) behind
+//!   a chamber that makes the valve three or four times slower fully open. The slow stroke at
+//!   half travel is listed after the slowdown (and the dead time of valve 24) that causes it.
 
 use valve_bridge::diagnose::Effect;
 
@@ -32,5 +40,45 @@ fn a_valve_slow_one_way_only_is_not_named_slow() {
         let (case, d) = diagnosed_as(17, index, false);
         assert_eq!(case.labels, [Effect::Asymmetry], "valve {index}");
         assert_eq!(named(&d), [Effect::Asymmetry], "valve {index}");
+    }
+}
+
+#[test]
+fn a_slow_uneven_valve_in_a_busy_loop_is_named_uneven_and_slow() {
+    for (seed, index) in [(17, 0), (18, 117)] {
+        let (case, d) = diagnosed_as(seed, index, false);
+        assert_eq!(case.labels, [Effect::SlewRate, Effect::Asymmetry]);
+        let found = named(&d);
+        assert!(
+            found.contains(&Effect::Asymmetry),
+            "{seed}/{index}: {found:?}"
+        );
+        assert!(
+            found.contains(&Effect::SlewRate),
+            "{seed}/{index}: {found:?}"
+        );
+        assert!(
+            !found.contains(&Effect::Calibration),
+            "{seed}/{index}: {found:?}"
+        );
+        assert!(holds(&case, &d, Effect::Asymmetry), "{:?}", d.findings);
+    }
+}
+
+#[test]
+fn a_valve_slow_only_through_its_slowdown_has_the_slowdown_named_first() {
+    for (index, first) in [(24, Effect::DeadTime), (144, Effect::StateDependentDelay)] {
+        let (case, d) = diagnosed_as(18, index, false);
+        assert!(case.labels.contains(&first), "valve {index}");
+        assert!(!case.labels.contains(&Effect::SlewRate), "valve {index}");
+        let found = named(&d);
+        assert_eq!(found.first(), Some(&first), "valve {index}: {found:?}");
+        assert!(
+            found.contains(&Effect::StateDependentDelay),
+            "valve {index}: {found:?}"
+        );
+        if let Some(at) = found.iter().position(|&e| e == Effect::SlewRate) {
+            assert_eq!(at, found.len() - 1, "valve {index}: {found:?}");
+        }
     }
 }

@@ -24,8 +24,8 @@ const BIN: &str = env!("CARGO_BIN_EXE_valve-bridge");
 const PACKING_ALARMS: [&str; 4] = [
     "lost motion (backlash): new, crossing time at half travel 1.14 s (1.07-1.76) since 0:50 h",
     "slow to respond (dead time): new, dead time 0.49 s (0.45-0.51) since 1:50 h",
-    "lost motion (backlash): new, crossing time at half travel 1.45 s (1.45-1.63) since 2:20 h",
-    "slower the more open (opening-dependent delay): new, crossing time fully open 5.31 s (5.31-5.61) since 2:20 h",
+    "lost motion (backlash): new, crossing time at half travel 1.45 s (1.45-1.64) since 2:20 h",
+    "slower the more open (opening-dependent delay): new, crossing time fully open 5.31 s (5.31-5.63) since 2:20 h",
 ];
 
 fn run(config: &str, secs: &str, dir: &Path) -> Output {

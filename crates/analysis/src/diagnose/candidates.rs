@@ -170,20 +170,17 @@ pub(crate) fn variants(
                 speed.min(slew),
             )]]
         }
-        Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => vec![vec![
-            f(
-                Knob::Slew,
-                SLOWEST_PCT_PER_S,
-                FASTEST_PCT_PER_S,
-                facts.open_speed.max(0.5),
-            ),
-            f(
-                Knob::ClosingSlew,
-                SLOWEST_PCT_PER_S,
-                FASTEST_PCT_PER_S,
-                facts.close_speed.max(0.5),
-            ),
-        ]],
+        // From the fastest move measured each way, and from each side three times faster: a
+        // valve in a busy loop never moves far enough either way to show its limits, and how
+        // much faster one side is shows only in where the valve rests (below O_P when it
+        // closes faster, and by more the faster it closes).
+        Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => {
+            let (open, close) = (facts.open_speed.max(0.5), facts.close_speed.max(0.5));
+            let limit = |knob, start| f(knob, SLOWEST_PCT_PER_S, FASTEST_PCT_PER_S, start);
+            [(open, close), (3.0 * open, close), (open, 3.0 * close)]
+                .map(|(o, c)| vec![limit(Knob::Slew, o), limit(Knob::ClosingSlew, c)])
+                .to_vec()
+        }
         // A positioner's creep floor can be as fast as a slow stroke: up to the slew limit.
         Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => vec![vec![f(
             Knob::MinSpeed,
@@ -353,5 +350,23 @@ mod tests {
         assert!((offset - 0.5).abs() < 1e-9, "{offset}");
         let (knobs, _) = calibration_knobs(&[20.0, 70.0, 45.0, 85.0, 30.0]);
         assert_eq!(knobs, [Knob::CalGain, Knob::CalOffset]);
+    }
+
+    #[test]
+    fn an_uneven_valve_is_also_tried_with_each_side_three_times_faster_than_measured() {
+        let dt = 0.01;
+        let op = steps(20_000, 500, &[40.0, 60.0]);
+        let rec = Columns::new(op.clone(), op, dt);
+        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
+        let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        let starts: Vec<(f64, f64)> = variants(Effect::Asymmetry, &spec, &facts, 1.0)
+            .iter()
+            .map(|v| (v[0].init, v[1].init))
+            .collect();
+        let (open, close) = (facts.open_speed.max(0.5), facts.close_speed.max(0.5));
+        assert_eq!(
+            starts,
+            [(open, close), (3.0 * open, close), (open, 3.0 * close)]
+        );
     }
 }

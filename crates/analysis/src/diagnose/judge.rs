@@ -293,6 +293,9 @@ pub(crate) fn bic_change(
     n_eff * ((new.fit + new.held) / (cur.fit + cur.held)).ln() + k_new as f64 * n_eff.ln()
 }
 
+/// Share of a speed limit below which V_P's fastest measured move has not reached it.
+const SHORT_OF_LIMIT: f64 = 0.8;
+
 /// Whether a fitted effect agrees with what the recording shows directly, whatever its size (a
 /// speed limit must be reached by the measured V_P; opening and closing speeds must differ
 /// the same way as the fit says; a minimum speed must show in the tails of steps).
@@ -307,10 +310,15 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
         // A slew limit even where the valve is fastest (closed), that V_P reaches and holds:
         // the short bursts of a proportional positioner answering small errors do not show one.
         Effect::SlewRate => facts.held_speed >= 0.7 * g(Knob::Slew) / composed::half_open(spec),
+        // The measured speeds differ the same way, by a fifth or more unless V_P never
+        // reached the faster limit: a valve in a busy loop turns back before it gets there,
+        // and its measured speeds then understate how much faster that side is.
         Effect::Asymmetry => {
             let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
             let (oa, ob) = (facts.open_speed, facts.close_speed);
-            let seen = oa.max(ob) / oa.min(ob).max(1e-9) >= 1.2 && (a > b) == (oa > ob);
+            let short_of_faster = oa.max(ob) < SHORT_OF_LIMIT * a.max(b);
+            let seen = (a > b) == (oa > ob)
+                && (oa.max(ob) / oa.min(ob).max(1e-9) >= 1.2 || short_of_faster);
             seen && a.min(b) < 0.8 * FASTEST_PCT_PER_S && oa.min(ob) >= 0.5 * a.min(b)
         }
         // The floor takes over from proportional action below an error of dy_min / P_k, but
@@ -546,6 +554,11 @@ mod tests {
         composed::set(&mut asym, Knob::ClosingSlew, 20.0);
         assert!(material(Effect::Asymmetry, &asym, &facts(50.0, 20.0)));
         assert!(!material(Effect::Asymmetry, &asym, &facts(20.0, 50.0)));
+        // Measured speeds a tenth apart say it only where V_P never reached the faster limit
+        // (a valve that turns back first): 35 %/s is short of 50, 45 %/s is not.
+        assert!(material(Effect::Asymmetry, &asym, &facts(35.0, 32.0)));
+        assert!(!material(Effect::Asymmetry, &asym, &facts(45.0, 41.0)));
+        assert!(!material(Effect::Asymmetry, &asym, &facts(32.0, 35.0)));
         // Lost motion: a crossing of 0.15 s at half travel after reversals at 4 %/s is a band
         // of 0.6 %; one of 0.05 s is a healthy positioner's (or a slow stroke's taken up at the
         // reversals); the same 0.15 s after reversals at 1 %/s is a band of 0.15 %: a trace.
