@@ -220,7 +220,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     // A valve found slow already has its speed limit among the findings.
     let speed_found =
         (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
-    let worth_speed = data.tuning.worth.stroke_speed_pct_per_s / data.tuning.materiality;
+    let worth_speed = data.tuning.worth_speed();
     slow::slowdown_first(&mut findings, &final_spec, worth_speed);
     if let Some(slow) = slow::slow_strokes(data.facts, rec.op, worth_speed).filter(|_| !speed_found)
     {

@@ -166,7 +166,7 @@ pub(crate) fn size(
         Effect::StateDependentDelay => (100.0 * g(Knob::CrossingSlope)).abs() / w.crossing_growth_s,
         // A valve with a limit each way strokes as slowly as its faster side lets it.
         Effect::SlewRate => {
-            let faster = g(speed_knobs(spec).1) / composed::half_open(spec);
+            let faster = faster_limit(spec) / composed::half_open(spec);
             w.stroke_speed_pct_per_s / value.max(faster).max(1e-9)
         }
         Effect::Asymmetry => (value - 1.0) / w.speed_ratio_excess,
@@ -341,6 +341,11 @@ pub(crate) fn speed_knobs(spec: &ModelSpec) -> (Knob, Knob) {
     } else {
         (Knob::Slew, Knob::ClosingSlew)
     }
+}
+
+/// The faster of the speed limits of `spec` (closed, where the valve is fastest), %/s.
+pub(crate) fn faster_limit(spec: &ModelSpec) -> f64 {
+    composed::get(spec, speed_knobs(spec).1)
 }
 
 /// The knob whose profile gives the interval of `effect`'s size in `spec`, and whether its

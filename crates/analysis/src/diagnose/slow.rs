@@ -135,13 +135,13 @@ pub(super) fn slow_both_ways(
     if named || !uneven.size.high.is_finite() {
         return None;
     }
-    let worth_speed = tuning.worth.stroke_speed_pct_per_s / tuning.materiality;
-    let fast = size::speed_knobs(spec).1;
-    let faster = composed::get(spec, fast) / composed::half_open(spec);
+    let worth_speed = tuning.worth_speed();
+    let faster = size::faster_limit(spec) / composed::half_open(spec);
     if composed::get(spec, Knob::ClosingSlew) <= 0.0 || faster >= worth_speed {
         return None;
     }
     let mut not_slow = spec.clone();
+    let fast = size::speed_knobs(spec).1;
     composed::set(&mut not_slow, fast, worth_speed * composed::half_open(spec));
     let (sim_before, sim_after) = (scorer.simulate(&not_slow), scorer.simulate(spec));
     let (before, after) = (scorer.errors_of(&sim_before), scorer.errors_of(&sim_after));
@@ -206,7 +206,7 @@ pub(super) fn slow_both_ways(
 pub(super) fn slowdown_first(findings: &mut [Finding], spec: &ModelSpec, worth_pct_per_s: f64) {
     let slowdown = composed::get(spec, Knob::Slowdown) > 0.0
         && (findings.iter()).any(|f| f.effect == Effect::StateDependentDelay);
-    let limit = composed::get(spec, size::speed_knobs(spec).1);
+    let limit = size::faster_limit(spec);
     if slowdown && limit >= worth_pct_per_s {
         findings.sort_by_key(|f| f.effect == Effect::SlewRate);
     }

@@ -97,6 +97,13 @@ pub struct Tuning {
     pub worth: Worth,
 }
 
+impl Tuning {
+    /// The stroke speed below which a valve is slow enough to be worth maintenance, %/s.
+    pub(crate) fn worth_speed(&self) -> f64 {
+        self.worth.stroke_speed_pct_per_s / self.materiality
+    }
+}
+
 impl Default for Tuning {
     fn default() -> Self {
         Tuning {
