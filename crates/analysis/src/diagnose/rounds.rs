@@ -25,7 +25,7 @@ use super::candidates::{self, MAX_DEAD_TIME_S, WINDUP_RANGE_PCT};
 use super::diagnosis::{params, Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{best_per_effect, bic_change, pick_nuisance, Judge, Trial};
+use super::judge::{best_per_effect, bic_change, offset_alike, pick_nuisance, Judge, Trial};
 use super::locate::Window;
 use super::measure::Measure;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
@@ -359,17 +359,20 @@ impl<'a> Search<'a> {
     /// error across the recording is better supported than one that helps a few blocks a lot.
     /// Then the smaller BIC: of two alike, the one with fewer parameters (a tolerance band).
     /// Stiction with a deadband nearly as good ([`LOOK_ALIKE_SHARE`]) needs V_P to jump
-    /// ([`stickslip::jumps`]); else the deadband wins.
+    /// ([`stickslip::jumps`]); else the deadband wins. An asymmetry a calibration offset fits
+    /// about as well ([`offset_alike`]) does not pass: the offset is put in first.
     fn winner<'t>(&self, best: &[&'t Trial]) -> Option<&'t Trial> {
-        let first = *best.iter().find(|t| t.passes())?;
+        let d = &self.data;
+        let held_noise = self.held_noise();
+        let passes = |t: &Trial| t.passes() && !offset_alike(t, best, d.facts, held_noise);
+        let first = *best.iter().find(|t| passes(t))?;
         let gain = |t: &Trial| self.cur.held - t.errors.held;
         let winner = (best.iter())
-            .filter(|t| t.passes() && gain(t) >= TIE_SHARE * gain(first))
+            .filter(|t| passes(t) && gain(t) >= TIE_SHARE * gain(first))
             .max_by(|a, b| {
                 (a.t_stat.total_cmp(&b.t_stat)).then(b.delta_bic.total_cmp(&a.delta_bic))
             })
             .copied()?;
-        let d = &self.data;
         let band = (best.iter()).find(|t| {
             t.effect == Effect::Deadband && t.passes() && gain(t) >= LOOK_ALIKE_SHARE * gain(winner)
         });
