@@ -179,29 +179,29 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
         by_slips,
         ..
     } = search;
+    let sized = (data.facts, rec.op, data.tuning);
+    for f in findings.iter_mut() {
+        // A stick-slip finding judged by its slips is sized by the measured slips.
+        if matches!(f.measure, Measure::HeldoutSse { .. }) {
+            let now = size::size(f.effect, &current, data.facts, rec.op, data.tuning);
+            let now = size::interval(now, f.effect, &current, scorer, sized);
+            f.size = size::open_ended(f.effect, now, &current, scorer);
+            f.params = diagnosis::params(&current, f.knobs.iter().copied());
+            f.facts.in_final(f.effect, &current, data.facts, data.sigma);
+        }
+    }
+    findings.extend(slow::slow_both_ways(
+        (&findings, &traces),
+        &current,
+        data,
+        (held_noise, corr_len),
+    ));
+    // The traces stay in the model only beside a finding.
     let final_spec = if findings.is_empty() {
         baseline.spec.clone()
     } else {
         current
     };
-    let sized = (data.facts, rec.op, data.tuning);
-    for f in findings.iter_mut() {
-        // A stick-slip finding judged by its slips is sized by the measured slips.
-        if matches!(f.measure, Measure::HeldoutSse { .. }) {
-            let now = size::size(f.effect, &final_spec, data.facts, rec.op, data.tuning);
-            let now = size::interval(now, f.effect, &final_spec, scorer, sized);
-            f.size = size::open_ended(f.effect, now, &final_spec, scorer);
-            f.params = diagnosis::params(&final_spec, f.knobs.iter().copied());
-            f.facts
-                .in_final(f.effect, &final_spec, data.facts, data.sigma);
-        }
-    }
-    findings.extend(slow::slow_both_ways(
-        &findings,
-        &final_spec,
-        data,
-        (held_noise, corr_len),
-    ));
     for t in traces.iter_mut() {
         t.size = size::interval(t.size, t.effect, &t.spec, scorer, sized);
     }

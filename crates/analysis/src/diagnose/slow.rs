@@ -16,14 +16,15 @@
 //!   that moves less than [`SLOW_SHARE`] of it (or of the speed worth maintenance, if lower)
 //!   could not keep up: a ramp of 10 %/s followed at 1 %/s.
 //!
-//! A valve whose model holds a speed limit each way (an asymmetry finding) is slow too when
-//! the faster of them is: [`slow_both_ways`] names the slew-rate limit that model already has.
+//! A valve whose model holds a speed limit each way (an asymmetry finding, or a trace of one)
+//! is slow too when the faster of them is: [`slow_both_ways`] names the slew-rate limit that
+//! model already has.
 //! A valve slow at half travel only because its opening slows it has the slowdown named first
 //! ([`slowdown_first`]).
 //!
 //! Not here: the speed limits a model is given (`candidates`) or judged by (`judge`).
 
-use super::diagnosis::{self, Note, Support};
+use super::diagnosis::{self, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
 use super::judge::{beyond_chance, bic_change, blocks_helped, shares};
@@ -112,10 +113,13 @@ pub(super) fn slow_strokes(facts: &Facts, op: &[f64], worth_pct_per_s: f64) -> O
 
 /// The slew-rate finding of a valve uneven and slow both ways, or `None`.
 ///
-/// An asymmetry finding puts a speed limit each way in the model (`spec`, the final one), and
-/// the rounds never try a slew-rate limit on a model that has one each way already; when the
-/// faster of the two is itself slower than the speed worth maintenance, the valve is slow
-/// whichever way it moves, not only uneven, and a planner needs to hear both. Its size is the
+/// An asymmetry puts a speed limit each way in the model (`spec`, the final one): as a finding,
+/// or as a trace (uneven by too little to name) that the rounds put in unnamed. The rounds
+/// never try a slew-rate limit on a model that has one each way already; when the faster of
+/// the two is itself slower than the speed worth maintenance, the valve is slow whichever way
+/// it moves, not only uneven, and a planner needs to hear it. A valve in a quiet loop that
+/// never holds its speed long enough for a slew-rate limit of its own to be plausible may
+/// still be fitted best by two limits alike. Its size is the
 /// stroke speed at half travel (the geometric mean of the two limits), with its interval. It
 /// is named when the recording shows it: the asymmetry's ratio is bounded above (the recording
 /// asked the faster side for its speed), and on the held-out blocks `spec` beats the valve
@@ -124,21 +128,42 @@ pub(super) fn slow_strokes(facts: &Facts, op: &[f64], worth_pct_per_s: f64) -> O
 /// `min_blocks` blocks, a real share of the error above the noise floor (`held_noise`), BIC
 /// (with the residual's correlation length `corr_len`) agreeing.
 pub(super) fn slow_both_ways(
-    findings: &[Finding],
+    (findings, traces): (&[Finding], &[Trace]),
     spec: &ModelSpec,
     data: Data,
     (held_noise, corr_len): (f64, f64),
 ) -> Option<Finding> {
     let (scorer, tuning) = (data.scorer, data.tuning);
-    let uneven = findings.iter().find(|f| f.effect == Effect::Asymmetry)?;
+    let (uneven, traced) = match findings.iter().find(|f| f.effect == Effect::Asymmetry) {
+        Some(f) => (f.size, false),
+        None => {
+            let t = traces.iter().find(|t| t.effect == Effect::Asymmetry)?;
+            (
+                size::open_ended(Effect::Asymmetry, t.size, spec, scorer),
+                true,
+            )
+        }
+    };
     let named = findings.iter().any(|f| f.effect == Effect::SlewRate);
-    if named || !uneven.size.high.is_finite() {
+    if named || !uneven.high.is_finite() {
         return None;
     }
     let worth_speed = tuning.worth_speed();
     let faster = size::faster_limit(spec) / composed::half_open(spec);
     if composed::get(spec, Knob::ClosingSlew) <= 0.0 || faster >= worth_speed {
         return None;
+    }
+    // A trace's limits are the valve's stroke only where it is slow even closed (where it is
+    // fastest: not its slowdown's doing) and where O_P asked a valve in good order for more
+    // than that: a valve in a busy loop that answers the controller's noise at its
+    // positioner's creep floor moves at one speed both ways, faster than a valve in good
+    // order would ever have been asked to move there.
+    if traced {
+        let closed = size::faster_limit(spec);
+        let (up, down) = good_speeds(data.rec.op, data.facts.dt);
+        if closed >= worth_speed || up.max(down) <= closed {
+            return None;
+        }
     }
     let mut not_slow = spec.clone();
     let fast = size::speed_knobs(spec).1;
