@@ -25,7 +25,7 @@ pub(crate) const REGENERATE: &str = "cargo run --example readme-figures -- --wri
 /// The page (relative to the checkout) that holds block `name`.
 pub(crate) fn page(name: &str) -> &'static str {
     match name {
-        DIAGNOSE_CASES | VOCABULARY => "docs/diagnosis.md",
+        DIAGNOSE_CASES | DIAGNOSE_REAL | VOCABULARY => "docs/diagnosis.md",
         FLEET_CASES => "docs/fleet.md",
         _ => "README.md",
     }
@@ -46,6 +46,15 @@ pub(crate) const CASES: [&str; 9] = [
 
 /// The block of the diagnoses of [`CASES`].
 pub(crate) const DIAGNOSE_CASES: &str = "diagnose-cases";
+/// The block of the diagnosis of the real recording [`REAL_CASE`].
+pub(crate) const DIAGNOSE_REAL: &str = "diagnose-real";
+/// The real recording of [`DIAGNOSE_REAL`]: its path under `tests/data/`, its name in the table
+/// and its column mapping (`--columns`).
+pub(crate) const REAL_CASE: (&str, &str, &str) = (
+    "real/damadics-actuator3-1h/actuator3_2001-10-11_1h_1Hz.csv",
+    "DAMADICS actuator 3",
+    "t=t_s,op=LC74_20CV_pct,vp=LC74_20X_pct",
+);
 /// The block of identify's Table 1 on [`TABLE1_CASE`].
 pub(crate) const IDENTIFY_TABLE1: &str = "identify-table1";
 /// The recording of identify's Table 1 (README).
@@ -122,12 +131,28 @@ pub(crate) const DIAGNOSE_HEADER: &str =
 /// The row of `case` in the diagnoses' table, from its `truth.json` and its `diagnose --json`
 /// document `d`.
 pub(crate) fn diagnose_row(case: &str, truth: &Value, d: &Value) -> String {
-    let list = |v: &Value| -> Vec<String> {
-        (v.as_array().into_iter().flatten())
-            .filter_map(|e| e.as_str().map(str::to_string))
-            .collect()
+    let truth: Vec<&str> = (truth["effects"].as_array().into_iter().flatten())
+        .filter_map(Value::as_str)
+        .collect();
+    let truth = if truth.is_empty() {
+        "—".to_string()
+    } else {
+        truth.join(", ")
     };
-    let truth = list(&truth["effects"]);
+    row(case, &truth, d)
+}
+
+/// The block of the diagnosis of [`REAL_CASE`], from its `diagnose --json` document `d`: the
+/// diagnoses' table with its one row, whose truth no one knows.
+pub(crate) fn real_block(d: &Value) -> String {
+    format!(
+        "{DIAGNOSE_HEADER}\n{}",
+        row(REAL_CASE.1, "not known (a real plant)", d)
+    )
+}
+
+/// A row of the diagnoses' table: `case`, what is known of its truth, what `d` found.
+fn row(case: &str, truth: &str, d: &Value) -> String {
     let findings = d["findings"].as_array().cloned().unwrap_or_default();
     let f64_of = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let found: Vec<String> = (findings.iter())
@@ -142,7 +167,8 @@ pub(crate) fn diagnose_row(case: &str, truth: &Value, d: &Value) -> String {
                     s["name"].as_str().unwrap_or(""),
                     f64_of(&s["value"]),
                     f64_of(&s["low"]),
-                    f64_of(&s["high"])
+                    // `null`: the size has no upper end.
+                    s["high"].as_f64().unwrap_or(f64::INFINITY)
                 )
             )
         })
@@ -166,12 +192,7 @@ pub(crate) fn diagnose_row(case: &str, truth: &Value, d: &Value) -> String {
         ),
     };
     format!(
-        "| {case} | {} | {} | {measure} |",
-        if truth.is_empty() {
-            "—".to_string()
-        } else {
-            truth.join(", ")
-        },
+        "| {case} | {truth} | {} | {measure} |",
         if found.is_empty() {
             "— (nothing worth maintenance)".to_string()
         } else {

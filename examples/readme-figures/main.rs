@@ -1,5 +1,6 @@
 //! Generates the deterministic figures README and docs/ quote: diagnoses the nine shared
-//! recordings (their table, and their fleet ranking as `valve-bridge fleet` makes it),
+//! recordings (their table, and their fleet ranking as `valve-bridge fleet` makes it) and the
+//! real DAMADICS one,
 //! identifies the paper-like one, runs the standard response test on the emulated valve,
 //! writes the vocabulary's table and the blind bench's figures from its records, then prints
 //! the generated blocks, or with `--write` puts each into its page (`blocks::page`). Tests
@@ -69,6 +70,15 @@ fn main() -> anyhow::Result<()> {
         bar.inc(1);
     }
     let ranking = blocks::fleet_table(&serde_json::to_value(Fleet::ranked(valves))?);
+    let (path, _, columns) = blocks::REAL_CASE;
+    let options = ReadOptions {
+        columns: columns.parse()?,
+        ..ReadOptions::default()
+    };
+    let rec = recording::read(&root.join("tests/data").join(path), &options)?;
+    let d = valve_bridge::diagnose::diagnose(&rec.view(), None, &|_, _| {})
+        .with_context(|| format!("diagnosing {path}"))?;
+    let real = blocks::real_block(&diagnose::json(&d));
     let rec = recording::read(
         &cases.join(format!("{}.csv", blocks::TABLE1_CASE)),
         &ReadOptions::default(),
@@ -85,6 +95,7 @@ fn main() -> anyhow::Result<()> {
     bar.finish_and_clear();
     let blocks = [
         (blocks::DIAGNOSE_CASES, rows.join("\n")),
+        (blocks::DIAGNOSE_REAL, real),
         (blocks::FLEET_CASES, ranking),
         (blocks::IDENTIFY_TABLE1, table1),
         (blocks::VOCABULARY, blocks::vocabulary_table()),

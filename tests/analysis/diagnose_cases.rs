@@ -5,7 +5,7 @@
 //! Every case also as the daemon would log it (per mille, 0.5 % of the rows without V_P in
 //! bursts of 1-3): the same effects must be named. Each case's row of the table of these
 //! diagnoses in `docs/diagnosis.md` must be the one the generator (`examples/readme-figures/`)
-//! makes of the diagnosis.
+//! makes of the diagnosis, and so must the table of a real plant's valve (DAMADICS).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -25,12 +25,12 @@ fn diagnose(case: &str) -> (Value, Vec<String>) {
     diagnose_file(&dir.join(format!("{case}.csv")), case)
 }
 
-/// Diagnoses the recording at `path` against the truth of `case`.
-fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cases");
+/// `valve-bridge diagnose --json` of the recording at `path`, with the options `args`.
+fn diagnose_json(path: &Path, args: &[&str]) -> Value {
     let out = Command::new(env!("CARGO_BIN_EXE_valve-bridge"))
         .arg("diagnose")
         .arg(path)
+        .args(args)
         .arg("--json")
         .output()
         .unwrap();
@@ -39,7 +39,13 @@ fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let d: Value = serde_json::from_slice(&out.stdout).unwrap();
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Diagnoses the recording at `path` against the truth of `case`.
+fn diagnose_file(path: &Path, case: &str) -> (Value, Vec<String>) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cases");
+    let d = diagnose_json(path, &[]);
     let truth: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.join(format!("{case}.truth.json"))).unwrap(),
     )
@@ -132,6 +138,19 @@ fn check(case: &str) -> Value {
         }
     }
     d
+}
+
+/// A real plant's valve (DAMADICS actuator 3, 1 Hz, mapped columns): the table of its
+/// diagnosis in `docs/diagnosis.md` must be the one the generator makes of it.
+#[test]
+fn the_real_valves_diagnosis_in_the_docs_is_generated() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (path, _, columns) = blocks::REAL_CASE;
+    let d = diagnose_json(&root.join("tests/data").join(path), &["--columns", columns]);
+    let text = std::fs::read_to_string(root.join(blocks::page(blocks::DIAGNOSE_REAL))).unwrap();
+    if let Err(e) = blocks::check_block(&text, blocks::DIAGNOSE_REAL, &blocks::real_block(&d)) {
+        panic!("{e}");
+    }
 }
 
 #[test]
