@@ -1,11 +1,10 @@
 //! Generates the deterministic figures README and docs/ quote: diagnoses the nine shared
 //! recordings (their table, and their fleet ranking as `valve-bridge fleet` makes it) and the
-//! real DAMADICS one,
-//! identifies the paper-like one, runs the standard response test on the emulated valve,
-//! writes the vocabulary's table and the blind bench's figures from its records, then prints
-//! the generated blocks, or with `--write` puts each into its page (`blocks::page`). Tests
-//! compare the pages with the same rows, made by this example's own `blocks.rs`
-//! (`tests/analysis/diagnose_cases.rs`, `tests/analysis/fleet_cli.rs`,
+//! real DAMADICS one, identifies the paper-like one, runs the standard response test on the
+//! emulated valve, writes the vocabulary's table and the blind bench's figures from its
+//! records, then prints the generated blocks, or with `--write` puts each into its page
+//! (`blocks::page`). Tests compare the pages with the same rows, made by this example's own
+//! `blocks.rs` (`tests/analysis/diagnose_cases.rs`, `tests/analysis/fleet_cli.rs`,
 //! `tests/analysis/identify_cli.rs`, `tests/analysis/response_test.rs`,
 //! `tests/analysis/diagnose_blind_readme.rs`; the vocabulary in `tests.rs`), so a stale figure
 //! fails CI.
