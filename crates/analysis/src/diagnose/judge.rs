@@ -377,11 +377,11 @@ pub(super) fn offset_alike(t: &Trial, best: &[&Trial], facts: &Facts, held_noise
 }
 
 /// The best variant of each effect (the lowest BIC among the material ones, when any is: of
-/// two forms of an effect that remove about as much held-out error, the one that fits the whole
-/// recording better for its parameters), best effect first by held-out error. A variant that cannot be kept (pinned at the edge of its box, or
-/// too small to matter) does not hide one that can: lost motion of 1.2 % in a valve moving
-/// at 60 %/s is a crossing time of 0.02 s, on the edge of that form's box, and a friction band
-/// well inside its own.
+/// two forms of an effect that remove about as much held-out error, the one that fits the
+/// whole recording better for its parameters), best effect first by held-out error. A variant
+/// that cannot be kept (pinned at the edge of its box, or too small to matter) does not hide
+/// one that can: lost motion of 1.2 % in a valve moving at 60 %/s is a crossing time of
+/// 0.02 s, on the edge of that form's box, and a friction band well inside its own.
 pub(super) fn best_per_effect(trials: &[Trial]) -> Vec<&Trial> {
     let better = |t: &Trial, b: &Trial| (t.material, -t.delta_bic) > (b.material, -b.delta_bic);
     let mut best: Vec<&Trial> = Vec::new();
