@@ -4,18 +4,11 @@
 //! on the potentiometer behind the play, so V_P comes to rest at the set-point and a reversal
 //! waits while the stem crosses the play; `diagnose` names `backlash` first, no `deadband`,
 //! and its 90 % interval holds the stem's lost motion (the play; `friction_band_pct`).
-//!
-//! Play beside a slow stroke (seed 22 valve 309: 1.14 % of play at 3.37 %/s; seed 23 valve
-//! 342: 4.15 % at 2.73 %/s; both digital, mixed excitation, sensor noise 0.25 %, intact): the
-//! slow stroke is named first, at a limit slow enough to take up part of the reversals'
-//! waits. The play is named beside it only because its candidates refit that limit too, and
-//! both intervals then hold the drawn values.
 
 use valve_bridge::diagnose::{self, Effect};
 use valve_bridge::synth::logged;
 
 use crate::cases;
-use crate::diagnose_stiction_or_not::{diagnosed_as, holds, named};
 
 #[test]
 fn play_inside_the_loop_is_named_backlash_and_sized() {
@@ -47,19 +40,6 @@ fn play_inside_the_loop_is_named_backlash_and_sized() {
                 truth.value,
                 size.words()
             );
-        }
-    }
-}
-
-#[test]
-fn play_beside_a_slow_stroke_is_named_and_both_are_sized() {
-    for (seed, index) in [(22, 309), (23, 342)] {
-        let (case, d) = diagnosed_as(seed, index, false);
-        assert_eq!(case.labels, [Effect::Backlash, Effect::SlewRate]);
-        let found = named(&d);
-        for effect in [Effect::Backlash, Effect::SlewRate] {
-            assert!(found.contains(&effect), "{seed}/{index}: {found:?}");
-            assert!(holds(&case, &d, effect), "{seed}/{index}: {:?}", d.findings);
         }
     }
 }

@@ -4,10 +4,9 @@
 //! An effect that is already in the model, or that the data cannot identify (saturation when
 //! V_P never stops short of O_P), has no candidate; nor has quantization, which is named from
 //! the sensor lattice itself.
-//! Every candidate also refits the positioner gain, the dead time and the stroke-speed limit
-//! (a healthy one within a healthy range, a slow one found earlier within a factor of it), so
-//! an effect is judged against the best the rest of the model can do, not against a model
-//! fitted without it.
+//! Every candidate also refits the positioner gain, the dead time and (while it is a healthy
+//! one) the stroke-speed limit, so an effect is judged against the best the rest of the model
+//! can do, not against a model fitted without it.
 //!
 //! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
 
@@ -90,43 +89,37 @@ pub(crate) fn jobs(
 }
 
 /// The model's own knobs a candidate refits with those of its effect (`own`): the positioner
-/// gain, the dead time up to `td_hi` and the stroke-speed limit; those `own` frees already are
-/// left out.
+/// gain, the dead time up to `td_hi` and, while it is a healthy one, the stroke-speed limit;
+/// those `own` frees already are left out.
 pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free]) -> Vec<Free> {
     let mut rest = vec![free_gain(spec, dt)];
     if !own.iter().any(|f| f.knob == Knob::DeadTime) {
         let td = composed::get(spec, Knob::DeadTime);
         rest.push(Free::new(Knob::DeadTime, 0.0, td_hi.max(td), td));
     }
-    rest.extend(free_slew(spec, own));
+    rest.extend(healthy_slew(spec, own));
     rest
 }
 
-/// How many times slower or faster than found a stroke-speed limit already named is refitted
-/// with another effect ([`free_slew`]).
-const NAMED_SLEW_FREEDOM: f64 = 2.0;
-
-/// The stroke-speed limit of `spec` free, when `free` does not free it already and the valve
-/// has one limit both ways: within a healthy positioner's range when it lies there, else
-/// within [`NAMED_SLEW_FREEDOM`] times the slow limit found. Either was fitted next to a
-/// missing effect (a dead time too short, no travel stop, lost motion whose reversal delays a
-/// slower stroke took up), where it may have settled on a compromise that only the effect's
-/// refit can undo.
-fn free_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
+/// The stroke-speed limit of `spec` free within a healthy positioner's range, when it lies
+/// there and `free` does not free it already: the baseline fitted it next to a missing effect
+/// (a dead time too short, no travel stop), where it may have settled on a compromise that
+/// only the effect's refit can undo.
+fn healthy_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
     let slew = composed::get(spec, Knob::Slew);
     let taken = free
         .iter()
         .any(|f| matches!(f.knob, Knob::Slew | Knob::ClosingSlew));
-    if taken || spec.effects.closing_slew_pct_per_s != 0.0 {
-        return None;
-    }
-    let (lo, hi) = if (NOMINAL_MIN_SLEW_PCT_PER_S..=FASTEST_PCT_PER_S).contains(&slew) {
-        (NOMINAL_MIN_SLEW_PCT_PER_S, FASTEST_PCT_PER_S)
-    } else {
-        let (lo, hi) = (slew / NAMED_SLEW_FREEDOM, slew * NAMED_SLEW_FREEDOM);
-        (lo.max(SLOWEST_PCT_PER_S), hi.min(FASTEST_PCT_PER_S))
-    };
-    (lo < hi).then(|| Free::new(Knob::Slew, lo, hi, slew))
+    let healthy = (NOMINAL_MIN_SLEW_PCT_PER_S..=FASTEST_PCT_PER_S).contains(&slew)
+        && spec.effects.closing_slew_pct_per_s == 0.0;
+    (healthy && !taken).then(|| {
+        Free::new(
+            Knob::Slew,
+            NOMINAL_MIN_SLEW_PCT_PER_S,
+            FASTEST_PCT_PER_S,
+            slew,
+        )
+    })
 }
 
 /// The variants to try for `effect` on top of `spec`, or none when it is already there or the
@@ -375,28 +368,5 @@ mod tests {
             starts,
             [(open, close), (3.0 * open, close), (open, 3.0 * close)]
         );
-    }
-
-    #[test]
-    fn a_stroke_speed_limit_is_refitted_in_its_range_with_every_effect() {
-        let at = |slew: f64| {
-            let mut spec = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
-            composed::set(&mut spec, Knob::Slew, slew);
-            spec
-        };
-        let boxed = |spec: &ModelSpec| free_slew(spec, &[]).map(|f| (f.def.lo, f.def.hi));
-        // A healthy limit within a healthy positioner's range.
-        assert_eq!(
-            boxed(&at(120.0)),
-            Some((NOMINAL_MIN_SLEW_PCT_PER_S, FASTEST_PCT_PER_S))
-        );
-        // A slow limit already named within a factor of two of it.
-        assert_eq!(boxed(&at(2.5)), Some((1.25, 5.0)));
-        // Not when the effect frees it, nor beside a second limit (an asymmetry).
-        let own = [Free::new(Knob::Slew, 0.05, 1000.0, 2.5)];
-        assert!(free_slew(&at(2.5), &own).is_none());
-        let mut uneven = at(2.5);
-        composed::set(&mut uneven, Knob::ClosingSlew, 0.8);
-        assert!(free_slew(&uneven, &[]).is_none());
     }
 }

@@ -376,14 +376,13 @@ pub(super) fn offset_alike(t: &Trial, best: &[&Trial], facts: &Facts, held_noise
             .any(|c| c.effect == Effect::Calibration && excess(c) <= OFFSET_ALIKE * excess(t))
 }
 
-/// The best variant of each effect (the lowest BIC among the material ones, when any is: of
-/// two forms of an effect that remove about as much held-out error, the one that fits the
-/// whole recording better for its parameters), best effect first by held-out error. A variant
-/// that cannot be kept (pinned at the edge of its box, or too small to matter) does not hide
-/// one that can: lost motion of 1.2 % in a valve moving at 60 %/s is a crossing time of
-/// 0.02 s, on the edge of that form's box, and a friction band well inside its own.
+/// The best variant of each effect (lowest held-out error among the material ones, when any
+/// is), best effect first. A variant that cannot be kept (pinned at the edge of its box, or
+/// too small to matter) does not hide one that can: lost motion of 1.2 % in a valve moving
+/// at 60 %/s is a crossing time of 0.02 s, on the edge of that form's box, and a friction band
+/// well inside its own.
 pub(super) fn best_per_effect(trials: &[Trial]) -> Vec<&Trial> {
-    let better = |t: &Trial, b: &Trial| (t.material, -t.delta_bic) > (b.material, -b.delta_bic);
+    let better = |t: &Trial, b: &Trial| (t.material, -t.errors.held) > (b.material, -b.errors.held);
     let mut best: Vec<&Trial> = Vec::new();
     for trial in trials {
         match best.iter_mut().find(|b| b.effect == trial.effect) {
