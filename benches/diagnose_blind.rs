@@ -21,7 +21,8 @@
 //! `--materiality` and `--heldout-share` set the [`diagnose::Tuning`] thresholds; `--stride K`
 //! runs every K-th valve of the plan (the same valves as the full run's, by index).
 //! `--jsonl` writes one JSON line per case (physics, labels with their truth, findings with
-//! their sizes, scores) for analysis; `--case N` runs only the case of that index; `--csv DIR`
+//! their sizes, scores, the diagnosis's wall time and its CPU time in all threads) for
+//! analysis; `--case N` runs only the case of that index; `--csv DIR`
 //! also writes each case's recording (`case-N.csv`) and its truth (`case-N.truth.json`: the
 //! labels, their truth and the valve's parameters; for the physical family also its model
 //! file `case-N.toml`), so `valve-bridge diagnose DIR/case-N.csv` repeats it; `--write-only`
@@ -215,10 +216,11 @@ fn run() -> Result<(), String> {
                 continue;
             }
         }
-        let started = Instant::now();
+        let (started, cpu_started) = (Instant::now(), process_cpu_seconds());
         let d = diagnose::diagnose_with(&rec.view(), None, &o.tuning, &|_, _| {})
             .map_err(|e| format!("case {}: diagnose: {e}", plan.index))?;
         let seconds = started.elapsed().as_secs_f64();
+        let cpu_seconds = process_cpu_seconds() - cpu_started;
         let out = score::Outcome {
             family: plan.family.name(),
             excitation: plan.excitation,
@@ -230,10 +232,11 @@ fn run() -> Result<(), String> {
             baseline_heldout_sse: d.baseline.heldout_sse,
             final_heldout_sse: d.final_model.heldout_sse,
             seconds,
+            cpu_seconds: Some(cpu_seconds),
             items: items(&d),
         };
         eprintln!(
-            "{:>4}/{} case {:>3} {:<8} {:<13} noise {:.2} lattice {:.3} labels [{}] found [{}] gain {:>5.1} % {:.1} s",
+            "{:>4}/{} case {:>3} {:<8} {:<13} noise {:.2} lattice {:.3} labels [{}] found [{}] gain {:>5.1} % {:.1} s ({:.1} s of CPU)",
             k + 1,
             plans.len(),
             plan.index,
@@ -244,7 +247,8 @@ fn run() -> Result<(), String> {
             names(&out.labels),
             names(&out.findings),
             100.0 * out.gain(),
-            seconds
+            seconds,
+            cpu_seconds
         );
         if let Some(f) = jsonl.as_mut() {
             writeln!(f, "{}", json_line(&case, &d, &out))
@@ -304,6 +308,22 @@ fn items(d: &diagnose::Diagnosis) -> Vec<score::Item> {
         heldout_share: t.heldout_share,
     });
     findings.chain(traces).collect()
+}
+
+/// CPU time the process has used so far, in all its threads, s: what a diagnosis costs the
+/// machine whatever the threads it runs on (the wall time depends on what else runs).
+#[allow(unsafe_code)]
+fn process_cpu_seconds() -> f64 {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `t` is a timespec the call writes into; the clock is one every Linux has.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) };
+    if rc != 0 {
+        return f64::NAN;
+    }
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
 /// The case's recording, truth and (physical family) model file, for the command line.
@@ -405,6 +425,7 @@ fn json_line(case: &cases::Case, d: &diagnose::Diagnosis, out: &score::Outcome) 
             ("final_heldout_sse", json!(out.final_heldout_sse)),
             ("gain", json!(out.gain())),
             ("seconds", json!(out.seconds)),
+            ("cpu_seconds", json!(out.cpu_seconds)),
             ("verdict", json!(report::verdict(d))),
             ("traces", json!(d.traces)),
             ("notes", json!(d.notes)),

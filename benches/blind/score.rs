@@ -28,6 +28,9 @@ pub(crate) struct Outcome {
     pub baseline_heldout_sse: f64,
     pub final_heldout_sse: f64,
     pub seconds: f64,
+    /// CPU time of the diagnosis in all its threads, s (records written before it was
+    /// measured have none).
+    pub cpu_seconds: Option<f64>,
     /// Every finding and trace: its effect, its size over what is worth maintenance, the share
     /// of the held-out error it removes (1 for stick-slip judged by its slips, which the
     /// held-out error cannot judge).
@@ -69,6 +72,8 @@ pub(crate) const RECALL_TARGET: f64 = 0.90;
 pub(crate) const HEALTHY_FALSE_TARGET: f64 = 0.02;
 pub(crate) const GAIN_TARGET: f64 = 0.50;
 pub(crate) const SECONDS_TARGET: f64 = 15.0;
+/// CPU time a recording of [`crate::cases::DURATION_S`] (10 minutes) may cost, s, in all threads.
+pub(crate) const CPU_SECONDS_TARGET: f64 = 10.0;
 /// Share of cases a size bin must find to count as found reliably.
 pub(crate) const RELIABLE: f64 = 0.80;
 /// Share of findings whose 90 % interval must hold the physical truth, per effect.
@@ -516,6 +521,11 @@ pub(crate) fn print_overall(all: &[Outcome]) {
         h.deadband_as_stiction.num, h.deadband_as_stiction.den
     );
     println!("Time per case (diagnosis): median {t_med:.1} s, max {t_max:.1} s");
+    let cpu: Option<Vec<f64>> = all.iter().map(|o| o.cpu_seconds).collect();
+    let cpu = cpu.map(|c| (median(c.clone()), c.iter().copied().fold(0.0, f64::max)));
+    if let Some((c_med, c_max)) = cpu {
+        println!("CPU per case (diagnosis, all threads): median {c_med:.1} s, max {c_max:.1} s");
+    }
     println!(
         "\nOverall, {} valves ({} with an effect, {} healthy, {} too faint to label):",
         all.len(),
@@ -565,4 +575,12 @@ pub(crate) fn print_overall(all: &[Outcome]) {
         t_max <= SECONDS_TARGET,
         &format!("<= {SECONDS_TARGET:.0} s"),
     );
+    if let Some((_, c_max)) = cpu {
+        line(
+            "CPU per 10-minute recording (max)",
+            format!("{c_max:.1} s"),
+            c_max <= CPU_SECONDS_TARGET,
+            &format!("<= {CPU_SECONDS_TARGET:.0} s"),
+        );
+    }
 }
