@@ -496,11 +496,8 @@ pub(crate) fn print_overall(all: &[Outcome]) {
         .filter(|o| o.labels.is_empty() && !o.sizes.is_empty())
         .collect();
     let gain = median(with.iter().map(|o| o.gain()).collect());
-    let secs: Vec<f64> = all.iter().map(|o| o.seconds).collect();
-    let (t_med, t_max) = (
-        median(secs.clone()),
-        secs.iter().copied().fold(0.0, f64::max),
-    );
+    let median_max = |v: Vec<f64>| (median(v.clone()), v.iter().copied().fold(0.0, f64::max));
+    let (t_med, t_max) = median_max(all.iter().map(|o| o.seconds).collect());
     println!(
         "\nHealthy valves with any finding: {}/{}",
         h.healthy_flagged.num, h.healthy_flagged.den
@@ -521,8 +518,9 @@ pub(crate) fn print_overall(all: &[Outcome]) {
         h.deadband_as_stiction.num, h.deadband_as_stiction.den
     );
     println!("Time per case (diagnosis): median {t_med:.1} s, max {t_max:.1} s");
-    let cpu: Option<Vec<f64>> = all.iter().map(|o| o.cpu_seconds).collect();
-    let cpu = cpu.map(|c| (median(c.clone()), c.iter().copied().fold(0.0, f64::max)));
+    let cpu = (all.iter().map(|o| o.cpu_seconds))
+        .collect::<Option<Vec<f64>>>()
+        .map(median_max);
     if let Some((c_med, c_max)) = cpu {
         println!("CPU per case (diagnosis, all threads): median {c_med:.1} s, max {c_max:.1} s");
     }
