@@ -216,11 +216,11 @@ fn run() -> Result<(), String> {
                 continue;
             }
         }
-        let (started, cpu_started) = (Instant::now(), process_cpu_seconds());
+        let (started, cpu_started) = (Instant::now(), process_cpu_seconds()?);
         let d = diagnose::diagnose_with(&rec.view(), None, &o.tuning, &|_, _| {})
             .map_err(|e| format!("case {}: diagnose: {e}", plan.index))?;
         let seconds = started.elapsed().as_secs_f64();
-        let cpu_seconds = process_cpu_seconds() - cpu_started;
+        let cpu_seconds = process_cpu_seconds()? - cpu_started;
         let out = score::Outcome {
             family: plan.family.name(),
             excitation: plan.excitation,
@@ -232,7 +232,7 @@ fn run() -> Result<(), String> {
             baseline_heldout_sse: d.baseline.heldout_sse,
             final_heldout_sse: d.final_model.heldout_sse,
             seconds,
-            cpu_seconds: Some(cpu_seconds),
+            cpu_seconds,
             items: items(&d),
         };
         eprintln!(
@@ -313,7 +313,7 @@ fn items(d: &diagnose::Diagnosis) -> Vec<score::Item> {
 /// CPU time the process has used so far, in all its threads, s: what a diagnosis costs the
 /// machine whatever the threads it runs on (the wall time depends on what else runs).
 #[allow(unsafe_code)]
-fn process_cpu_seconds() -> f64 {
+fn process_cpu_seconds() -> Result<f64, String> {
     let mut t = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
@@ -321,9 +321,10 @@ fn process_cpu_seconds() -> f64 {
     // SAFETY: `t` is a timespec the call writes into; the clock is one every Linux has.
     let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) };
     if rc != 0 {
-        return f64::NAN;
+        let e = std::io::Error::last_os_error();
+        return Err(format!("cannot read the process's CPU clock: {e}"));
     }
-    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    Ok(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9)
 }
 
 /// The case's recording, truth and (physical family) model file, for the command line.

@@ -141,7 +141,7 @@ fn outcome(v: &Value) -> Result<Outcome, String> {
         baseline_heldout_sse: number(&v["baseline_heldout_sse"])?,
         final_heldout_sse: number(&v["final_heldout_sse"])?,
         seconds: number(&v["seconds"])?,
-        cpu_seconds: v["cpu_seconds"].as_f64(),
+        cpu_seconds: number(&v["cpu_seconds"])?,
     })
 }
 

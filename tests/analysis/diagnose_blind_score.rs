@@ -36,7 +36,7 @@ fn valve(truth: f64, found: Option<Size>) -> Outcome {
         baseline_heldout_sse: 1.0,
         final_heldout_sse: 0.5,
         seconds: 1.0,
-        cpu_seconds: None,
+        cpu_seconds: 1.0,
         items: Vec::new(),
     }
 }
