@@ -19,6 +19,10 @@ use vb_core::model::ModelSpec;
 const SLOWEST_PCT_PER_S: f64 = 0.05;
 /// Longest dead time a diagnosis fits, s.
 pub(super) const MAX_DEAD_TIME_S: f64 = 3.0;
+/// Longest crossing time of lost motion a fit considers, s: a friction band of 6 % crossed at
+/// pin-cart II's pace (0.3-0.8 s per % of band) takes 3 s at mid travel and nearly 5 s fully
+/// open, and a fit pinned at the edge of its box is not named.
+const LONGEST_CROSSING_S: f64 = 10.0;
 /// Span of O_P (5th to 95th percentile) below which a calibration is fitted as an offset
 /// alone, % of travel: the sensor's gain shows only across a fifth of the travel or more.
 const MIN_GAIN_SPAN_PCT: f64 = 20.0;
@@ -65,6 +69,9 @@ pub(crate) fn jobs(
             for mut free in spread_starts(variant) {
                 let rest = rest_of_model(current, dt, td_hi, &free);
                 free.extend(rest);
+                if effect == Effect::DeadTime {
+                    free.extend(named_slow_stroke(current));
+                }
                 // Variants that differ only in their own start share the spread starts.
                 let same_box = |starts: &[Vec<Free>]| {
                     starts[0].len() == free.len()
@@ -122,6 +129,34 @@ fn healthy_slew(spec: &ModelSpec, free: &[Free]) -> Option<Free> {
     })
 }
 
+/// The stroke-speed limits of `spec` when they are a slow stroke already named (or put in as
+/// a trace), each free within a factor of two of where it is: they were fitted beside the
+/// baseline's short dead time, and a slow stroke that starts late reaches its target late too,
+/// so a longer delay only fits together with the stroke it shifts. Freed for the dead time's
+/// candidate only: beside lost motion a refitted stroke also takes over part of a reversal's
+/// wait, which only the crossing time should.
+fn named_slow_stroke(spec: &ModelSpec) -> Vec<Free> {
+    let slew = composed::get(spec, Knob::Slew);
+    let uneven = spec.effects.closing_slew_pct_per_s > 0.0;
+    if slew >= NOMINAL_MIN_SLEW_PCT_PER_S && !uneven {
+        return Vec::new();
+    }
+    let around = |knob| {
+        let v = composed::get(spec, knob);
+        Free::new(
+            knob,
+            (0.5 * v).max(SLOWEST_PCT_PER_S),
+            (2.0 * v).min(FASTEST_PCT_PER_S),
+            v,
+        )
+    };
+    let mut free = vec![around(Knob::Slew)];
+    if uneven {
+        free.push(around(Knob::ClosingSlew));
+    }
+    free
+}
+
 /// The variants to try for `effect` on top of `spec`, or none when it is already there or the
 /// data cannot identify it.
 pub(crate) fn variants(
@@ -149,8 +184,8 @@ pub(crate) fn variants(
         // positioner crosses at its own speed (the lost time then depends on the move); the
         // error surface of either has many valleys, so each starts from several sizes.
         Effect::Backlash if get(Knob::Crossing) == 0.0 && get(Knob::FrictionBand) == 0.0 => vec![
-            vec![f(Knob::Crossing, 0.02, 5.0, 0.2)],
-            vec![f(Knob::Crossing, 0.02, 5.0, 0.8)],
+            vec![f(Knob::Crossing, 0.02, LONGEST_CROSSING_S, 0.2)],
+            vec![f(Knob::Crossing, 0.02, LONGEST_CROSSING_S, 0.8)],
             vec![f(Knob::FrictionBand, 0.05, 20.0, 0.3)],
             vec![f(Knob::FrictionBand, 0.05, 20.0, 1.0)],
             vec![f(Knob::FrictionBand, 0.05, 20.0, 3.0)],
@@ -260,7 +295,7 @@ fn slowdown_variants(spec: &ModelSpec) -> Vec<Vec<Free>> {
     let c = composed::get(spec, Knob::Crossing);
     if c > 0.0 {
         v.push(vec![
-            f(Knob::Crossing, 0.0, 5.0, c * 0.5),
+            f(Knob::Crossing, 0.0, LONGEST_CROSSING_S, c * 0.5),
             f(Knob::CrossingSlope, -c / 100.0, 0.05, c / 100.0),
         ]);
     }
@@ -368,5 +403,35 @@ mod tests {
             starts,
             [(open, close), (3.0 * open, close), (open, 3.0 * close)]
         );
+    }
+
+    #[test]
+    fn only_the_dead_time_refits_a_slow_stroke_already_named() {
+        let dt = 0.01;
+        let op = steps(20_000, 500, &[40.0, 60.0]);
+        let rec = Columns::new(op.clone(), op, dt);
+        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
+        let mut spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        let boxes = |spec: &ModelSpec, effect| {
+            let jobs = jobs(&[effect], spec, &facts, dt, 1.0);
+            let free = &jobs[0].starts[0];
+            (free.iter())
+                .filter(|f| matches!(f.knob, Knob::Slew | Knob::ClosingSlew))
+                .map(|f| (f.knob, f.def.lo, f.def.hi))
+                .collect::<Vec<_>>()
+        };
+        // A healthy stroke is refitted with every effect, in a healthy positioner's range.
+        composed::set(&mut spec, Knob::Slew, 100.0);
+        let healthy = [(Knob::Slew, NOMINAL_MIN_SLEW_PCT_PER_S, FASTEST_PCT_PER_S)];
+        assert_eq!(boxes(&spec, Effect::DeadTime), healthy);
+        assert_eq!(boxes(&spec, Effect::Backlash), healthy);
+        // A slow stroke, uneven: both limits within a factor of two, for the dead time only.
+        composed::set(&mut spec, Knob::Slew, 3.0);
+        composed::set(&mut spec, Knob::ClosingSlew, 4.0);
+        assert_eq!(
+            boxes(&spec, Effect::DeadTime),
+            [(Knob::Slew, 1.5, 6.0), (Knob::ClosingSlew, 2.0, 8.0)]
+        );
+        assert!(boxes(&spec, Effect::Backlash).is_empty());
     }
 }
