@@ -387,13 +387,18 @@ mod tests {
         assert_eq!(knobs, [Knob::CalGain, Knob::CalOffset]);
     }
 
+    /// The facts of a valve that follows O_P stepping between 40 and 60 % exactly, and the
+    /// bundled FOPDT model (at 100 Hz).
+    fn following_steps() -> (Facts, ModelSpec) {
+        let op = steps(20_000, 500, &[40.0, 60.0]);
+        let rec = Columns::new(op.clone(), op, 0.01);
+        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
+        (facts, composed::compose(&bundled(ModelKind::Fopdt), 0.01))
+    }
+
     #[test]
     fn an_uneven_valve_is_also_tried_with_each_side_three_times_faster_than_measured() {
-        let dt = 0.01;
-        let op = steps(20_000, 500, &[40.0, 60.0]);
-        let rec = Columns::new(op.clone(), op, dt);
-        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
-        let spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        let (facts, spec) = following_steps();
         let starts: Vec<(f64, f64)> = variants(Effect::Asymmetry, &spec, &facts, 1.0)
             .iter()
             .map(|v| (v[0].init, v[1].init))
@@ -407,13 +412,9 @@ mod tests {
 
     #[test]
     fn only_the_dead_time_refits_a_slow_stroke_already_named() {
-        let dt = 0.01;
-        let op = steps(20_000, 500, &[40.0, 60.0]);
-        let rec = Columns::new(op.clone(), op, dt);
-        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
-        let mut spec = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        let (facts, mut spec) = following_steps();
         let boxes = |spec: &ModelSpec, effect| {
-            let jobs = jobs(&[effect], spec, &facts, dt, 1.0);
+            let jobs = jobs(&[effect], spec, &facts, 0.01, 1.0);
             let free = &jobs[0].starts[0];
             (free.iter())
                 .filter(|f| matches!(f.knob, Knob::Slew | Knob::ClosingSlew))
