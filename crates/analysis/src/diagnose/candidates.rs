@@ -6,7 +6,8 @@
 //! the sensor lattice itself.
 //! Every candidate also refits the positioner gain, the dead time and (while it is a healthy
 //! one) the stroke-speed limit, so an effect is judged against the best the rest of the model
-//! can do, not against a model fitted without it.
+//! can do, not against a model fitted without it; the dead time's candidate also refits a slow
+//! stroke already named, within a factor of two.
 //!
 //! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
 
