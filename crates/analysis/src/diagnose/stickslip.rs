@@ -55,6 +55,8 @@
 //!   minute in the fit and the held-out blocks alike: a valve that hunts under a noisy
 //!   reading slips by too little for one slip to stand out from the noise, but it slips
 //!   hundreds of times, and healthy valves under a noisy controller miss a few a minute.
+//!   A stem that a fast positioner pushes past its target and turns round within 0.3 s
+//!   rests before the slip out and after the slip back, not between them: both count.
 //!
 //! Quantization (a lattice step is not a slip), sensor spikes (no level change), O_P steps and
 //! smooth moves or slewing (no rest before and after) cannot produce slips, so they cannot be
@@ -112,6 +114,12 @@ const RIVAL_SLIPS: usize = 2 * EVIDENT_SLIPS;
 /// a valve whose slips the current model misses at [`EVIDENT_PER_MIN`] in the fit and the
 /// held-out blocks alike (hunting whose slips the noise hides one by one).
 const MIN_EVIDENT: usize = 10;
+
+/// Longest brief stick between a slip past the target and the slip back, in slip spans
+/// (0.3 s at 100 Hz): a fast positioner turns a stem round within that.
+const BRIEF_STICK_SPANS: usize = 3;
+/// Largest ratio of the sizes of a slip out and the slip back.
+const LIKE_SIZE: f64 = 1.5;
 
 type Histogram = [f64; BINS];
 
@@ -375,9 +383,11 @@ impl Rest {
     /// transient, with `y` at rest for a span just before and just after the move: within a
     /// quarter of the slip plus what five noise sigmas spread over. A valve that jitters
     /// after a noisy controller output moves all the time; a stuck stem stands still, then
-    /// slips.
+    /// slips. A stem pushed past its target by a fast positioner may stick there only briefly
+    /// and slip back ([`BRIEF_STICK_SPANS`]): two slips of opposite sign and like size, at rest
+    /// before the first and after the second, count both: a healthy valve on a still command
+    /// has no reason to leave its place and come back.
     fn evident(&self, slips: &[Slip], y: &[f64]) -> usize {
-        let least = self.least;
         let h = self.span;
         let still = |a: usize, b: usize, size: f64| {
             let (lo, hi) = y[a..b]
@@ -387,17 +397,33 @@ impl Rest {
                 });
             hi - lo <= 0.25 * size + 5.0 * self.sigma
         };
-        slips
-            .iter()
-            .filter(|s| {
-                let size = s.size_pct.abs();
-                s.k >= self.skip.max(2 * h)
-                    && s.k + 2 * h <= y.len()
-                    && size >= least
-                    && still(s.k - 2 * h, s.k - h, size)
-                    && still(s.k + h, s.k + 2 * h, size)
-            })
-            .count()
+        let counted = |s: &Slip| {
+            s.k >= self.skip.max(2 * h) && s.k + 2 * h <= y.len() && s.size_pct.abs() >= self.least
+        };
+        let before = |s: &Slip| still(s.k - 2 * h, s.k - h, s.size_pct.abs());
+        let after = |s: &Slip| still(s.k + h, s.k + 2 * h, s.size_pct.abs());
+        let back = |out: &Slip, back: &Slip| {
+            let (a, b) = (out.size_pct, back.size_pct);
+            back.k - out.k <= BRIEF_STICK_SPANS * h
+                && a * b < 0.0
+                && a.abs().max(b.abs()) <= LIKE_SIZE * a.abs().min(b.abs())
+        };
+        let mut count = 0;
+        let mut i = 0;
+        while i < slips.len() {
+            let s = &slips[i];
+            match slips.get(i + 1) {
+                Some(b) if counted(s) && counted(b) && back(s, b) && before(s) && after(b) => {
+                    count += 2;
+                    i += 2;
+                }
+                _ => {
+                    count += usize::from(counted(s) && before(s) && after(s));
+                    i += 1;
+                }
+            }
+        }
+        count
     }
 }
 
@@ -692,6 +718,39 @@ mod tests {
         let f = x.log2();
         assert!((c[0][0] - (1.0 - f)).abs() < 1e-12 && (c[0][1] - f).abs() < 1e-12);
         assert_eq!(distances(&a, &c)[1], 1.0);
+    }
+
+    #[test]
+    fn a_slip_counts_as_evident_with_rests_around_it_or_around_a_brief_stick_and_back() {
+        // 100 Hz, a quiet reading: slips take 10 samples, evident ones are 0.3 % or more.
+        let scale = facts::SlipScale::new(0.01, 0.01, 0.0);
+        let rest = Rest::new(&scale, 0.01, 0, &Tuning::default());
+        let h = scale.span;
+        // Level 50; a move of `first` % at 1000 and one of `second` % `dwell` samples later.
+        let reading = |first: f64, second: f64, dwell: usize| -> Vec<f64> {
+            (0..3000)
+                .map(|k| match k {
+                    _ if k < 1000 => 50.0,
+                    _ if k < 1000 + dwell => 50.0 + first,
+                    _ => 50.0 + first + second,
+                })
+                .collect()
+        };
+        let slips = |y: &[f64]| facts::slips(&vec![50.0; y.len()], y, &scale);
+        // A stem that stays where it slipped to: one evident slip.
+        let stays = reading(0.5, 0.0, 0);
+        assert_eq!(rest.evident(&slips(&stays), &stays), 1);
+        // Out and back after a brief stick, too brief for a span's rest after the first slip
+        // (between one and a half and two spans: the slip detector sees both): both evident.
+        for dwell in [3 * h / 2, 2 * h - 1] {
+            let y = reading(0.5, -0.5, dwell);
+            assert_eq!(slips(&y).len(), 2, "dwell {dwell}");
+            assert_eq!(rest.evident(&slips(&y), &y), 2, "dwell {dwell}");
+        }
+        // On in two moves as close together (a valve catching up in steps): neither.
+        let on = reading(0.5, 0.5, 2 * h - 1);
+        assert_eq!(slips(&on).len(), 2);
+        assert_eq!(rest.evident(&slips(&on), &on), 0);
     }
 
     #[test]
