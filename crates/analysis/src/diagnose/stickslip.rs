@@ -402,7 +402,7 @@ impl Rest {
         };
         let before = |s: &Slip| still(s.k - 2 * h, s.k - h, s.size_pct.abs());
         let after = |s: &Slip| still(s.k + h, s.k + 2 * h, s.size_pct.abs());
-        let back = |out: &Slip, back: &Slip| {
+        let turned_round = |out: &Slip, back: &Slip| {
             let (a, b) = (out.size_pct, back.size_pct);
             back.k - out.k <= BRIEF_STICK_SPANS * h
                 && a * b < 0.0
@@ -413,7 +413,9 @@ impl Rest {
         while i < slips.len() {
             let s = &slips[i];
             match slips.get(i + 1) {
-                Some(b) if counted(s) && counted(b) && back(s, b) && before(s) && after(b) => {
+                Some(b)
+                    if counted(s) && counted(b) && turned_round(s, b) && before(s) && after(b) =>
+                {
                     count += 2;
                     i += 2;
                 }
