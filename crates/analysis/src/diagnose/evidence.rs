@@ -90,6 +90,19 @@ impl StickSlipModel {
     }
 }
 
+/// Uneven stroke speeds: V_P's speeds each way as the recording shows its limits, and the
+/// fit's limits.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Uneven {
+    /// 99.9th percentile of V_P's opening and closing speeds ([`Facts::measured_speeds`]), %/s.
+    pub open_speed: f64,
+    pub close_speed: f64,
+    /// Whether those are of the speeds V_P holds for 0.3 s or more.
+    pub held: bool,
+    pub fitted_open_pct_per_s: f64,
+    pub fitted_close_pct_per_s: f64,
+}
+
 /// Stick-slip judged by the slips of V_P ([`super::stickslip`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Slips {
@@ -160,12 +173,7 @@ pub enum Detail {
         #[serde(skip_serializing_if = "Option::is_none")]
         closing_slew_pct_per_s: Option<f64>,
     },
-    Asymmetry {
-        open_speed: f64,
-        close_speed: f64,
-        fitted_open_pct_per_s: f64,
-        fitted_close_pct_per_s: f64,
-    },
+    Asymmetry(Uneven),
     MinSpeed {
         min_speed_pct_per_s: f64,
     },
@@ -387,12 +395,16 @@ fn detail(
             slew_pct_per_s: g(Knob::Slew),
             closing_slew_pct_per_s: Some(g(Knob::ClosingSlew)).filter(|&c| c > 0.0),
         },
-        Effect::Asymmetry => Detail::Asymmetry {
-            open_speed: facts.open_speed,
-            close_speed: facts.close_speed,
-            fitted_open_pct_per_s: g(Knob::Slew),
-            fitted_close_pct_per_s: g(Knob::ClosingSlew),
-        },
+        Effect::Asymmetry => {
+            let ((open_speed, close_speed), held) = facts.measured_speeds();
+            Detail::Asymmetry(Uneven {
+                open_speed,
+                close_speed,
+                held,
+                fitted_open_pct_per_s: g(Knob::Slew),
+                fitted_close_pct_per_s: g(Knob::ClosingSlew),
+            })
+        }
         Effect::MinSpeed => Detail::MinSpeed {
             min_speed_pct_per_s: g(Knob::MinSpeed),
         },

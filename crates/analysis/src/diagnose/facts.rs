@@ -5,7 +5,7 @@
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
-use super::speeds::{speeds, WINDOWS_S};
+use super::speeds::{limit_speeds, speeds, WINDOWS_S};
 use vb_core::metrics::stats::{self, median, quantile, Differences};
 use vb_core::metrics::steps::{self, StepOptions};
 use vb_core::recording::RecordingView;
@@ -44,10 +44,11 @@ pub struct Facts {
     /// windows of 0.1 to 3 s), %/s.
     pub open_speed: f64,
     pub close_speed: f64,
-    /// Fastest speed V_P holds for 0.3 s or more, either way, noise taken out, %/s: a speed
-    /// limit holds its speed that long, while a proportional positioner, which answers a small
-    /// error with a short burst, has slowed by then to under half its peak.
-    pub held_speed: f64,
+    /// Fastest opening and closing speeds V_P holds for 0.3 s or more, noise taken out, %/s: a
+    /// speed limit holds its speed that long, while a proportional positioner, which answers a
+    /// small error with a short burst, has slowed by then to under half its peak, and a stem
+    /// that sticks and jumps has landed.
+    pub held_speeds: (f64, f64),
     /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
     pub lattice_pct: f64,
     /// Noise of the V_P reading (standard deviation), %.
@@ -80,7 +81,7 @@ pub struct Facts {
 pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
     let (open_speed, close_speed) = speeds(vp, dt, sigma, &WINDOWS_S);
-    let (open_held, close_held) = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
+    let held_speeds = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     let vp_span_pct = span(vp);
     Facts {
@@ -91,7 +92,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         holds: holds(op, vp, dt),
         open_speed,
         close_speed,
-        held_speed: open_held.max(close_held),
+        held_speeds,
         lattice_pct,
         noise_pct: sigma,
         slip_scale,
@@ -115,6 +116,12 @@ impl Facts {
             return None;
         }
         median(&speeds)
+    }
+
+    /// V_P's opening and closing speeds as its speed limits show in them, %/s, and whether
+    /// they are those it holds for 0.3 s or more ([`limit_speeds`]).
+    pub fn measured_speeds(&self) -> ((f64, f64), bool) {
+        limit_speeds((self.open_speed, self.close_speed), self.held_speeds)
     }
 }
 

@@ -28,6 +28,7 @@ use super::facts::{self, Facts};
 use super::refit::Free;
 use super::scorer::{Errors, Scorer};
 use super::size::{self, Size};
+use super::speeds::differ;
 use super::tuning::Tuning;
 use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use vb_core::model::ModelSpec;
@@ -309,15 +310,19 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
         }
         // A slew limit even where the valve is fastest (closed), that V_P reaches and holds:
         // the short bursts of a proportional positioner answering small errors do not show one.
-        Effect::SlewRate => facts.held_speed >= 0.7 * g(Knob::Slew) / composed::half_open(spec),
-        // The measured speeds differ the same way, by a fifth or more unless V_P never
-        // reached the faster limit: a valve in a busy loop turns back before it gets there,
-        // and its measured speeds then understate how much faster that side is.
+        Effect::SlewRate => {
+            let (open, close) = facts.held_speeds;
+            open.max(close) >= 0.7 * g(Knob::Slew) / composed::half_open(spec)
+        }
+        // The measured speeds ([`Facts::measured_speeds`]) differ the same way, by a fifth or
+        // more unless V_P never reached the faster limit: a valve in a busy loop turns back
+        // before it gets there, and its measured speeds then understate how much faster that
+        // side is.
         Effect::Asymmetry => {
             let (a, b) = (g(Knob::Slew), g(Knob::ClosingSlew));
-            let (oa, ob) = (facts.open_speed, facts.close_speed);
+            let ((oa, ob), _) = facts.measured_speeds();
             let short_of_faster = oa.max(ob) < SHORT_OF_LIMIT * a.max(b);
-            let seen = (a > b) == (oa > ob) && (speeds_differ(facts) || short_of_faster);
+            let seen = (a > b) == (oa > ob) && (differ((oa, ob)) || short_of_faster);
             seen && a.min(b) < 0.8 * FASTEST_PCT_PER_S && oa.min(ob) >= 0.5 * a.min(b)
         }
         // The floor takes over from proportional action below an error of dy_min / P_k, but
@@ -351,18 +356,12 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
     }
 }
 
-/// Whether V_P's fastest measured moves each way differ by a fifth or more.
-fn speeds_differ(facts: &Facts) -> bool {
-    let (oa, ob) = (facts.open_speed, facts.close_speed);
-    oa.max(ob) / oa.min(ob).max(1e-9) >= 1.2
-}
-
 /// How many times the held-out error above noise an asymmetry leaves a calibration offset may
 /// leave for the two to be alike ([`offset_alike`]).
 const OFFSET_ALIKE: f64 = 1.25;
 
-/// Whether `t` is an unevenness of speed that only where the valve rests shows (V_P's fastest
-/// measured moves each way within a fifth of each other) and that a calibration offset among
+/// Whether `t` is an unevenness of speed that only where the valve rests shows (V_P's measured
+/// speeds each way, [`Facts::measured_speeds`], within a fifth of each other) and that a calibration offset among
 /// `best` fits about as well: it leaves at most [`OFFSET_ALIKE`] times the held-out error above
 /// the noise floor (`held_noise`) that `t` leaves (both down to the noise are alike). An offset
 /// moves where the valve rests too, and every sensor reads a few hundredths of a percent off; a
@@ -371,7 +370,7 @@ const OFFSET_ALIKE: f64 = 1.25;
 pub(super) fn offset_alike(t: &Trial, best: &[&Trial], facts: &Facts, held_noise: f64) -> bool {
     let excess = |t: &Trial| (t.errors.held - held_noise).max(0.0);
     t.effect == Effect::Asymmetry
-        && !speeds_differ(facts)
+        && !differ(facts.measured_speeds().0)
         && (best.iter())
             .any(|c| c.effect == Effect::Calibration && excess(c) <= OFFSET_ALIKE * excess(t))
 }
@@ -524,7 +523,7 @@ mod tests {
             holds: vec![],
             open_speed: open,
             close_speed: close,
-            held_speed: open.max(close),
+            held_speeds: (open, close),
             lattice_pct: 0.0,
             noise_pct: 0.1,
             reversals: 0,
@@ -570,7 +569,7 @@ mod tests {
             &facts(5.0, 5.0)
         ));
         let bursts = Facts {
-            held_speed: 8.0,
+            held_speeds: (8.0, 8.0),
             ..facts(20.0, 20.0)
         };
         assert!(!material(
@@ -588,6 +587,15 @@ mod tests {
         assert!(material(Effect::Asymmetry, &asym, &facts(35.0, 32.0)));
         assert!(!material(Effect::Asymmetry, &asym, &facts(45.0, 41.0)));
         assert!(!material(Effect::Asymmetry, &asym, &facts(32.0, 35.0)));
+        // A stem that sticks and jumps: its fastest moves (the jumps) alike both ways, the
+        // speeds it holds for 0.3 s or more those of its air flows.
+        let jumps = |open, close| Facts {
+            held_speeds: (open, close),
+            ..facts(30.0, 30.0)
+        };
+        assert!(material(Effect::Asymmetry, &asym, &jumps(30.0, 15.0)));
+        assert!(!material(Effect::Asymmetry, &asym, &jumps(15.0, 30.0)));
+        assert!(!material(Effect::Asymmetry, &asym, &jumps(30.0, 28.0)));
         // Lost motion: a crossing of 0.15 s at half travel after reversals at 4 %/s is a band
         // of 0.6 %; one of 0.05 s is a healthy positioner's (or a slow stroke's taken up at the
         // reversals); the same 0.15 s after reversals at 1 %/s is a band of 0.15 %: a trace.

@@ -54,6 +54,24 @@ pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64
     best
 }
 
+/// The opening and closing speeds of V_P as its speed limits show in them, %/s, from its
+/// fastest moves each way (`fastest`) and the speeds it holds for 0.3 s or more (`held`), and
+/// whether they are the held ones: those when the fastest are alike ([`differ`]) and the held
+/// are not. A stem that sticks and jumps jumps as fast one way as the other, whatever its air
+/// flows; what the flows allow shows once it has landed.
+pub(super) fn limit_speeds(fastest: (f64, f64), held: (f64, f64)) -> ((f64, f64), bool) {
+    if !differ(fastest) && differ(held) {
+        (held, true)
+    } else {
+        (fastest, false)
+    }
+}
+
+/// Whether two speeds differ by a fifth or more.
+pub(super) fn differ((a, b): (f64, f64)) -> bool {
+    a.max(b) / a.min(b).max(1e-9) >= 1.2
+}
+
 /// Whether the log shows the stroke speed of the pin-cart II `spec`, simulated as `sim` on the
 /// log's `op` at `dt`: some sample asks the model's positioner, opening or closing, for at least
 /// its speed limit (its gain times the error between the delayed, calibrated O_P, less half an

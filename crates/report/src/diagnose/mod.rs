@@ -17,7 +17,7 @@ use super::identify::fmt_param;
 pub use super::verdict::{advice, model_verdict, verdict};
 use super::verdict::{figures, measure, slow_strokes, trace};
 pub use page::html;
-use vb_analysis::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel};
+use vb_analysis::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel, Uneven};
 use vb_analysis::diagnose::locate::{Context, Window};
 use vb_analysis::diagnose::{Diagnosis, Effect, Finding, Note};
 use vb_core::metrics;
@@ -228,15 +228,7 @@ pub fn evidence(f: &Finding) -> String {
             "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): {}",
             slew_limits(*slew_pct_per_s, *closing_slew_pct_per_s)
         ),
-        Detail::Asymmetry {
-            open_speed,
-            close_speed,
-            fitted_open_pct_per_s,
-            fitted_close_pct_per_s,
-        } => format!(
-            "V_P opens at up to {open_speed:.1} %/s but closes at up to {close_speed:.1} %/s (99.9th percentile); the fit gives \
-             {fitted_open_pct_per_s:.1} %/s opening and {fitted_close_pct_per_s:.1} %/s closing"
-        ),
+        Detail::Asymmetry(u) => uneven_text(u),
         Detail::MinSpeed {
             min_speed_pct_per_s,
         } => format!(
@@ -282,6 +274,19 @@ pub fn evidence(f: &Finding) -> String {
              a gain or offset between command and position"
         ),
     }
+}
+
+/// The evidence of uneven stroke speeds: V_P's speeds each way against the fit's limits.
+fn uneven_text(u: &Uneven) -> String {
+    let of = if u.held {
+        "99.9th percentile of the speeds held for 0.3 s or more; its fastest moves are alike both ways"
+    } else {
+        "99.9th percentile"
+    };
+    format!(
+        "V_P opens at up to {:.1} %/s but closes at up to {:.1} %/s ({of}); the fit gives {:.1} %/s opening and {:.1} %/s closing",
+        u.open_speed, u.close_speed, u.fitted_open_pct_per_s, u.fitted_close_pct_per_s
+    )
 }
 
 /// The slew-rate limit a finding's model has: one, or one each way (a valve slow both ways).
