@@ -361,12 +361,13 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
 const OFFSET_ALIKE: f64 = 1.25;
 
 /// Whether `t` is an unevenness of speed that only where the valve rests shows (V_P's measured
-/// speeds each way, [`Facts::measured_speeds`], within a fifth of each other) and that a calibration offset among
-/// `best` fits about as well: it leaves at most [`OFFSET_ALIKE`] times the held-out error above
-/// the noise floor (`held_noise`) that `t` leaves (both down to the noise are alike). An offset
-/// moves where the valve rests too, and every sensor reads a few hundredths of a percent off; a
-/// slow uneven valve in a busy loop rests off its target by its unevenness in a way an offset
-/// fits far worse (it leaves 1.6 times the error above noise or more on the bench's).
+/// speeds each way, [`Facts::measured_speeds`], within a fifth of each other) and that a
+/// calibration offset among `best` fits about as well: it leaves at most [`OFFSET_ALIKE`] times
+/// the held-out error above the noise floor (`held_noise`) that `t` leaves (both down to the
+/// noise are alike). An offset moves where the valve rests too, and every sensor reads a few
+/// hundredths of a percent off; a slow uneven valve in a busy loop rests off its target by its
+/// unevenness in a way an offset fits far worse (it leaves 1.6 times the error above noise or
+/// more on the bench's).
 pub(super) fn offset_alike(t: &Trial, best: &[&Trial], facts: &Facts, held_noise: f64) -> bool {
     let excess = |t: &Trial| (t.errors.held - held_noise).max(0.0);
     t.effect == Effect::Asymmetry
