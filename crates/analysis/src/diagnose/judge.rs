@@ -196,15 +196,24 @@ impl Judge<'_> {
     /// [`facts::STOP_ASKED_S`] or more). A valve whose deadband or friction already keeps it
     /// short of where O_P asks at the top of its travel shows no stop there, and a stop fitted
     /// at the highest reading it reached only takes up a small error of something else.
+    /// Each stop is measured where the recording shows it ([`Facts::stop_high_pct`],
+    /// [`Facts::stop_low_pct`]) when it shows one: a fit may settle a few tenths short of
+    /// the level V_P holds, and a held reading spreads less than that on a quiet sensor.
     fn stop_seen(&self, spec: &ModelSpec, ya: &[f64]) -> bool {
-        let sensor = (self.facts.noise_pct, self.facts.lattice_pct);
-        let seen = |level: f64, high: bool| {
-            let held = facts::held_at_stop(self.scorer.vp, ya, level, high, sensor);
-            held as f64 * self.scorer.dt >= facts::STOP_ASKED_S
-        };
-        let (lo, hi) = (spec.travel.min_pct, spec.travel.max_pct);
-        (hi >= 100.0 || seen(hi, true)) && (lo <= 0.0 || seen(lo, false))
+        let travel = (spec.travel.min_pct, spec.travel.max_pct);
+        stops_held(self.scorer.vp, ya, self.scorer.dt, self.facts, travel)
     }
+}
+
+/// Whether V_P (sampled every `dt` s) stays at each travel stop of `(lo, hi)` % short of the
+/// end of travel while `free`, the valve without them, goes on (see [`Judge::stop_seen`]).
+fn stops_held(vp: &[f64], free: &[f64], dt: f64, facts: &Facts, (lo, hi): (f64, f64)) -> bool {
+    let sensor = (facts.noise_pct, facts.lattice_pct);
+    let seen = |level: f64, high: bool| {
+        facts::held_at_stop(vp, free, level, high, sensor) as f64 * dt >= facts::STOP_ASKED_S
+    };
+    (hi >= 100.0 || seen(facts.stop_high_pct.unwrap_or(hi), true))
+        && (lo <= 0.0 || seen(facts.stop_low_pct.unwrap_or(lo), false))
 }
 
 /// The shares of the held-out error a model removes going from `before` to `after` %²: of
@@ -650,6 +659,35 @@ mod tests {
             ..tails(|e| (5.0 * e).max(5.0))
         };
         assert!(!material(Effect::MinSpeed, &floor, &never_faster));
+    }
+
+    #[test]
+    fn a_stop_is_held_where_the_recording_shows_it() {
+        // V_P held at 43.19 % for 10 s by a quiet sensor (a held reading spreads 0.18 %) while
+        // the valve without the stop would stand at 50 %; the fit put the stop at 42.98 %.
+        let quiet = Facts {
+            noise_pct: 0.02,
+            lattice_pct: 0.01,
+            ..facts(30.0, 30.0)
+        };
+        let (vp, free) = (vec![43.19; 1000], vec![50.0; 1000]);
+        let fitted = (0.0, 42.98);
+        assert!(!stops_held(&vp, &free, 0.01, &quiet, fitted));
+        let shown = Facts {
+            stop_high_pct: Some(43.19),
+            ..quiet.clone()
+        };
+        assert!(stops_held(&vp, &free, 0.01, &shown, fitted));
+        // Held for 5 s only when the stop is asked for 5 s.
+        assert!(!stops_held(&vp[..400], &free[..400], 0.01, &shown, fitted));
+        // A lower stop the recording shows is measured where it shows it too.
+        let (low_vp, low_free) = (vec![6.2; 1000], vec![0.0; 1000]);
+        let low = Facts {
+            stop_low_pct: Some(6.2),
+            ..quiet.clone()
+        };
+        assert!(!stops_held(&low_vp, &low_free, 0.01, &quiet, (6.41, 100.0)));
+        assert!(stops_held(&low_vp, &low_free, 0.01, &low, (6.41, 100.0)));
     }
 
     #[test]
