@@ -80,8 +80,11 @@ pub struct Facts {
 /// `lattice_pct` (0 = none, see [`lattice`]).
 pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
-    let (open_speed, close_speed) = speeds(vp, dt, sigma, &WINDOWS_S);
-    let held_speeds = speeds(vp, dt, sigma, &[0.3, 1.0, 3.0]);
+    // The fastest speeds are the largest over every window length: those of the shortest
+    // windows or the held ones, measured once each.
+    let held_speeds = speeds(vp, dt, sigma, &WINDOWS_S[1..]);
+    let quick = speeds(vp, dt, sigma, &WINDOWS_S[..1]);
+    let (open_speed, close_speed) = (quick.0.max(held_speeds.0), quick.1.max(held_speeds.1));
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     let vp_span_pct = span(vp);
     Facts {

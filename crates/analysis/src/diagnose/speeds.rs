@@ -9,7 +9,8 @@ use vb_core::metrics::stats::quantile;
 use vb_core::model::composed::{self, Knob};
 use vb_core::model::{ModelKind, ModelSpec};
 
-/// The window lengths the fastest speeds of a recording are measured over, s.
+/// The window lengths the fastest speeds of a recording are measured over, s: the shortest,
+/// then those of the speeds V_P holds (0.3 s or more).
 pub(super) const WINDOWS_S: [f64; 4] = [0.1, 0.3, 1.0, 3.0];
 
 /// The fastest opening and closing speeds of V_P over windows of `windows_s`, %/s, noise
