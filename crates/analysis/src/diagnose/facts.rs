@@ -174,7 +174,7 @@ pub(crate) const STOP_ASKED_S: f64 = 5.0;
 
 /// How far a reading held at one level can spread, %: six noise sigmas, a step of the sensor's
 /// lattice and a little more.
-fn held_spread_pct(sigma: f64, lattice_pct: f64) -> f64 {
+pub(crate) fn held_spread_pct(sigma: f64, lattice_pct: f64) -> f64 {
     6.0 * sigma + lattice_pct + 0.05
 }
 

@@ -145,7 +145,8 @@ impl Judge<'_> {
         let plausible = !pinned(own, &spec, effect)
             && plausible(effect, &spec, self.facts)
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
-            && (effect != Effect::Saturation || self.stop_seen(&spec, ya));
+            && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
+            && (effect != Effect::Stiction || !self.stop_departure(ya, &yb));
         let material = plausible
             && size.worth >= tuning.materiality
             && heldout_share >= tuning.min_heldout_share;
@@ -203,6 +204,62 @@ impl Judge<'_> {
         let travel = (spec.travel.min_pct, spec.travel.max_pct);
         stops_held(self.scorer.vp, ya, self.scorer.dt, self.facts, travel)
     }
+
+    /// Whether a stick-slip candidate (simulated as `yb`, the model so far as `ya`) gains
+    /// only where V_P leaves a travel stop: [`AT_DEPARTURE`] or more of what it removes lies
+    /// in the [`DEPARTURE_S`] after V_P was at a stop the recording shows
+    /// ([`share_at_departures`]). Stick-slip sticks at every reversal, wherever in its travel
+    /// the valve turns; a breakaway that helps only where the valve comes off a stop takes up
+    /// how the stop lets go (a deadband's valve leaves it a little later than the smooth model
+    /// does), not a friction the valve shows elsewhere.
+    fn stop_departure(&self, ya: &[f64], yb: &[f64]) -> bool {
+        let (vp, dt) = (self.scorer.vp, self.scorer.dt);
+        let share = share_at_departures(vp, ya, yb, dt, self.facts);
+        tracing::debug!(?share, "stick-slip's gain where V_P leaves a stop");
+        share.is_some_and(|s| s >= AT_DEPARTURE)
+    }
+}
+
+/// How long after V_P was at a travel stop its departure may still be under way, s.
+const DEPARTURE_S: f64 = 2.0;
+/// Share of what a stick-slip candidate removes that, lying where V_P leaves a travel stop,
+/// makes it the stop's departure rather than stick-slip ([`Judge::stop_departure`]).
+const AT_DEPARTURE: f64 = 0.8;
+
+/// The share of what `yb` removes of `ya`'s squared error against `vp` (sampled every `dt` s)
+/// that lies at V_P's departures from the travel stops `facts` shows: at samples within
+/// [`DEPARTURE_S`] of one where V_P reads at a stop (within what the sensor spreads a held
+/// reading over). `None` when the recording shows no stop, when those stretches cover half of
+/// it or more (a valve that lives at its stop leaves nothing to tell them apart), or when `yb`
+/// removes nothing.
+fn share_at_departures(vp: &[f64], ya: &[f64], yb: &[f64], dt: f64, facts: &Facts) -> Option<f64> {
+    if facts.stop_high_pct.is_none() && facts.stop_low_pct.is_none() {
+        return None;
+    }
+    let held = facts::held_spread_pct(facts.noise_pct, facts.lattice_pct);
+    let at_stop = |v: f64| {
+        facts.stop_high_pct.is_some_and(|hi| v >= hi - held)
+            || facts.stop_low_pct.is_some_and(|lo| v <= lo + held)
+    };
+    let after = (DEPARTURE_S / dt).round() as usize;
+    let (mut since, mut near_n, mut near, mut total) = (usize::MAX, 0usize, 0.0, 0.0);
+    for ((&v, &a), &b) in vp.iter().zip(ya).zip(yb) {
+        since = if at_stop(v) {
+            0
+        } else {
+            since.saturating_add(1)
+        };
+        if !v.is_finite() {
+            continue;
+        }
+        let gain = (v - a).powi(2) - (v - b).powi(2);
+        total += gain;
+        if since <= after {
+            near += gain;
+            near_n += 1;
+        }
+    }
+    (2 * near_n < vp.len() && total > 0.0).then(|| near / total)
 }
 
 /// Whether V_P (sampled every `dt` s) stays at each travel stop of `(lo, hi)` % short of the
@@ -688,6 +745,40 @@ mod tests {
         };
         assert!(!stops_held(&low_vp, &low_free, 0.01, &quiet, (6.41, 100.0)));
         assert!(stops_held(&low_vp, &low_free, 0.01, &low, (6.41, 100.0)));
+    }
+
+    #[test]
+    fn a_breakaway_that_helps_only_off_a_stop_is_the_stops_departure() {
+        // V_P held at a stop at 70 % for 2 s, then 8 s of travel below it, five times over; the
+        // model so far is 1 % off where V_P leaves the stop, and 0.05 % off everywhere else.
+        let vp: Vec<f64> = (0..5000)
+            .map(|k| {
+                if k % 1000 < 200 {
+                    70.0
+                } else {
+                    50.0 + (k % 7) as f64
+                }
+            })
+            .collect();
+        let ya: Vec<f64> = (vp.iter().enumerate())
+            .map(|(k, v)| v + if k % 1000 == 200 { 1.0 } else { 0.05 })
+            .collect();
+        let stop = Facts {
+            stop_high_pct: Some(70.0),
+            ..facts(30.0, 30.0)
+        };
+        // A candidate mending only the departures gains there alone.
+        let departs: Vec<f64> = (ya.iter().zip(&vp).enumerate())
+            .map(|(k, (a, v))| if k % 1000 == 200 { *v } else { *a })
+            .collect();
+        let share = share_at_departures(&vp, &ya, &departs, 0.01, &stop);
+        assert!(share.is_some_and(|s| s >= AT_DEPARTURE), "{share:?}");
+        // One mending every sample gains mostly away from the stop.
+        let share = share_at_departures(&vp, &ya, &vp, 0.01, &stop);
+        assert!(share.is_some_and(|s| s < AT_DEPARTURE), "{share:?}");
+        // Without a stop the recording shows, nothing is said.
+        let none = share_at_departures(&vp, &ya, &departs, 0.01, &facts(30.0, 30.0));
+        assert_eq!(none, None);
     }
 
     #[test]
