@@ -143,7 +143,7 @@ impl Judge<'_> {
         let size = size::size(effect, &spec, self.facts, self.scorer.op, tuning);
         let significant = beyond_chance(t_stat, excess_share, delta_bic, tuning);
         let plausible = !pinned(own, &spec, effect)
-            && plausible(effect, &spec, self.facts)
+            && (plausible(effect, &spec, self.facts) || self.always_at_limit(effect, &spec, &yb))
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
             && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
             && (effect != Effect::Stiction || !self.stop_departure(ya, &yb));
@@ -205,6 +205,21 @@ impl Judge<'_> {
         stops_held(self.scorer.vp, ya, self.scorer.dt, self.facts, travel)
     }
 
+    /// Whether a stroke-speed limit (`spec`, simulated as `yb`) keeps the valve at its limit in
+    /// [`AT_LIMIT`] of the samples or more ([`share_at_limit`]). A slow valve in a busy loop
+    /// runs at its limit nearly all the time, but turns with every turn of the controller's
+    /// output, so V_P never holds the limit for the 0.3 s [`plausible`] asks of it; a limit
+    /// fitted to the bursts of a healthy positioner's answer to small errors keeps the valve at
+    /// it in a few samples in a hundred at most.
+    fn always_at_limit(&self, effect: Effect, spec: &ModelSpec, yb: &[f64]) -> bool {
+        if effect != Effect::SlewRate {
+            return false;
+        }
+        let share = share_at_limit(spec, yb, self.scorer.dt);
+        tracing::debug!(share, "share of the samples at the stroke-speed limit");
+        share >= AT_LIMIT
+    }
+
     /// Whether a stick-slip candidate (simulated as `yb`, the model so far as `ya`) gains
     /// only where V_P leaves a travel stop: [`AT_DEPARTURE`] or more of what it removes lies
     /// in the [`DEPARTURE_S`] after V_P was at a stop the recording shows
@@ -218,6 +233,26 @@ impl Judge<'_> {
         tracing::debug!(?share, "stick-slip's gain where V_P leaves a stop");
         share.is_some_and(|s| s >= AT_DEPARTURE)
     }
+}
+
+/// Share of the samples a stroke-speed limit must keep the valve at it for it to be seen
+/// without V_P holding it ([`Judge::always_at_limit`]).
+const AT_LIMIT: f64 = 0.5;
+
+/// The share of the samples in which `y`, simulated by `spec`, moves at its stroke-speed limit
+/// (within 5 %, each way its own, slowed with opening as the model slows it). Its sample-to-sample
+/// moves are measured: a valve turning every few samples is at its limit between turns.
+fn share_at_limit(spec: &ModelSpec, y: &[f64], dt: f64) -> f64 {
+    let g = |k| composed::get(spec, k);
+    let (open, close, r) = (g(Knob::Slew), g(Knob::ClosingSlew), g(Knob::Slowdown));
+    let at = (y.windows(2))
+        .filter(|w| {
+            let v = (w[1] - w[0]) / dt;
+            let limit = if v > 0.0 { open } else { close } / (1.0 + r * w[0] / 100.0);
+            v.abs() >= 0.95 * limit
+        })
+        .count();
+    at as f64 / y.len().max(1) as f64
 }
 
 /// How long after V_P was at a travel stop its departure may still be under way, s.
@@ -745,6 +780,24 @@ mod tests {
         };
         assert!(!stops_held(&low_vp, &low_free, 0.01, &quiet, (6.41, 100.0)));
         assert!(stops_held(&low_vp, &low_free, 0.01, &low, (6.41, 100.0)));
+    }
+
+    #[test]
+    fn a_limit_kept_between_the_turns_of_a_busy_loop_is_seen() {
+        let mut spec = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        composed::set(&mut spec, Knob::Slew, 0.5);
+        // At 0.5 %/s, turning every 2 samples: at the limit in every move.
+        let busy: Vec<f64> = (0..1000)
+            .map(|k| 50.0 + 0.005 * [0.0, 1.0, 2.0, 1.0][k % 4])
+            .collect();
+        assert!(share_at_limit(&spec, &busy, 0.01) > 0.99);
+        // A proportional answer to 0.5 % steps every 5 s (gain 8 /s): at the limit only at
+        // the start of each step.
+        let steps: Vec<f64> = (0..1000)
+            .map(|k| 50.0 + 0.5 * (1.0 - (-8.0 * (k % 500) as f64 * 0.01).exp()))
+            .collect();
+        let share = share_at_limit(&spec, &steps, 0.01);
+        assert!(share < 0.1, "{share}");
     }
 
     #[test]
