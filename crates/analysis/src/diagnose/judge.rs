@@ -497,6 +497,27 @@ pub(super) fn offset_alike(t: &Trial, best: &[&Trial], facts: &Facts, held_noise
             .any(|c| c.effect == Effect::Calibration && excess(c) <= OFFSET_ALIKE * excess(t))
 }
 
+/// Whether `t` is a stroke-speed limit that only a busy loop shows (V_P never holds it for
+/// 0.3 s, [`plausible`]; its model runs at it, [`Judge::always_at_limit`]) and that a minimum
+/// speed among `best` fits nearly as well: it removes `share` of what `t` removes from
+/// `cur_held`, the current held-out error. In a busy loop a valve that never moves slower
+/// than a floor, jittering about its target at that speed, looks like one that never moves
+/// faster than a limit, and the recording cannot tell the two apart (no minimum speed is
+/// named there either). On the bench's, a floor removes 0.90 of the limit's gain on a healthy
+/// valve with a floor of 2.7 %/s, and 0.39-0.71 of it on slow valves.
+pub(super) fn floor_alike(
+    t: &Trial,
+    best: &[&Trial],
+    facts: &Facts,
+    cur_held: f64,
+    share: f64,
+) -> bool {
+    let gain = |t: &Trial| cur_held - t.errors.held;
+    t.effect == Effect::SlewRate
+        && !plausible(Effect::SlewRate, &t.spec, facts)
+        && (best.iter()).any(|c| c.effect == Effect::MinSpeed && gain(c) >= share * gain(t))
+}
+
 /// The best variant of each effect (lowest held-out error among the material ones, when any
 /// is), best effect first. A variant that cannot be kept (pinned at the edge of its box, or
 /// too small to matter) does not hide one that can: lost motion of 1.2 % in a valve moving
@@ -912,6 +933,29 @@ mod tests {
         assert!(!alike(46.5, 81.4, 36.0, &even));
         let alone = trial(Effect::Asymmetry, 337.9, true);
         assert!(!offset_alike(&alone, &[&alone], &even, 439.0));
+    }
+
+    #[test]
+    fn a_limit_only_a_busy_loop_shows_is_a_floor_when_a_floor_fits_nearly_as_well() {
+        // Seed 27 valve 204 (healthy, a floor of 2.7 %/s): from 387.2 %², a limit of 2.4 %/s
+        // leaves 366.8, a floor 368.7; seed 28 valve 33 (0.44 %/s): from 23.5, 14.4 and 17.1.
+        let limit = |held: f64, slew: f64| {
+            let mut t = trial(Effect::SlewRate, held, true);
+            composed::set(&mut t.spec, Knob::Slew, slew);
+            t
+        };
+        let floor = |held: f64| trial(Effect::MinSpeed, held, false);
+        // V_P holds 1 %/s for 0.3 s: not a limit of 2.4 %/s as far as held speeds show.
+        let busy = facts(1.0, 1.0);
+        let (t, c) = (limit(366.8, 2.4), floor(368.7));
+        assert!(floor_alike(&t, &[&t, &c], &busy, 387.2, 0.8));
+        let (t, c) = (limit(14.4, 0.455), floor(17.1));
+        assert!(!floor_alike(&t, &[&t, &c], &facts(0.31, 0.31), 23.5, 0.8));
+        // A limit V_P holds is not a floor's look-alike, nor one with no floor beside it.
+        let (t, c) = (limit(366.8, 1.2), floor(368.7));
+        assert!(!floor_alike(&t, &[&t, &c], &busy, 387.2, 0.8));
+        let t = limit(366.8, 2.4);
+        assert!(!floor_alike(&t, &[&t], &busy, 387.2, 0.8));
     }
 
     #[test]

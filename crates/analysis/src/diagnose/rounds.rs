@@ -25,7 +25,9 @@ use super::candidates::{self, MAX_DEAD_TIME_S, WINDUP_RANGE_PCT};
 use super::diagnosis::{params, Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
-use super::judge::{best_per_effect, bic_change, offset_alike, pick_nuisance, Judge, Trial};
+use super::judge::{
+    best_per_effect, bic_change, floor_alike, offset_alike, pick_nuisance, Judge, Trial,
+};
 use super::locate::Window;
 use super::measure::Measure;
 use super::refit::{refit_from, spread_starts, starting_at, Free};
@@ -360,11 +362,16 @@ impl<'a> Search<'a> {
     /// Then the smaller BIC: of two alike, the one with fewer parameters (a tolerance band).
     /// Stiction with a deadband nearly as good ([`LOOK_ALIKE_SHARE`]) needs V_P to jump
     /// ([`stickslip::jumps`]); else the deadband wins. An asymmetry a calibration offset fits
-    /// about as well ([`offset_alike`]) does not pass: the offset is put in first.
+    /// about as well ([`offset_alike`]) does not pass: the offset is put in first; nor does a
+    /// limit only a busy loop shows that a floor fits nearly as well ([`floor_alike`]).
     fn winner<'t>(&self, best: &[&'t Trial]) -> Option<&'t Trial> {
         let d = &self.data;
         let held_noise = self.held_noise();
-        let passes = |t: &Trial| t.passes() && !offset_alike(t, best, d.facts, held_noise);
+        let passes = |t: &Trial| {
+            t.passes()
+                && !offset_alike(t, best, d.facts, held_noise)
+                && !floor_alike(t, best, d.facts, self.cur.held, LOOK_ALIKE_SHARE)
+        };
         let first = *best.iter().find(|t| passes(t))?;
         let gain = |t: &Trial| self.cur.held - t.errors.held;
         let winner = (best.iter())
