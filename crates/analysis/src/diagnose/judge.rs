@@ -248,15 +248,17 @@ const HELD_IN_BUSY_LOOP: f64 = 0.35;
 /// Whether `y`, simulated by `spec` (sampled every `dt` s), is at its stroke-speed limit in
 /// [`AT_LIMIT`] of the samples or more while V_P, whose speeds held for 0.3 s or more each way
 /// are `held`, makes way at [`HELD_IN_BUSY_LOOP`] of the limit (see [`Judge::always_at_limit`]).
-fn kept_at_limit(spec: &ModelSpec, y: &[f64], dt: f64, (open, close): (f64, f64)) -> bool {
+fn kept_at_limit(spec: &ModelSpec, y: &[f64], dt: f64, held: (f64, f64)) -> bool {
     let share = share_at_limit(spec, y, dt);
-    let limit = composed::get(spec, Knob::Slew) / composed::half_open(spec);
-    tracing::debug!(
-        share,
-        held = open.max(close) / limit,
-        "at the stroke-speed limit"
-    );
-    share >= AT_LIMIT && open.max(close) >= HELD_IN_BUSY_LOOP * limit
+    let held = held_share(spec, held);
+    tracing::debug!(share, held, "at the stroke-speed limit");
+    share >= AT_LIMIT && held >= HELD_IN_BUSY_LOOP
+}
+
+/// V_P's faster speed held for 0.3 s or more (`open`, `close`: [`Facts::held_speeds`]) as a
+/// share of the stroke-speed limit of `spec` at half travel.
+fn held_share(spec: &ModelSpec, (open, close): (f64, f64)) -> f64 {
+    open.max(close) / (composed::get(spec, Knob::Slew) / composed::half_open(spec))
 }
 
 /// The share of the samples in which `y`, simulated by `spec`, moves at its stroke-speed limit
@@ -417,6 +419,9 @@ pub(crate) fn bic_change(
 
 /// Share of a speed limit below which V_P's fastest measured move has not reached it.
 const SHORT_OF_LIMIT: f64 = 0.8;
+/// Share of a stroke-speed limit V_P must hold for 0.3 s or more for the limit to be seen
+/// ([`plausible`]).
+const HELD_AT_LIMIT: f64 = 0.7;
 
 /// Whether a fitted effect agrees with what the recording shows directly, whatever its size (a
 /// speed limit must be reached by the measured V_P; opening and closing speeds must differ
@@ -431,10 +436,7 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
         }
         // A slew limit even where the valve is fastest (closed), that V_P reaches and holds:
         // the short bursts of a proportional positioner answering small errors do not show one.
-        Effect::SlewRate => {
-            let (open, close) = facts.held_speeds;
-            open.max(close) >= 0.7 * g(Knob::Slew) / composed::half_open(spec)
-        }
+        Effect::SlewRate => held_share(spec, facts.held_speeds) >= HELD_AT_LIMIT,
         // The measured speeds ([`Facts::measured_speeds`]) differ the same way, by a fifth or
         // more unless V_P never reached the faster limit: a valve in a busy loop turns back
         // before it gets there, and its measured speeds then understate how much faster that
