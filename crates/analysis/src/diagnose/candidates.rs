@@ -27,15 +27,16 @@ const LONGEST_CROSSING_S: f64 = 10.0;
 /// Span of O_P (5th to 95th percentile) below which a calibration is fitted as an offset
 /// alone, % of travel: the sensor's gain shows only across a fifth of the travel or more.
 const MIN_GAIN_SPAN_PCT: f64 = 20.0;
-/// Largest wind-up past a travel stop the first fit of a stop searches, % of travel: a drive
-/// winds from a stop low in the travel up to its supply, most within a travel; its few starts
-/// stay where most stops are.
-pub(super) const MAX_WINDUP_PCT: f64 = 100.0;
-/// Largest wind-up the stop's own refit searches ([`super::rounds`]), % of travel: a
+/// Largest wind-up past a travel stop a fit of a stop searches, % of travel: a
 /// spring-diaphragm chamber winds on to its supply, several spring ranges above the pressure
 /// that holds the stem at a stop (a 6 bar supply on a 0.4-2 bar spring is 250 % beyond a stop
 /// at half travel), and must vent all that before the valve leaves the stop.
 pub(super) const WINDUP_RANGE_PCT: f64 = 400.0;
+/// Where the first fit of a stop starts its wind-up, % of travel. A drive winds up most often
+/// within a travel, but one that winds on to its supply holds the valve at the stop for tens
+/// of seconds after O_P has come back; from a start within a travel the fit moves the stop
+/// itself to the end of its box instead, and the stop is not named.
+const WINDUP_STARTS_PCT: [f64; 3] = [20.0, 100.0, 320.0];
 
 /// One effect to refit, from several starts (the knobs and boxes are the same in all).
 #[derive(Debug, Clone)]
@@ -324,15 +325,21 @@ fn travel_limits(facts: &Facts) -> Vec<Vec<Free>> {
             lo,
         )
     });
-    let mut sets: Vec<Vec<Free>> = [high, low].into_iter().flatten().map(|f| vec![f]).collect();
+    let mut stops: Vec<Vec<Free>> = [high, low].into_iter().flatten().map(|f| vec![f]).collect();
     if let (Some(h), Some(l)) = (high, low) {
-        sets.push(vec![h, l]);
+        stops.push(vec![h, l]);
     }
     // The drive winds up past the stop while O_P asks for more, and must come back first.
-    for set in &mut sets {
-        set.push(Free::new(Knob::Windup, 0.0, MAX_WINDUP_PCT, 20.0));
-    }
-    sets
+    let windup = Free::new(Knob::Windup, 0.0, WINDUP_RANGE_PCT, 20.0);
+    (stops.iter())
+        .flat_map(|set| {
+            WINDUP_STARTS_PCT.map(|start| {
+                let mut set = set.clone();
+                set.push(windup.from(start));
+                set
+            })
+        })
+        .collect()
 }
 
 /// Least-squares line through the settled holds: V_P = g O_P + o (1, 0 with too few holds).
