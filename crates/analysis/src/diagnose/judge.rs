@@ -174,12 +174,21 @@ impl Judge<'_> {
     /// else (stem dynamics, a small asymmetry, a slowdown too small to matter) is stretched
     /// well beyond what the valve shows there. Where either ratio cannot be measured (too few
     /// moves in a third of the travel) it says nothing against; nor when the candidate names a
-    /// crossing time that grows with opening rather than a slowdown.
+    /// crossing time that grows with opening rather than a slowdown. Nor is one seen where
+    /// V_P visits too little of the travel for the fitted slowdown to make it [`SLOWDOWN_SEEN`]
+    /// times slower at the top of the openings visited (95th percentile) than at their bottom
+    /// (5th): a valve held near a travel stop by a closed loop answers differently where it
+    /// leaves the stop than elsewhere, and a slowdown fitted over a few percent of travel takes
+    /// that up, to be extrapolated to a valve several times slower fully open.
     fn slowdown_seen(&self, spec: &ModelSpec, ya: &[f64]) -> bool {
-        if composed::get(spec, Knob::Slowdown) < MIN_SLOWDOWN {
+        let slowdown = composed::get(spec, Knob::Slowdown);
+        if slowdown < MIN_SLOWDOWN {
             return true;
         }
         let (dt, span) = (self.scorer.dt, self.facts.vp_span_pct);
+        if slower_across(slowdown, span) < SLOWDOWN_SEEN {
+            return false;
+        }
         let current = facts::speed_ratio(self.scorer.op, ya, dt, 0.0, span);
         tracing::debug!(
             recording = ?self.facts.speed_ratio,
@@ -236,6 +245,13 @@ impl Judge<'_> {
         tracing::debug!(?share, "stick-slip's gain where V_P leaves a stop");
         share.is_some_and(|s| s >= AT_DEPARTURE)
     }
+}
+
+/// How many times slower an opening-dependent slowdown of `slowdown` (the composed model's
+/// `open_slowdown`) makes the valve at the top of the openings `(lo, hi)` % than at their
+/// bottom.
+fn slower_across(slowdown: f64, (lo, hi): (f64, f64)) -> f64 {
+    (1.0 + slowdown * hi / 100.0) / (1.0 + slowdown * lo / 100.0)
 }
 
 /// Share of the samples a stroke-speed limit must keep the valve at it for it to be seen
@@ -682,6 +698,22 @@ mod tests {
             vp_span_pct: (20.0, 80.0),
             speed_ratio: None,
         }
+    }
+
+    #[test]
+    fn a_slowdown_is_seen_only_across_the_openings_visited() {
+        // Seed 28's valve 216, held at a stop at 40.8 % by a closed loop: V_P visits 35.7-40.9 %,
+        // where a slowdown fitted to 6.77 times slower fully open is 1.10 times slower.
+        let narrow = slower_across(5.77, (35.66, 40.87));
+        assert!(
+            (narrow - 1.098).abs() < 1e-3 && narrow < SLOWDOWN_SEEN,
+            "{narrow}"
+        );
+        // The same valve sweeping 20-80 %: 2.5 times slower at the top.
+        assert!(slower_across(5.77, (20.0, 80.0)) > 2.5);
+        // A valve three times slower fully open, across a fifth of the travel from 10 %.
+        assert!(slower_across(2.0, (10.0, 30.0)) >= SLOWDOWN_SEEN);
+        assert!(slower_across(2.0, (40.0, 45.0)) < SLOWDOWN_SEEN);
     }
 
     #[test]
