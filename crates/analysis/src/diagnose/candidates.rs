@@ -33,9 +33,10 @@ const MIN_GAIN_SPAN_PCT: f64 = 20.0;
 /// at half travel), and must vent all that before the valve leaves the stop.
 pub(super) const WINDUP_RANGE_PCT: f64 = 400.0;
 /// Where the first fit of a stop starts its wind-up, % of travel. A drive winds up most often
-/// within a travel, but one that winds on to its supply holds the valve at the stop for tens
-/// of seconds after O_P has come back; from a start within a travel the fit moves the stop
-/// itself to the end of its box instead, and the stop is not named.
+/// within a travel, but one that winds on to its supply holds the valve at the stop for
+/// seconds after O_P has come back (1.7-1.8 s on seed 30's digital valve 360, up to 10 s on
+/// its 279); from a start within a travel the fit moves the stop itself to the end of its box
+/// instead, and the stop is not named.
 const WINDUP_STARTS_PCT: [f64; 3] = [20.0, 100.0, 320.0];
 
 /// One effect to refit, from several starts (the knobs and boxes are the same in all).
