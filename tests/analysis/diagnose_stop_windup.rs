@@ -8,11 +8,10 @@
 //! was named to cover it. Two more (seeds 27 and 30, intact) wind up further than a travel
 //! (seed 30's holds the valve at its stop 1.7-1.8 s after O_P has stepped back from it):
 //! fitted with a wind-up starting within a travel, the stop itself moved to the end of its
-//! box, and nothing was named. Two physical valves
-//! held at a stop by a closed loop (seeds 28 and 30, intact) visit a few percent of travel
-//! beside it: a slowdown of the open valve fitted there took up how the valve leaves the stop
-//! and was named, 3.0 and 6.8 times slower fully open, until a slowdown had to show across the
-//! openings visited.
+//! box, and nothing was named. Two physical valves held at a stop by a closed loop (seeds 28
+//! and 30, intact) visit a few percent of travel beside it: a slowdown of the open valve
+//! fitted there took up how the valve leaves the stop and was named, 6.8 and 3.0 times slower
+//! fully open, until a slowdown had to show across the openings visited.
 
 use valve_bridge::diagnose::{Diagnosis, Effect};
 

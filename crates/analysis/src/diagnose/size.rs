@@ -48,8 +48,8 @@ use vb_core::model::ModelSpec;
 /// intact). The stroke speed is the 90th percentile of its 88 findings in the records of
 /// seeds 19-23 (every third valve, intact and as logged, each run with the diagnosis of its
 /// day): 0.083, where its intervals held the drawn value in 85 % of them with a spread of
-/// 0.05. Sizes not listed
-/// (the crossing time quoted when no band can be told) had too few findings to measure it.
+/// 0.05. Sizes not listed (the crossing time quoted when no band can be told) had too few
+/// findings to measure it.
 const MODEL_SPREAD: [(&str, f64); 11] = [
     ("dead_time_s", 0.05),
     ("deadband_pct", 0.40),
