@@ -31,7 +31,7 @@ use super::size::{self, Size};
 use super::speeds::differ;
 use super::tuning::Tuning;
 use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
-use vb_core::model::ModelSpec;
+use vb_core::model::{slower_at, ModelSpec};
 
 /// Smallest crossing time at half travel that is lost motion rather than stem dynamics, s: a
 /// healthy positioner swings its pressure across a healthy stem's tenth of a percent of band
@@ -251,7 +251,7 @@ impl Judge<'_> {
 /// `open_slowdown`) makes the valve at the top of the openings `(lo, hi)` % than at their
 /// bottom.
 fn slower_across(slowdown: f64, (lo, hi): (f64, f64)) -> f64 {
-    (1.0 + slowdown * hi / 100.0) / (1.0 + slowdown * lo / 100.0)
+    slower_at(slowdown, hi) / slower_at(slowdown, lo)
 }
 
 /// Share of the samples a stroke-speed limit must keep the valve at it for it to be seen

@@ -577,7 +577,7 @@ fn crossing_as_band(
     slowdown: f64,
     (op_min, op_max): (f64, f64),
 ) -> (f64, f64) {
-    let t = |v: f64| p.crossing_time_s(v) * (1.0 + slowdown * v / 100.0);
+    let t = |v: f64| p.crossing_time_s(v) * crate::model::slower_at(slowdown, v);
     // Least squares of a line through T over the range (31 points).
     let n = 31.0;
     let (sx, sy, sxx, sxy) = (0..=30)

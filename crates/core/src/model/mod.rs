@@ -37,7 +37,7 @@ pub use drift::{Drift, DriftSpec};
 pub use effects::Effects;
 pub use fopdt::FopdtParams;
 pub use physical::PhysicalParams;
-pub use pincart::{crossing_poly, PinCart1Params, PinCart2Params, PinReach};
+pub use pincart::{crossing_poly, slower_at, PinCart1Params, PinCart2Params, PinReach};
 pub use stiction::StictionParams;
 
 use crate::toml_file::{self, TomlError};

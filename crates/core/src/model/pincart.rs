@@ -366,13 +366,19 @@ impl PinCart {
     }
 }
 
-/// The opening-dependent slowdown `r` at opening `v`: how many times slower than closed the
-/// chamber makes the valve there, `1 + r V / 100`, and its inverse. Never inlined: inlined
+/// How many times slower than closed the opening-dependent slowdown `slowdown` (r) makes the
+/// valve at opening `v` %: `1 + r V / 100`, the chamber's volume there over its volume closed.
+#[inline]
+pub fn slower_at(slowdown: f64, v: f64) -> f64 {
+    1.0 + slowdown * v / 100.0
+}
+
+/// The opening-dependent slowdown `r` at opening `v`: [`slower_at`], and its inverse. Never inlined: inlined
 /// into [`PinCart::slowed`], the compiler makes the two divisions on every sample and selects,
 /// and the simulation waits for them even while the cart rests.
 #[inline(never)]
 fn slowdown_at(slowdown: f64, v: f64) -> (f64, f64) {
-    let grow = 1.0 + slowdown * v / 100.0;
+    let grow = slower_at(slowdown, v);
     (grow, 1.0 / grow)
 }
 
