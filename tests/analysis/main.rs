@@ -30,6 +30,7 @@ mod diagnose_blind_score;
 mod diagnose_cases;
 mod diagnose_concealed;
 mod diagnose_linkage_play;
+mod diagnose_min_speed;
 mod diagnose_physical;
 mod diagnose_smooth_slips;
 mod diagnose_stiction_or_not;

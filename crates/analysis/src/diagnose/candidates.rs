@@ -220,12 +220,16 @@ pub(crate) fn variants(
                 .to_vec()
         }
         // A positioner's creep floor can be as fast as a slow stroke: up to the slew limit.
-        Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => vec![vec![f(
-            Knob::MinSpeed,
-            0.05,
-            slew.clamp(1.0, 100.0),
-            1.0_f64.min(slew),
-        )]],
+        // Where the floor is slower than the valve closes its small errors it does nothing and
+        // a fit feels no slope, so it also starts from a tenth and three tenths of the limit
+        // (from 1 %/s alone, seed 31's physical valve 204, a floor of 1.9 %/s beside an uneven
+        // stroke, was named `slew_rate`).
+        Effect::MinSpeed if get(Knob::MinSpeed) == 0.0 => {
+            let top = slew.clamp(1.0, 100.0);
+            [1.0, 0.1 * top, 0.3 * top]
+                .map(|start| vec![f(Knob::MinSpeed, 0.05, top, start.clamp(0.05, top))])
+                .to_vec()
+        }
         // Stick-slip either on the valve's input (Choudhury) or inside the positioner loop
         // (breakaway: sticks when slow, slips past the target, hunts).
         Effect::Stiction if get(Knob::Stickband) == 0.0 && get(Knob::Breakaway) == 0.0 => vec![

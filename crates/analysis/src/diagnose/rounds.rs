@@ -267,6 +267,7 @@ impl<'a> Search<'a> {
             tuning: self.data.tuning,
             sigma: self.data.sigma,
             held_noise: self.held_noise,
+            current: &self.current,
             current_sim: &current_sim,
             cur: self.cur,
             corr_len: self.corr_len,
