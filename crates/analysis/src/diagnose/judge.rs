@@ -57,7 +57,7 @@ const MIN_SLOWDOWN: f64 = 0.6;
 /// [`Judge::slowdown_seen`]): the upper third of the openings visited 15 % slower.
 const SLOWDOWN_SEEN: f64 = 1.15;
 
-/// The share of a candidate's gain on the held-out blocks its own knobs must make (see
+/// The share of a candidate's gain (on the whole recording) its own knobs must make (see
 /// [`Judge::does_the_work`]).
 const OWN_WORK: f64 = 0.5;
 
@@ -149,11 +149,11 @@ impl Judge<'_> {
         let size = size::size(effect, &spec, self.facts, self.scorer.op, tuning);
         let significant = beyond_chance(t_stat, excess_share, delta_bic, tuning);
         let plausible = !pinned(own, &spec, effect)
-            && self.does_the_work(effect, &spec, own, &errors)
             && (plausible(effect, &spec, self.facts) || self.always_at_limit(effect, &spec, &yb))
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
             && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
-            && (effect != Effect::Stiction || !self.stop_departure(ya, &yb));
+            && (effect != Effect::Stiction || !self.stop_departure(ya, &yb))
+            && self.does_the_work(effect, &spec, own, &errors);
         let material = plausible
             && size.worth >= tuning.materiality
             && heldout_share >= tuning.min_heldout_share;
