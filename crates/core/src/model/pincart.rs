@@ -373,9 +373,9 @@ pub fn slower_at(slowdown: f64, v: f64) -> f64 {
     1.0 + slowdown * v / 100.0
 }
 
-/// The opening-dependent slowdown `r` at opening `v`: [`slower_at`], and its inverse. Never inlined: inlined
-/// into [`PinCart::slowed`], the compiler makes the two divisions on every sample and selects,
-/// and the simulation waits for them even while the cart rests.
+/// The opening-dependent slowdown `r` at opening `v`: [`slower_at`], and its inverse. Never
+/// inlined: inlined into [`PinCart::slowed`], the compiler makes the two divisions on every
+/// sample and selects, and the simulation waits for them even while the cart rests.
 #[inline(never)]
 fn slowdown_at(slowdown: f64, v: f64) -> (f64, f64) {
     let grow = slower_at(slowdown, v);
