@@ -9,7 +9,11 @@
 //! - seed 17 valve 39 (physical, closed loop) and valve 280 (digital, small steps): one side
 //!   slow, the other at a healthy speed the recording never asks for in full. Only the
 //!   unevenness is named: the valve given a healthy speed on its faster side fits the
-//!   held-out blocks about as well.
+//!   held-out blocks about as well. So too seed 32 valve 324 (digital, ramps): opening at
+//!   9.5 %/s was named `slew_rate` in the first round, where the unevenness fitted with a
+//!   closing limit at the top of its box was not plausible; once the unevenness is named
+//!   the limit named first is its slower side, and the valve given a healthy speed on its
+//!   faster side (37 %/s closing) fits as well.
 //! - seed 17 valve 0 and seed 18 valve 117 (physical, busy closed loops, sensor noise 0.02 %):
 //!   both sides slow (0.3-0.8 %/s), one up to 2.6 times faster. The valve turns back long
 //!   before it reaches its faster limit, so its fastest moves each way differ by less than a
@@ -54,10 +58,10 @@ fn a_valve_slow_both_ways_is_named_uneven_and_slow() {
 
 #[test]
 fn a_valve_slow_one_way_only_is_not_named_slow() {
-    for index in [39, 280] {
-        let (case, d) = diagnosed_as(17, index, false);
-        assert_eq!(case.labels, [Effect::Asymmetry], "valve {index}");
-        assert_eq!(named(&d), [Effect::Asymmetry], "valve {index}");
+    for (seed, index) in [(17, 39), (17, 280), (32, 324)] {
+        let (case, d) = diagnosed_as(seed, index, false);
+        assert_eq!(case.labels, [Effect::Asymmetry], "{seed}/{index}");
+        assert_eq!(named(&d), [Effect::Asymmetry], "{seed}/{index}");
     }
 }
 
