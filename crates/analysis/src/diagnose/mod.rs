@@ -40,6 +40,7 @@ mod measure;
 mod refit;
 mod rounds;
 mod scorer;
+mod sensor;
 pub mod size;
 mod slow;
 mod speeds;
@@ -190,17 +191,12 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
             f.facts.in_final(f.effect, &current, data.facts, data.sigma);
         }
     }
-    // A slew-rate limit named in a round before an asymmetry is, in the final model, the
-    // asymmetry's two limits: it stands only where the valve is slow both ways.
-    if findings.iter().any(|f| f.effect == Effect::Asymmetry) {
-        findings.retain(|f| f.effect != Effect::SlewRate);
-    }
-    findings.extend(slow::slow_both_ways(
-        (&findings, &traces),
+    slow::slow_both_ways(
+        (&mut findings, &traces),
         &current,
         data,
         (held_noise, corr_len),
-    ));
+    );
     // The traces stay in the model only beside a finding.
     let final_spec = if findings.is_empty() {
         baseline.spec.clone()

@@ -67,6 +67,7 @@ use rayon::prelude::*;
 use super::facts::{self, Facts, Slip};
 use super::measure::Measure;
 use super::scorer::Scorer;
+use super::sensor::Sensor;
 use super::tuning::Tuning;
 use vb_core::metrics::stats::{self, Differences};
 use vb_core::model::composed::{self, Knob};
@@ -114,6 +115,16 @@ const RIVAL_SLIPS: usize = 2 * EVIDENT_SLIPS;
 /// a valve whose slips the current model misses at [`EVIDENT_PER_MIN`] in the fit and the
 /// held-out blocks alike (hunting whose slips the noise hides one by one).
 const MIN_EVIDENT: usize = 10;
+
+/// Octaves below the model's positioner gain that stick-slip inside the positioner loop is
+/// tried down to (a sixteenth). A stem stuck until a positioner that slow has built up its
+/// force slips seldom, about as seldom as a healthy pulsing positioner makes its quick moves
+/// in a busy loop (one every 4-5 s), while the rest of the recording shows the positioner
+/// sixteen times faster: the best fit there stands for that rarity, not for friction, and no
+/// stick-slip is named from the slips (seed 33's digital valves 366 intact and 318 as
+/// logged, seed 32's 363 as logged, all healthy; the stick-slip valves of seeds 30-33 were
+/// fitted at a half to an eighth of their model's gain).
+const SLOWEST_GAIN_OCTAVE: i32 = -4;
 
 /// Longest brief stick between a slip past the target and the slip back, in slip spans
 /// (0.3 s at 100 Hz): a fast positioner turns a stem round within that.
@@ -456,7 +467,8 @@ fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
 fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
     let sizes = || (0..=8).map(move |i| size * 2f64.powf(i as f64 / 4.0 - 1.0));
     let breakaway = sizes().flat_map(|b| {
-        (-4..=3).map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
+        (SLOWEST_GAIN_OCTAVE..=3)
+            .map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
     });
     let input = sizes().flat_map(|jump| {
         [1.0, 0.5, 0.25].into_iter().flat_map(move |fraction| {
@@ -470,6 +482,14 @@ fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
         })
     });
     breakaway.chain(input).collect()
+}
+
+/// Whether `spec` is stick-slip inside the positioner loop with the slowest positioner
+/// [`grid`] tries on a model of positioner gain `gain` ([`SLOWEST_GAIN_OCTAVE`]).
+fn at_slowest_positioner(spec: &ModelSpec, gain: f64) -> bool {
+    let slowest = gain * 2f64.powi(SLOWEST_GAIN_OCTAVE);
+    composed::get(spec, Knob::Breakaway) > 0.0
+        && composed::get(spec, Knob::Gain) <= slowest * (1.0 + 1e-9)
 }
 
 /// Smooth valves that make slips too, seeded like [`grid`]: a friction band crossed at the
@@ -565,6 +585,10 @@ pub(crate) fn fit(
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
     };
     let (spec, knobs, stick_distance, _) = closest(grid(size, gain))?;
+    if at_slowest_positioner(&spec, gain) {
+        tracing::debug!("stick-slip only with the slowest positioner tried");
+        return None;
+    }
     let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain))?;
     let (read_smooth, slips_smooth, smooth, _) = score(&scorer.simulate(&smooth_spec));
     let evident_smooth = rest.evident(&slips_smooth, &read_smooth);
@@ -650,50 +674,6 @@ fn with_knobs(current: &ModelSpec, knobs: &[(Knob, f64)]) -> ModelSpec {
         composed::set(&mut spec, k, v);
     }
     spec
-}
-
-/// The recording's sensor, for simulations: seeded Gaussian noise of the noise floor, then the
-/// sensor lattice, and no reading where the recording has none (so a simulation's slips are
-/// counted on the same rows as the measured ones).
-struct Sensor {
-    noise: Vec<f64>,
-    lattice: f64,
-}
-
-impl Sensor {
-    /// The sensor of the measured V_P `vp` (NaN where missing).
-    fn new(vp: &[f64], sigma: f64, lattice: f64) -> Self {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, StandardNormal};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51_1b5);
-        let noise = vp
-            .iter()
-            .map(|v| {
-                let e: f64 = StandardNormal.sample(&mut rng);
-                if v.is_finite() {
-                    sigma * e
-                } else {
-                    f64::NAN
-                }
-            })
-            .collect();
-        Sensor { noise, lattice }
-    }
-
-    /// What the sensor would have read of the positions `y`.
-    fn read(&self, y: &[f64]) -> Vec<f64> {
-        y.iter()
-            .zip(&self.noise)
-            .map(|(v, e)| {
-                let r = v + e;
-                if self.lattice > 0.0 {
-                    (r / self.lattice).round() * self.lattice
-                } else {
-                    r
-                }
-            })
-            .collect()
-    }
 }
 
 #[cfg(test)]
