@@ -116,16 +116,6 @@ const RIVAL_SLIPS: usize = 2 * EVIDENT_SLIPS;
 /// held-out blocks alike (hunting whose slips the noise hides one by one).
 const MIN_EVIDENT: usize = 10;
 
-/// Octaves below the model's positioner gain that stick-slip inside the positioner loop is
-/// tried down to (a sixteenth). A stem stuck until a positioner that slow has built up its
-/// force slips seldom, about as seldom as a healthy pulsing positioner makes its quick moves
-/// in a busy loop (one every 4-5 s), while the rest of the recording shows the positioner
-/// sixteen times faster: the best fit there stands for that rarity, not for friction, and no
-/// stick-slip is named from the slips (seed 33's digital valves 366 intact and 318 as
-/// logged, seed 32's 363 as logged, all healthy; the stick-slip valves of seeds 30-33 were
-/// fitted at a half to an eighth of their model's gain).
-const SLOWEST_GAIN_OCTAVE: i32 = -4;
-
 /// Longest brief stick between a slip past the target and the slip back, in slip spans
 /// (0.3 s at 100 Hz): a fast positioner turns a stem round within that.
 const BRIEF_STICK_SPANS: usize = 3;
@@ -467,8 +457,7 @@ fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
 fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
     let sizes = || (0..=8).map(move |i| size * 2f64.powf(i as f64 / 4.0 - 1.0));
     let breakaway = sizes().flat_map(|b| {
-        (SLOWEST_GAIN_OCTAVE..=3)
-            .map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
+        (-4..=3).map(move |j| vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))])
     });
     let input = sizes().flat_map(|jump| {
         [1.0, 0.5, 0.25].into_iter().flat_map(move |fraction| {
@@ -482,14 +471,6 @@ fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
         })
     });
     breakaway.chain(input).collect()
-}
-
-/// Whether `spec` is stick-slip inside the positioner loop with the slowest positioner
-/// [`grid`] tries on a model of positioner gain `gain` ([`SLOWEST_GAIN_OCTAVE`]).
-fn at_slowest_positioner(spec: &ModelSpec, gain: f64) -> bool {
-    let slowest = gain * 2f64.powi(SLOWEST_GAIN_OCTAVE);
-    composed::get(spec, Knob::Breakaway) > 0.0
-        && composed::get(spec, Knob::Gain) <= slowest * (1.0 + 1e-9)
 }
 
 /// Smooth valves that make slips too, seeded like [`grid`]: a friction band crossed at the
@@ -585,10 +566,6 @@ pub(crate) fn fit(
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
     };
     let (spec, knobs, stick_distance, _) = closest(grid(size, gain))?;
-    if at_slowest_positioner(&spec, gain) {
-        tracing::debug!("stick-slip only with the slowest positioner tried");
-        return None;
-    }
     let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain))?;
     let (read_smooth, slips_smooth, smooth, _) = score(&scorer.simulate(&smooth_spec));
     let evident_smooth = rest.evident(&slips_smooth, &read_smooth);
