@@ -48,6 +48,10 @@
 //!   mixed excitation): once the stop is in the model, the free-run error is least with a
 //!   stick-slip trace of 0.05 %, which goes in the model unnamed. Judged by its slips against
 //!   the model without that trace, stiction is named, its interval holding the drawn slip.
+//! - Stick-slip that wins a round by the held-out error must stick and jump too: seed 33's
+//!   physical valve 78 (an unevenness of 1.8 on random steps, a static excess of 0.009 %) was
+//!   named `stiction` 0.36 % beside the unevenness, for 7 % of the held-out error left, while
+//!   V_P made not one evident slip. The unevenness alone is named, intact and as logged.
 
 use valve_bridge::diagnose::{self, Diagnosis, Effect};
 use valve_bridge::synth::logged;
@@ -218,4 +222,13 @@ fn a_valve_hunting_beside_a_travel_stop_is_named_stiction_by_its_slips() {
     assert!(named(&d).contains(&Effect::Stiction), "{:?}", named(&d));
     assert!(holds(&case, &d, Effect::Stiction), "{:?}", d.findings);
     assert!(holds(&case, &d, Effect::Saturation), "{:?}", d.findings);
+}
+
+#[test]
+fn a_smooth_mismatch_without_one_evident_slip_is_not_named_stiction() {
+    for as_logged in [false, true] {
+        let (case, d) = diagnosed_as(33, 78, as_logged);
+        assert_eq!(case.labels, [Effect::Asymmetry]);
+        assert_eq!(named(&d), [Effect::Asymmetry], "as logged: {as_logged}");
+    }
 }

@@ -38,6 +38,7 @@ mod judge;
 pub mod locate;
 mod measure;
 mod refit;
+mod rests;
 mod rounds;
 mod scorer;
 mod sensor;

@@ -361,17 +361,24 @@ impl<'a> Search<'a> {
     /// ([`TIE_SHARE`]) with the support of more held-out blocks: an effect that explains the
     /// error across the recording is better supported than one that helps a few blocks a lot.
     /// Then the smaller BIC: of two alike, the one with fewer parameters (a tolerance band).
-    /// Stiction with a deadband nearly as good ([`LOOK_ALIKE_SHARE`]) needs V_P to jump
-    /// ([`stickslip::jumps`]); else the deadband wins. An asymmetry a calibration offset fits
+    /// Stiction passes only where V_P sticks, then jumps ([`stickslip::jumps`]); with a
+    /// deadband nearly as good ([`LOOK_ALIKE_SHARE`]) it must jump beyond what the deadband
+    /// makes, else the deadband wins. An asymmetry a calibration offset fits
     /// about as well ([`offset_alike`]) does not pass: the offset is put in first; nor does a
     /// limit only a busy loop shows that a floor fits nearly as well ([`floor_alike`]).
     fn winner<'t>(&self, best: &[&'t Trial]) -> Option<&'t Trial> {
         let d = &self.data;
         let held_noise = self.held_noise();
+        let jumps = |smooth| {
+            let current = (&self.current, smooth);
+            stickslip::jumps(d.scorer, current, d.facts, d.sigma, d.tuning)
+        };
+        let sticks = std::cell::OnceCell::new();
         let passes = |t: &Trial| {
             t.passes()
                 && !offset_alike(t, best, d.facts, held_noise)
                 && !floor_alike(t, best, d.facts, self.cur.held, LOOK_ALIKE_SHARE)
+                && (t.effect != Effect::Stiction || *sticks.get_or_init(|| jumps(None)))
         };
         let first = *best.iter().find(|t| passes(t))?;
         let gain = |t: &Trial| self.cur.held - t.errors.held;
@@ -385,16 +392,7 @@ impl<'a> Search<'a> {
             t.effect == Effect::Deadband && t.passes() && gain(t) >= LOOK_ALIKE_SHARE * gain(winner)
         });
         match band {
-            Some(band)
-                if winner.effect == Effect::Stiction
-                    && !stickslip::jumps(
-                        d.scorer,
-                        (&self.current, &band.spec),
-                        d.facts,
-                        d.sigma,
-                        d.tuning,
-                    ) =>
-            {
+            Some(band) if winner.effect == Effect::Stiction && !jumps(Some(&band.spec)) => {
                 Some(band)
             }
             _ => Some(winner),

@@ -57,6 +57,13 @@
 //!   hundreds of times, and healthy valves under a noisy controller miss a few a minute.
 //!   A stem that a fast positioner pushes past its target and turns round within 0.3 s
 //!   rests before the slip out and after the slip back, not between them: both count.
+//! - **Stuck before it jumps**: in the 0.2 s before each evident slip, a stuck stem stands
+//!   still while the smooth model moves on (V_P and the model's V_P uncorrelated, the reading
+//!   its noise). When V_P follows the model there (median correlation over the slips 0.25 or
+//!   more), the quick moves are those of a valve that was moving all along, such as a pulsing
+//!   positioner following a noisy controller output, and stick-slip is not judged, unless
+//!   the current model misses fifteen slips a minute as above (slips the noise hides are not
+//!   the evident ones).
 //!
 //! Quantization (a lattice step is not a slip), sensor spikes (no level change), O_P steps and
 //! smooth moves or slewing (no rest before and after) cannot produce slips, so they cannot be
@@ -66,6 +73,7 @@ use rayon::prelude::*;
 
 use super::facts::{self, Facts, Slip};
 use super::measure::Measure;
+use super::rests::{Rest, FOLLOWS};
 use super::scorer::Scorer;
 use super::sensor::Sensor;
 use super::tuning::Tuning;
@@ -90,12 +98,6 @@ const SMOOTH_LEAN_P: f64 = 0.5;
 /// stick-slip to be named by their number, when the fitted model matches them only in part:
 /// healthy valves under a noisy controller output miss a few a minute, a hunting valve tens.
 const EVIDENT_PER_MIN: f64 = 15.0;
-/// A slip at least this many times the slip threshold is evident: noise alone (five sigmas of
-/// the compared means at the threshold) practically never makes one, and the slips a healthy
-/// valve's small mismatch with its model makes lie just above the threshold. It must also be
-/// larger than a healthy stem's friction band ([`super::tuning::Worth::friction_band_pct`]), whose lost motion
-/// a stem can make up in one quick move.
-const EVIDENT_FACTOR: f64 = 1.5;
 /// Fewest evident slips the current model must miss over the whole recording, and how many
 /// times as many as the model makes (read through the same sensor), for stick-slip to be named
 /// by them even where they fall unevenly between the fit and the held-out blocks (a valve that
@@ -115,12 +117,6 @@ const RIVAL_SLIPS: usize = 2 * EVIDENT_SLIPS;
 /// a valve whose slips the current model misses at [`EVIDENT_PER_MIN`] in the fit and the
 /// held-out blocks alike (hunting whose slips the noise hides one by one).
 const MIN_EVIDENT: usize = 10;
-
-/// Longest brief stick between a slip past the target and the slip back, in slip spans
-/// (0.3 s at 100 Hz): a fast positioner turns a stem round within that.
-const BRIEF_STICK_SPANS: usize = 3;
-/// Largest ratio of the sizes of a slip out and the slip back.
-const LIKE_SIZE: f64 = 1.5;
 
 type Histogram = [f64; BINS];
 
@@ -354,82 +350,6 @@ fn drops(pieces: &Pieces, from: &[f64], to: &[f64], held: Option<bool>) -> Vec<f
         .collect()
 }
 
-/// What makes a slip evident: its size, and V_P at rest on both sides of the move.
-struct Rest {
-    /// Samples the move may take (the slip detector's span).
-    span: usize,
-    /// Noise of the reading, %.
-    sigma: f64,
-    /// Samples of the initial transient, not counted.
-    skip: usize,
-    /// Smallest evident slip, % ([`EVIDENT_FACTOR`]).
-    least: f64,
-}
-
-impl Rest {
-    /// Evident slips for a reading of noise `sigma` with the slips of `scale`, the first `skip`
-    /// samples not counted.
-    fn new(scale: &facts::SlipScale, sigma: f64, skip: usize, tuning: &Tuning) -> Rest {
-        Rest {
-            span: scale.span,
-            sigma,
-            skip,
-            least: (EVIDENT_FACTOR * scale.threshold_pct)
-                .max(tuning.worth.friction_band_pct)
-                .max(1.5 * sigma),
-        }
-    }
-
-    /// Number of `slips` of the reading `y` at least `least` in size, outside the initial
-    /// transient, with `y` at rest for a span just before and just after the move: within a
-    /// quarter of the slip plus what five noise sigmas spread over. A valve that jitters
-    /// after a noisy controller output moves all the time; a stuck stem stands still, then
-    /// slips. A stem pushed past its target by a fast positioner may stick there only briefly
-    /// and slip back ([`BRIEF_STICK_SPANS`]): two slips of opposite sign and like size, at rest
-    /// before the first and after the second, count both: a healthy valve on a still command
-    /// has no reason to leave its place and come back.
-    fn evident(&self, slips: &[Slip], y: &[f64]) -> usize {
-        let h = self.span;
-        let still = |a: usize, b: usize, size: f64| {
-            let (lo, hi) = y[a..b]
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &v| {
-                    (l.min(v), u.max(v))
-                });
-            hi - lo <= 0.25 * size + 5.0 * self.sigma
-        };
-        let counted = |s: &Slip| {
-            s.k >= self.skip.max(2 * h) && s.k + 2 * h <= y.len() && s.size_pct.abs() >= self.least
-        };
-        let before = |s: &Slip| still(s.k - 2 * h, s.k - h, s.size_pct.abs());
-        let after = |s: &Slip| still(s.k + h, s.k + 2 * h, s.size_pct.abs());
-        let turned_round = |out: &Slip, back: &Slip| {
-            let (a, b) = (out.size_pct, back.size_pct);
-            back.k - out.k <= BRIEF_STICK_SPANS * h
-                && a * b < 0.0
-                && a.abs().max(b.abs()) <= LIKE_SIZE * a.abs().min(b.abs())
-        };
-        let mut count = 0;
-        let mut i = 0;
-        while i < slips.len() {
-            let s = &slips[i];
-            match slips.get(i + 1) {
-                Some(b)
-                    if counted(s) && counted(b) && turned_round(s, b) && before(s) && after(b) =>
-                {
-                    count += 2;
-                    i += 2;
-                }
-                _ => {
-                    count += usize::from(counted(s) && before(s) && after(s));
-                    i += 1;
-                }
-            }
-        }
-        count
-    }
-}
-
 /// Median size of the `slips` in the fit blocks (`fit_only`), or in the whole recording.
 fn median_slip(slips: &[Slip], scorer: &Scorer, fit_only: bool) -> f64 {
     if fit_only {
@@ -529,8 +449,6 @@ pub(crate) fn fit(
         total(&before, &pieces, false),
         total(&before, &pieces, true),
     );
-    let (measured_n, model_n) = (measured_slips.len(), slips_before.len());
-    tracing::debug!(measured_n, model_n, ?missed, threshold, "slips of V_P");
     let rest = Rest::new(scale, sigma, scorer.skip, tuning);
     let (evident, evident_model) = (
         rest.evident(&measured_slips, scorer.vp),
@@ -538,11 +456,13 @@ pub(crate) fn fit(
     );
     let by_evidence =
         evident >= EVIDENT_SLIPS && evident as f64 >= EVIDENT_RATIO * evident_model.max(1) as f64;
-    tracing::debug!(evident, evident_model, by_evidence, "evident slips");
+    let follows = rest.follows(&measured_slips, scorer.vp, &reference);
+    tracing::debug!(?missed, evident, evident_model, follows, "slips of V_P");
     let both_halves = missed.0 >= MIN_MISSED && missed.1 >= MIN_MISSED;
     let per_min = EVIDENT_PER_MIN * scorer.n_fit() as f64 * scorer.dt / 60.0;
     let hunting = missed.0.min(missed.1) >= per_min;
-    if (evident < MIN_EVIDENT && !hunting) || !(both_halves || by_evidence) {
+    let stuck_then_jumps = evident >= MIN_EVIDENT && follows < FOLLOWS;
+    if !(stuck_then_jumps || hunting) || !(both_halves || by_evidence) {
         return None;
     }
     // Fitted on the fit blocks; on all of them when those hold too few slips to fit.
@@ -617,16 +537,17 @@ pub(crate) fn fit(
     Some(candidate)
 }
 
-/// `current` with the `knobs` set.
-/// Whether V_P sticks, then jumps, beyond what the smooth model `smooth` makes (a deadband
-/// that removes nearly as much held-out error as stiction): its evident slips, against the
-/// current model `current`, number at least [`MIN_EVIDENT`] and [`EVIDENT_RATIO`] times those
-/// of `smooth` read through a sensor like the recording's. A valve in a deadband rests
-/// anywhere in the band around its target and is moved back into it at the positioner's
-/// speed; stick-slip jumps.
+/// Whether V_P sticks, then jumps, against the current model `current`: at least
+/// [`MIN_EVIDENT`] evident slips, with the stem stuck before them ([`Rest::follows`] below
+/// [`FOLLOWS`]), and, beside a smooth model `smooth` (a deadband that removes nearly as much
+/// held-out error as stiction), [`EVIDENT_RATIO`] times those of `smooth` read through a
+/// sensor like the recording's. A valve in a deadband rests anywhere in the band around its
+/// target and is moved back into it at the positioner's speed, and a valve following a noisy
+/// command moves all along; stick-slip sticks, then jumps. Asked of stick-slip that wins a
+/// round by the held-out error (its slips are judged in [`fit`]).
 pub(crate) fn jumps(
     scorer: &Scorer,
-    (current, smooth): (&ModelSpec, &ModelSpec),
+    (current, smooth): (&ModelSpec, Option<&ModelSpec>),
     facts: &Facts,
     sigma: f64,
     tuning: &Tuning,
@@ -634,17 +555,22 @@ pub(crate) fn jumps(
     let scale = &facts.slip_scale;
     let reference = scorer.simulate(current);
     let rest = Rest::new(scale, sigma, scorer.skip, tuning);
-    let evident = rest.evident(&facts::slips(&reference, scorer.vp, scale), scorer.vp);
-    let read = Sensor::new(scorer.vp, sigma, facts.lattice_pct).read(&scorer.simulate(smooth));
-    let evident_smooth = rest.evident(&facts::slips(&reference, &read, scale), &read);
-    tracing::debug!(
-        evident,
-        evident_smooth,
-        "jumps of V_P against a smooth look-alike"
+    let slips = facts::slips(&reference, scorer.vp, scale);
+    let (evident, follows) = (
+        rest.evident(&slips, scorer.vp),
+        rest.follows(&slips, scorer.vp, &reference),
     );
-    evident >= MIN_EVIDENT && evident as f64 >= EVIDENT_RATIO * evident_smooth.max(1) as f64
+    let evident_smooth = smooth.map_or(0, |smooth| {
+        let read = Sensor::new(scorer.vp, sigma, facts.lattice_pct).read(&scorer.simulate(smooth));
+        rest.evident(&facts::slips(&reference, &read, scale), &read)
+    });
+    tracing::debug!(evident, follows, evident_smooth, "jumps of V_P");
+    evident >= MIN_EVIDENT
+        && follows < FOLLOWS
+        && evident as f64 >= EVIDENT_RATIO * evident_smooth.max(1) as f64
 }
 
+/// `current` with the `knobs` set.
 fn with_knobs(current: &ModelSpec, knobs: &[(Knob, f64)]) -> ModelSpec {
     let mut spec = current.clone();
     for &(k, v) in knobs {
@@ -677,39 +603,6 @@ mod tests {
         let f = x.log2();
         assert!((c[0][0] - (1.0 - f)).abs() < 1e-12 && (c[0][1] - f).abs() < 1e-12);
         assert_eq!(distances(&a, &c)[1], 1.0);
-    }
-
-    #[test]
-    fn a_slip_counts_as_evident_with_rests_around_it_or_around_a_brief_stick_and_back() {
-        // 100 Hz, a quiet reading: slips take 10 samples, evident ones are 0.3 % or more.
-        let scale = facts::SlipScale::new(0.01, 0.01, 0.0);
-        let rest = Rest::new(&scale, 0.01, 0, &Tuning::default());
-        let h = scale.span;
-        // Level 50; a move of `first` % at 1000 and one of `second` % `dwell` samples later.
-        let reading = |first: f64, second: f64, dwell: usize| -> Vec<f64> {
-            (0..3000)
-                .map(|k| match k {
-                    _ if k < 1000 => 50.0,
-                    _ if k < 1000 + dwell => 50.0 + first,
-                    _ => 50.0 + first + second,
-                })
-                .collect()
-        };
-        let slips = |y: &[f64]| facts::slips(&vec![50.0; y.len()], y, &scale);
-        // A stem that stays where it slipped to: one evident slip.
-        let stays = reading(0.5, 0.0, 0);
-        assert_eq!(rest.evident(&slips(&stays), &stays), 1);
-        // Out and back after a brief stick, too brief for a span's rest after the first slip
-        // (between one and a half and two spans: the slip detector sees both): both evident.
-        for dwell in [3 * h / 2, 2 * h - 1] {
-            let y = reading(0.5, -0.5, dwell);
-            assert_eq!(slips(&y).len(), 2, "dwell {dwell}");
-            assert_eq!(rest.evident(&slips(&y), &y), 2, "dwell {dwell}");
-        }
-        // On in two moves as close together (a valve catching up in steps): neither.
-        let on = reading(0.5, 0.5, 2 * h - 1);
-        assert_eq!(slips(&on).len(), 2);
-        assert_eq!(rest.evident(&slips(&on), &on), 0);
     }
 
     #[test]
