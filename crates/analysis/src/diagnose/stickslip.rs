@@ -461,8 +461,7 @@ pub(crate) fn fit(
     let both_halves = missed.0 >= MIN_MISSED && missed.1 >= MIN_MISSED;
     let per_min = EVIDENT_PER_MIN * scorer.n_fit() as f64 * scorer.dt / 60.0;
     let hunting = missed.0.min(missed.1) >= per_min;
-    let stuck_then_jumps = evident >= MIN_EVIDENT && follows < FOLLOWS;
-    if !(stuck_then_jumps || hunting) || !(both_halves || by_evidence) {
+    if !(stuck_then_jumps(evident, follows) || hunting) || !(both_halves || by_evidence) {
         return None;
     }
     // Fitted on the fit blocks; on all of them when those hold too few slips to fit.
@@ -565,9 +564,14 @@ pub(crate) fn jumps(
         rest.evident(&facts::slips(&reference, &read, scale), &read)
     });
     tracing::debug!(evident, follows, evident_smooth, "jumps of V_P");
-    evident >= MIN_EVIDENT
-        && follows < FOLLOWS
+    stuck_then_jumps(evident, follows)
         && evident as f64 >= EVIDENT_RATIO * evident_smooth.max(1) as f64
+}
+
+/// A stem that sticks, then jumps: at least [`MIN_EVIDENT`] evident slips, and V_P stuck
+/// before them rather than following the model ([`Rest::follows`] below [`FOLLOWS`]).
+fn stuck_then_jumps(evident: usize, follows: f64) -> bool {
+    evident >= MIN_EVIDENT && follows < FOLLOWS
 }
 
 /// `current` with the `knobs` set.
