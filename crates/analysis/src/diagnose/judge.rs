@@ -31,7 +31,7 @@ use super::size::{self, Size};
 use super::speeds::differ;
 use super::tuning::Tuning;
 use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
-use vb_core::model::{slower_at, ModelSpec};
+use vb_core::model::ModelSpec;
 
 /// Smallest crossing time at half travel that is lost motion rather than stem dynamics, s: a
 /// healthy positioner swings its pressure across a healthy stem's tenth of a percent of band
@@ -230,7 +230,7 @@ impl Judge<'_> {
             return true;
         }
         let (dt, span) = (self.scorer.dt, self.facts.vp_span_pct);
-        if slower_across(slowdown, span) < SLOWDOWN_SEEN {
+        if size::slower_across(slowdown, span) < SLOWDOWN_SEEN {
             return false;
         }
         let current = facts::speed_ratio(self.scorer.op, ya, dt, 0.0, span);
@@ -289,13 +289,6 @@ impl Judge<'_> {
         tracing::debug!(?share, "stick-slip's gain where V_P leaves a stop");
         share.is_some_and(|s| s >= AT_DEPARTURE)
     }
-}
-
-/// How many times slower an opening-dependent slowdown of `slowdown` (the composed model's
-/// `open_slowdown`) makes the valve at the top of the openings `(lo, hi)` % than at their
-/// bottom.
-fn slower_across(slowdown: f64, (lo, hi): (f64, f64)) -> f64 {
-    slower_at(slowdown, hi) / slower_at(slowdown, lo)
 }
 
 /// Share of the samples a stroke-speed limit must keep the valve at it for it to be seen
@@ -748,16 +741,16 @@ mod tests {
     fn a_slowdown_is_seen_only_across_the_openings_visited() {
         // Seed 28's valve 216, held at a stop at 40.8 % by a closed loop: V_P visits 35.7-40.9 %,
         // where a slowdown fitted to 6.77 times slower fully open is 1.10 times slower.
-        let narrow = slower_across(5.77, (35.66, 40.87));
+        let narrow = size::slower_across(5.77, (35.66, 40.87));
         assert!(
             (narrow - 1.098).abs() < 1e-3 && narrow < SLOWDOWN_SEEN,
             "{narrow}"
         );
         // The same valve sweeping 20-80 %: 2.5 times slower at the top.
-        assert!(slower_across(5.77, (20.0, 80.0)) > 2.5);
+        assert!(size::slower_across(5.77, (20.0, 80.0)) > 2.5);
         // A valve three times slower fully open, across a fifth of the travel from 10 %.
-        assert!(slower_across(2.0, (10.0, 30.0)) >= SLOWDOWN_SEEN);
-        assert!(slower_across(2.0, (40.0, 45.0)) < SLOWDOWN_SEEN);
+        assert!(size::slower_across(2.0, (10.0, 30.0)) >= SLOWDOWN_SEEN);
+        assert!(size::slower_across(2.0, (40.0, 45.0)) < SLOWDOWN_SEEN);
     }
 
     #[test]

@@ -212,7 +212,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
     for s in
         (findings.iter_mut().map(|f| &mut f.size)).chain(traces.iter_mut().map(|t| &mut t.size))
     {
-        *s = size::with_model_spread(*s);
+        *s = size::with_model_spread(*s, data.facts.vp_span_pct);
     }
     let final_spec = if findings.is_empty() {
         baseline.spec.clone()
