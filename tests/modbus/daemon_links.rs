@@ -250,8 +250,15 @@ fn a_lost_reply_costs_one_cycle() {
     );
     // One reply in 7 with a bad CRC (RTU on a pty): a seventh of the cycles. A loaded machine
     // can stall a cycle past its deadline beside one (a `timeout` next to an `error`), so two
-    // in a row are allowed only when the summary counts such a timeout.
-    let (share, longest, summary) = lost_cycles(&["--pty", "--corrupt-crc-every", "7"]);
+    // in a row are allowed only when the summary counts such a timeout. A machine that stalls
+    // the device or the pty for longer than `late_reply_ms` (a reply arriving after it, which
+    // no bad CRC makes) holds the line for that long: such a run measures the machine, not
+    // what a bad CRC costs, and is run once more.
+    let crc = ["--pty", "--corrupt-crc-every", "7"];
+    let (mut share, mut longest, mut summary) = lost_cycles(&crc);
+    if summary.contains("replies no request waited for: ") {
+        (share, longest, summary) = lost_cycles(&crc);
+    }
     let stalled = !summary.contains(" 0 timeout,");
     assert!(
         share <= 0.16 && (longest == 1 || (stalled && longest == 2)),
