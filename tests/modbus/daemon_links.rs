@@ -282,6 +282,9 @@ fn a_device_that_closes_after_each_answer_gets_few_connections() {
         (3..=12).contains(&accepted),
         "{accepted} connections\n{summary}\n{stderr}"
     );
-    assert_eq!(sockets, 1, "{summary}");
+    // Never two at once. Each connection lives for one answer (a few ms of every reconnect
+    // wait), so the 20 ms sampling may see none open at all: the device's count above shows
+    // they were made.
+    assert!(sockets <= 1, "{sockets} sockets at once\n{summary}");
     assert!(reconnects >= 2, "{summary}");
 }

@@ -94,14 +94,24 @@ fn open_vs_closed_across(q: f64, (lo, hi): (f64, f64)) -> f64 {
 
 /// `size` with its interval widened to at least its model spread ([`MODEL_SPREAD`]) either
 /// side of its value (a ratio's no lower than 1); the slowdown's to its spread across
-/// `visited` (V_P's openings, %; [`SLOWDOWN_SPREAD`]). Its `worth_low` stays the held-out
+/// `visited` (V_P's openings, %; [`SLOWDOWN_SPREAD`]; from 1 up, open-ended, when V_P stayed at
+/// one opening). Its `worth_low` stays the held-out
 /// blocks' own: whether the recording shows an effect worth maintenance is judged on its
 /// evidence, the spread says how far the number may be from the valve's.
 pub(crate) fn with_model_spread(size: Size, visited: (f64, f64)) -> Size {
     if size.value.is_nan() || size.value <= 0.0 {
         return size;
     }
-    if size.name == "open_vs_closed" && visited.1 > visited.0 {
+    if size.name == "open_vs_closed" {
+        // A recording whose V_P stays at one opening shows no change of speed with the
+        // opening: any slowdown (no less than none) fits it.
+        if visited.1 <= visited.0 {
+            return Size {
+                low: 1.0,
+                high: f64::INFINITY,
+                ..size
+            };
+        }
         let q = slower_across(size.value - 1.0, visited);
         let w = SLOWDOWN_SPREAD;
         return Size {
@@ -628,6 +638,9 @@ mod tests {
         // The held-out blocks' own interval, when wider, stays.
         let wide = with_model_spread(slowdown(1.5, 30.0), (28.0, 92.0));
         assert_eq!((wide.low, wide.high), (1.5, 30.0));
+        // Seen at one opening only, any slowdown fits.
+        let one = at((50.0, 50.0));
+        assert!(one.low == 1.0 && one.high.is_infinite(), "{one:?}");
     }
     use vb_core::model::{bundled, ModelKind};
     use vb_core::testkit::{answer, noise, steps, Columns};
