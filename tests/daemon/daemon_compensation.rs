@@ -11,7 +11,8 @@
 //!   valve's band) is switched off by its guard in its first window, with a warning naming
 //!   the figure, and the controller's O_P is sent unchanged from then on;
 //! - the walk-through of docs/compensation.md: `config/models/physical-band-diagnosed.toml` is
-//!   the model `diagnose` finds in the log of `config/physical-band.toml`.
+//!   the model `diagnose` finds in the log of `config/physical-band.toml`, and the page quotes
+//!   the finding's size, the compensated run's summary and its O_P - V_P with and without.
 
 use std::path::{Path, PathBuf};
 
@@ -249,19 +250,34 @@ fn a_model_that_overstates_the_valve_s_faults_is_switched_off_by_the_guard() {
         .all(|r| r.op_pct == r.op_controller_pct));
 }
 
-#[test]
-fn the_shipped_diagnosed_model_is_what_diagnose_finds_in_the_worn_valve_s_log() {
-    // the walk-through of docs/compensation.md: the worn valve's own log, diagnosed, is the model
-    // config/compensated.toml compensates with.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = tempfile::tempdir().unwrap();
-    let logs = dir.path().join("band-log");
-    let out = run_cmd(&root.join("config/physical-band.toml"), &logs, 900.0)
+/// `valve-bridge run --as-fast-as-possible` on `cfg` from the checkout's root for `secs`:
+/// its summary, and the RMS of the controller's O_P minus V_P over its log, %.
+fn walk_through_run(root: &Path, cfg: &Path, logs: &Path, secs: f64) -> (String, f64) {
+    let out = run_cmd(cfg, logs, secs)
         .arg("--as-fast-as-possible")
         .current_dir(root)
         .output()
         .unwrap();
-    stdout(&out);
+    let summary = stdout(&out);
+    let rows: Vec<Row> = read_log(logs);
+    let squares: f64 = rows
+        .iter()
+        .map(|r| (r.op_controller_pct - r.vp_pct).powi(2))
+        .sum();
+    (summary, (squares / rows.len() as f64).sqrt())
+}
+
+#[test]
+fn the_shipped_diagnosed_model_is_what_diagnose_finds_in_the_worn_valve_s_log() {
+    // the walk-through of docs/compensation.md: the worn valve's own log, diagnosed, is the model
+    // config/compensated.toml compensates with, and the page quotes what each step prints.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // The page's words, one space apart (its lines wrap anywhere).
+    let page = std::fs::read_to_string(root.join("docs/compensation.md")).unwrap();
+    let page = page.split_whitespace().collect::<Vec<_>>().join(" ");
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("band-log");
+    walk_through_run(root, &root.join("config/physical-band.toml"), &logs, 900.0);
     let diag = dir.path().join("band-diag");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_valve-bridge"))
         .arg("diagnose")
@@ -270,9 +286,54 @@ fn the_shipped_diagnosed_model_is_what_diagnose_finds_in_the_worn_valve_s_log() 
         .arg(&diag)
         .output()
         .unwrap();
-    stdout(&out);
+    let report = stdout(&out);
     let found = ModelSpec::load(&diag.join("model.toml")).unwrap();
     let shipped =
         ModelSpec::load(&root.join("config/models/physical-band-diagnosed.toml")).unwrap();
     assert_eq!(found, shipped);
+    // The finding's size line, as the page quotes it.
+    let size = report
+        .split("finding: backlash\n  size: ")
+        .nth(1)
+        .and_then(|rest| rest.split(" (90 % interval)").next())
+        .unwrap_or_else(|| panic!("no backlash size in\n{report}"));
+    assert!(page.contains(&format!("`{size}`")), "page lacks `{size}`");
+    // The compensated run's last summary line, and the whole run's O_P - V_P with and without.
+    let cfg = root.join("config/compensated.toml");
+    let (summary, with) = walk_through_run(root, &cfg, &dir.path().join("band-comp"), 120.0);
+    let line = summary
+        .lines()
+        .find_map(|l| {
+            l.split(" (backlash")
+                .next()
+                .filter(|_| l.starts_with("compensation: "))
+        })
+        .unwrap_or_else(|| panic!("no compensation line in\n{summary}"));
+    assert!(page.contains(&format!("`{line}`")), "page lacks `{line}`");
+    // The gain and the deadband trace the compensator reads from the model, as it names them.
+    let after = |key: &str, end: &str| {
+        let rest = summary
+            .split(key)
+            .nth(1)
+            .unwrap_or_else(|| panic!("{summary}"));
+        format!("{key}{}{end}", rest.split(end).next().unwrap_or(""))
+    };
+    for quoted in [after("gain ", " /s"), after("deadband of ", " %")] {
+        let quoted = quoted.replace("gain ", "gain of ");
+        assert!(page.contains(&quoted), "page lacks {quoted}");
+    }
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    let (head, rest) = text.split_once("[valve.compensation]").unwrap();
+    let plain = dir.path().join("plain.toml");
+    std::fs::write(
+        &plain,
+        format!("{head}[source]{}", rest.split_once("[source]").unwrap().1),
+    )
+    .unwrap();
+    let (_, without) = walk_through_run(root, &plain, &dir.path().join("band-plain"), 120.0);
+    let figures = format!(
+        "is {with:.3} % RMS; the same run without `[valve.compensation]` gives {without:.3} % ({:.0} % less with it)",
+        100.0 * (1.0 - with / without)
+    );
+    assert!(page.contains(&figures), "page lacks {figures}");
 }
