@@ -32,32 +32,18 @@ use std::time::Instant;
 mod modbus;
 
 use valve_bridge::compensate::{CompensationConfig, Compensator};
-use valve_bridge::compensation_trial::{self as trial, Figures, Run, Scenario};
-use valve_bridge::diagnose::{self, Effect};
-use valve_bridge::fit::{self, Options};
-use valve_bridge::model::{bundled, ModelKind, ModelSpec};
+use valve_bridge::compensation_trial::bench::{
+    bench_valve, lineup, models, table, BenchValve, DT, RUN_S,
+};
+use valve_bridge::compensation_trial::{self as trial, Scenario};
+use valve_bridge::model::ModelSpec;
 use valve_bridge::report::plot::{self, Series};
-use valve_bridge::synth::{self, physical, Excitation};
 
 type Error = Box<dyn std::error::Error>;
 
 /// Where the bench writes what it makes unless told otherwise.
 fn work_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("target/compensation-bench")
-}
-
-const DT: f64 = 0.01;
-/// Length of the identification log and of each scenario run, s.
-const LOG_S: f64 = 900.0;
-const RUN_S: f64 = 600.0;
-/// Seed of the identification logs (the runs use 1..=seeds).
-const LOG_SEED: u64 = 1000;
-
-/// A valve of the bench and the compensator of the model identified from its own log.
-struct Bench {
-    name: String,
-    valve: ModelSpec,
-    compensator: Compensator,
 }
 
 /// What the command line asks for.
@@ -113,30 +99,6 @@ fn options() -> Result<Args, Error> {
     Ok(out)
 }
 
-/// Pin-cart II identified by `identify` from its random-step log.
-fn identified(valve: &ModelSpec) -> Result<ModelSpec, Error> {
-    let rec = synth::generate(valve, Excitation::RandomSteps, LOG_S, DT, 0.0, LOG_SEED)?;
-    // A physical valve's log is its own sensor's; pin-cart II's is noise-free.
-    let id = fit::identify(
-        &rec.view(),
-        &Options::for_models(&[ModelKind::Pincart2]),
-        &|_, _| {},
-    )?;
-    let row = (id.rows.into_iter())
-        .find(|r| r.kind == ModelKind::Pincart2)
-        .ok_or("identify gave no pin-cart II row")?;
-    Ok(row.spec)
-}
-
-/// The model `diagnose` ends with on the valve's mixed log.
-fn diagnosed(valve: &ModelSpec) -> Result<ModelSpec, Error> {
-    let ex = Excitation::Mixed { low_pct: 40.0 };
-    let rec = synth::generate(valve, ex, LOG_S, DT, 0.0, LOG_SEED)?;
-    Ok(diagnose::diagnose(&rec.view(), None, &|_, _| {})?
-        .final_model
-        .spec)
-}
-
 /// The compensator of the model file `path`, default settings.
 fn compensator(path: &Path) -> Result<Compensator, Error> {
     let cfg = CompensationConfig {
@@ -151,144 +113,8 @@ fn compensator(path: &Path) -> Result<Compensator, Error> {
     )?)
 }
 
-fn benches(kick_share: f64) -> Result<Vec<Bench>, Error> {
-    let cfg = CompensationConfig {
-        model_file: Some("model.toml".into()),
-        kick_share,
-        ..CompensationConfig::default()
-    };
-
-    let mut valves = vec![("pin-cart II".to_string(), bundled(ModelKind::Pincart2))];
-    valves.push(("physical, healthy".into(), physical::healthy()));
-    for band in [1.0, 1.5, 3.0] {
-        valves.push((
-            format!("physical, {band} % band"),
-            physical::with_effect(Effect::Backlash, band),
-        ));
-    }
-    valves.push((
-        "physical, 0.6 % deadband".into(),
-        physical::with_effect(Effect::Deadband, 0.6),
-    ));
-    // The 1.5 % valve once more, with the model `identify` fits (pin-cart II's crossing time).
-    let by_identify = "physical, 1.5 % band, identify's pin-cart II";
-    valves.push((
-        by_identify.into(),
-        physical::with_effect(Effect::Backlash, 1.5),
-    ));
-    let mut out = Vec::new();
-    for (name, valve) in valves {
-        let started = Instant::now();
-        let model = if valve.model == ModelKind::Physical && name != by_identify {
-            diagnosed(&valve)?
-        } else {
-            identified(&valve)?
-        };
-        let compensator = Compensator::new(&cfg, &model, DT, (0.0, 100.0))?;
-        eprintln!(
-            "{name}: model in {:.1} s; compensates {}",
-            started.elapsed().as_secs_f64(),
-            compensator.describe()
-        );
-        out.push(Bench {
-            name,
-            valve,
-            compensator,
-        });
-    }
-    Ok(out)
-}
-
-/// Without and with compensation, per seed.
-fn trials(
-    b: &Bench,
-    scenario: Scenario,
-    seeds: u64,
-) -> Result<Vec<(Figures, Figures, Run)>, Error> {
-    let nominal = trial::nominal(&b.valve);
-    (1..=seeds)
-        .map(|seed| {
-            let plain = trial::run(&b.valve, None, scenario, RUN_S, DT, seed)?;
-            let comped = trial::run(
-                &b.valve,
-                Some(b.compensator.clone()),
-                scenario,
-                RUN_S,
-                DT,
-                seed,
-            )?;
-            Ok((
-                trial::figures(&plain, &nominal, DT)?,
-                trial::figures(&comped, &nominal, DT)?,
-                comped,
-            ))
-        })
-        .collect()
-}
-
-fn mean(x: impl Iterator<Item = f64>) -> f64 {
-    let (s, n) = x.fold((0.0, 0), |(s, n), v| (s + v, n + 1));
-    s / f64::from(n.max(1))
-}
-
-/// `a → b (±c %)`, the change as the mean of the per-seed changes and their range.
-fn change(pairs: &[(f64, f64)], decimals: usize) -> String {
-    let a = mean(pairs.iter().map(|p| p.0));
-    let b = mean(pairs.iter().map(|p| p.1));
-    let ch: Vec<f64> = pairs
-        .iter()
-        .map(|(x, y)| if *x > 0.0 { 100.0 * (y / x - 1.0) } else { 0.0 })
-        .collect();
-    let lo = ch.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = ch.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    format!(
-        "{a:.decimals$} → {b:.decimals$} ({:+.0} %, {lo:+.0}..{hi:+.0})",
-        mean(ch.iter().copied())
-    )
-}
-
-fn row(b: &Bench, scenario: Scenario, results: &[(Figures, Figures, Run)]) -> String {
-    let pick = |f: &dyn Fn(&Figures) -> f64| -> Vec<(f64, f64)> {
-        results.iter().map(|(a, c, _)| (f(a), f(c))).collect()
-    };
-    let iae = if scenario == Scenario::LevelLoop {
-        change(&pick(&|f| f.pv_iae.unwrap_or(0.0)), 0)
-    } else {
-        "—".into()
-    };
-    let offs = results
-        .iter()
-        .filter_map(|r| r.2.switched_off_s)
-        .map(|t| format!("{t:.0} s"))
-        .collect::<Vec<_>>();
-    let added = mean(results.iter().map(|r| {
-        let run = &r.2;
-        let sq: f64 = run
-            .sent
-            .iter()
-            .zip(&run.op)
-            .map(|(s, o)| (s - o).powi(2))
-            .sum();
-        (sq / run.op.len().max(1) as f64).sqrt()
-    }));
-    format!(
-        "| {} | {} | {iae} | {} | {} | {} | {} | {added:.3} | {} |",
-        b.name,
-        scenario.name(),
-        change(&pick(&|f| f.tracking_pct), 3),
-        change(&pick(&|f| f.raw_pct), 3),
-        change(&pick(&|f| f.travel.travel_pct), 0),
-        change(&pick(&|f| f.travel.reversals as f64), 0),
-        if offs.is_empty() {
-            "on".into()
-        } else {
-            format!("off at {}", offs.join(", "))
-        },
-    )
-}
-
 /// The SVG of the first reversal of the small steps after a minute, with and without.
-fn reversal_plot(b: &Bench, path: &PathBuf) -> Result<(), Error> {
+fn reversal_plot(b: &BenchValve, path: &PathBuf) -> Result<(), Error> {
     let plain = trial::run(&b.valve, None, Scenario::SmallSteps, RUN_S, DT, 1)?;
     let comped = trial::run(
         &b.valve,
@@ -384,21 +210,21 @@ fn main() -> Result<(), Error> {
 
 /// The valves in process: their models, the table and the plot.
 fn in_process_part(seeds: u64, kick_share: f64, plot_path: &PathBuf) -> Result<(), Error> {
-    let benches = benches(kick_share)?;
-    println!("Models identified from each valve's own 15-minute log, and what they compensate:");
-    for b in &benches {
-        println!("- {}: {}", b.name, b.compensator.describe());
+    let mut valves = Vec::new();
+    for (name, valve) in lineup() {
+        let started = Instant::now();
+        let b = bench_valve(&name, valve, kick_share)?;
+        eprintln!(
+            "{name}: model in {:.1} s; compensates {}",
+            started.elapsed().as_secs_f64(),
+            b.compensator.describe()
+        );
+        valves.push(b);
     }
+    println!("{}", models(&valves));
     println!();
-    println!("| valve | scenario | level IAE, %·s | tracking error, % RMS | O_P - V_P, % RMS | travel, % | reversals | added, % RMS | compensation |");
-    println!("|---|---|---|---|---|---|---|---|---|");
-    for b in &benches {
-        for scenario in Scenario::ALL {
-            let results = trials(b, scenario, seeds)?;
-            println!("{}", row(b, scenario, &results));
-        }
-    }
-    let b = benches
+    println!("{}", table(&valves, seeds)?);
+    let b = valves
         .iter()
         .find(|b| b.name.contains("1.5 %"))
         .ok_or("no 1.5 % valve")?;

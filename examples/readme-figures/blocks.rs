@@ -15,6 +15,8 @@
 
 use serde_json::Value;
 
+use valve_bridge::compensate::CompensationConfig;
+use valve_bridge::compensation_trial::bench::{bench_valve, lineup, models, table, BenchError};
 use valve_bridge::metrics::{table1_cells, Scores};
 use valve_bridge::model::ModelKind;
 use valve_bridge::report::verdict::{num, size_text};
@@ -27,6 +29,7 @@ pub(crate) fn page(name: &str) -> &'static str {
     match name {
         DIAGNOSE_CASES | DIAGNOSE_REAL | VOCABULARY => "docs/diagnosis.md",
         FLEET_CASES => "docs/fleet.md",
+        COMPENSATION_BENCH => "docs/compensation.md",
         _ => "README.md",
     }
 }
@@ -66,6 +69,25 @@ pub(crate) const FLEET_CASES: &str = "fleet-cases";
 pub(crate) const VOCABULARY: &str = "vocabulary";
 /// The block of the blind bench's figures (`benches/blind/record.rs`).
 pub(crate) const BLIND_BENCH: &str = "blind-bench";
+/// The block of the compensation bench's valves in process: their models and the table.
+pub(crate) const COMPENSATION_BENCH: &str = "compensation-bench";
+/// The seeds of each scenario of [`COMPENSATION_BENCH`] (`cargo bench --bench compensation
+/// -- --seeds 3` prints the same).
+const COMPENSATION_SEEDS: u64 = 3;
+
+/// The compensation bench's models and table, as `cargo bench --bench compensation` prints
+/// them (default settings).
+pub(crate) fn compensation_block() -> Result<String, BenchError> {
+    let kick_share = CompensationConfig::default().kick_share;
+    let valves = (lineup().into_iter())
+        .map(|(name, valve)| bench_valve(&name, valve, kick_share))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(format!(
+        "{}\n\n{}",
+        models(&valves),
+        table(&valves, COMPENSATION_SEEDS)?
+    ))
+}
 
 /// The fleet ranking of a `summary.json` document `summary` as a Markdown table: rank, valve,
 /// severity, priority, what is wrong (each finding's plain name and what it does) and what to

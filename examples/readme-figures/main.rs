@@ -2,11 +2,12 @@
 //! recordings (their table, and their fleet ranking as `valve-bridge fleet` makes it) and the
 //! real DAMADICS one, identifies the paper-like one, runs the standard response test on the
 //! emulated valve, writes the vocabulary's table and the blind bench's figures from its
-//! records, then prints the generated blocks, or with `--write` puts each into its page
+//! records, runs the compensation bench's valves in process, then prints the generated blocks, or with `--write` puts each into its page
 //! (`blocks::page`). Tests compare the pages with the same rows, made by this example's own
 //! `blocks.rs` (`tests/analysis/diagnose_cases.rs`, `tests/analysis/fleet_cli.rs`,
 //! `tests/analysis/identify_cli.rs`, `tests/analysis/response_test.rs`,
-//! `tests/analysis/diagnose_blind_readme.rs`; the vocabulary in `tests.rs`), so a stale figure
+//! `tests/analysis/diagnose_blind_readme.rs`, `tests/analysis/compensation_trial.rs`; the
+//! vocabulary in `tests.rs`), so a stale figure
 //! fails CI.
 //!
 //! Run: `cargo run --example readme-figures -- [--write]` (a few minutes: the library is built
@@ -91,6 +92,7 @@ fn main() -> anyhow::Result<()> {
     let id = fit::identify(&rec.view(), &Options::for_models(&models), &|_, _| {})?;
     let table1 = blocks::table1(&serde_json::to_value(&id)?);
     let response = response_test(root)?;
+    let compensation = blocks::compensation_block()?;
     bar.finish_and_clear();
     let blocks = [
         (blocks::DIAGNOSE_CASES, rows.join("\n")),
@@ -100,6 +102,7 @@ fn main() -> anyhow::Result<()> {
         (blocks::VOCABULARY, blocks::vocabulary_table()),
         (blocks::RESPONSE_EMULATED, response),
         (blocks::BLIND_BENCH, blind_bench(root)?),
+        (blocks::COMPENSATION_BENCH, compensation),
     ];
     if write {
         for (name, content) in &blocks {

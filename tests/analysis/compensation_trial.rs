@@ -15,8 +15,11 @@
 //!   band valve keeps its compensation and tracks at least 40 % better, the healthy valve given
 //!   that model loses it within 75 s; the 0.6 % deadband valve ends 11 of the 12 holds of the
 //!   sequence within 0.15 % of the target with the guard on, and no random step more than
-//!   0.05 % past it.
+//!   0.05 % past it;
+//! - the compensation bench's models and table in docs/compensation.md are what the bench's
+//!   valves give today.
 
+use crate::blocks;
 use valve_bridge::compensate::{CompensationConfig, Compensator};
 use valve_bridge::compensation_trial::{self as trial, Figures, Scenario};
 use valve_bridge::diagnose::{self, Effect};
@@ -304,4 +307,19 @@ fn hold_ends(run: &trial::Run) -> Vec<f64> {
             dir * (run.stem[w[2] - 1] - op[w[1]])
         })
         .collect()
+}
+
+#[test]
+fn the_compensation_bench_s_models_and_table_are_the_page_s() {
+    // docs/compensation.md quotes the bench's valves in process; a change to diagnosis,
+    // identification or compensation that moves them fails here, naming the line.
+    let want = blocks::compensation_block().unwrap();
+    let page = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join(blocks::page(blocks::COMPENSATION_BENCH)),
+    )
+    .unwrap();
+    if let Err(e) = blocks::check_block(&page, blocks::COMPENSATION_BENCH, &want) {
+        panic!("{e}");
+    }
 }

@@ -14,7 +14,10 @@
 //! set-points: compensation cannot change a sensor's noise, so the figures that judge it
 //! leave the noise out, while the loop and the compensator see the noisy V_P a valve gives.
 //!
-//! Not here: identifying the model (the bench does, from the valve's own recording).
+//! [`bench`]: the compensation bench's valves, each with the model identified from its own
+//! log, and the table of their trials.
+
+pub mod bench;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
