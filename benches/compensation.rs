@@ -211,11 +211,12 @@ fn main() -> Result<(), Error> {
 /// The valves in process: their models, the table and the plot.
 fn in_process_part(seeds: u64, kick_share: f64, plot_path: &PathBuf) -> Result<(), Error> {
     let mut valves = Vec::new();
-    for (name, valve) in lineup() {
+    for entry in lineup() {
         let started = Instant::now();
-        let b = bench_valve(&name, valve, kick_share)?;
+        let b = bench_valve(entry, kick_share)?;
         eprintln!(
-            "{name}: model in {:.1} s; compensates {}",
+            "{}: model in {:.1} s; compensates {}",
+            b.name,
             started.elapsed().as_secs_f64(),
             b.compensator.describe()
         );

@@ -80,7 +80,7 @@ const COMPENSATION_SEEDS: u64 = 3;
 pub(crate) fn compensation_block() -> Result<String, BenchError> {
     let kick_share = CompensationConfig::default().kick_share;
     let valves = (lineup().into_iter())
-        .map(|(name, valve)| bench_valve(&name, valve, kick_share))
+        .map(|entry| bench_valve(entry, kick_share))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(format!(
         "{}\n\n{}",

@@ -310,16 +310,13 @@ fn the_shipped_diagnosed_model_is_what_diagnose_finds_in_the_worn_valve_s_log() 
         })
         .unwrap_or_else(|| panic!("no compensation line in\n{summary}"));
     assert!(page.contains(&format!("`{line}`")), "page lacks `{line}`");
-    // The gain and the deadband trace the compensator reads from the model, as it names them.
-    let after = |key: &str, end: &str| {
-        let rest = summary
-            .split(key)
-            .nth(1)
-            .unwrap_or_else(|| panic!("{summary}"));
-        format!("{key}{}{end}", rest.split(end).next().unwrap_or(""))
-    };
-    for quoted in [after("gain ", " /s"), after("deadband of ", " %")] {
-        let quoted = quoted.replace("gain ", "gain of ");
+    // The diagnosed model's gain and deadband trace, as the page quotes them.
+    let gain = found.pincart2.as_ref().map(|p| p.p_gain_per_s).unwrap();
+    let deadband = found.effects.deadband_pct;
+    for quoted in [
+        format!("gain of {gain:.1} /s"),
+        format!("deadband of {deadband:.3} %"),
+    ] {
         assert!(page.contains(&quoted), "page lacks {quoted}");
     }
     let text = std::fs::read_to_string(&cfg).unwrap();

@@ -23,8 +23,6 @@ pub const LOG_S: f64 = 900.0;
 pub const RUN_S: f64 = 600.0;
 /// Seed of the identification logs (the runs use 1..=seeds).
 const LOG_SEED: u64 = 1000;
-/// The valve whose model comes from `identify` although it is physical.
-const BY_IDENTIFY: &str = "physical, 1.5 % band, identify's pin-cart II";
 
 /// What went wrong making a bench valve or its trials (the causes boxed: a result stays small).
 #[derive(Debug, thiserror::Error)]
@@ -66,49 +64,80 @@ pub struct BenchValve {
     pub compensator: Compensator,
 }
 
-/// The bench's valves, by name: pin-cart II, the physical valve healthy, with 1, 1.5 and 3 %
-/// friction bands and a 0.6 % deadband, and the 1.5 % valve once more (modelled by `identify`).
-pub fn lineup() -> Vec<(String, ModelSpec)> {
-    let mut valves = vec![("pin-cart II".to_string(), bundled(ModelKind::Pincart2))];
-    valves.push(("physical, healthy".into(), physical::healthy()));
+/// How a bench valve's model is found from its log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModelledBy {
+    /// `diagnose` on the mixed excitation (small steps, then random steps).
+    Diagnose,
+    /// `identify`'s pin-cart II on the paper's random steps.
+    Identify,
+}
+
+/// One valve of the bench: its name, the valve itself and how its model is found.
+#[derive(Debug, Clone)]
+pub struct LineupValve {
+    pub name: String,
+    pub valve: ModelSpec,
+    pub by: ModelledBy,
+}
+
+/// The bench's valves: pin-cart II, the physical valve healthy, with 1, 1.5 and 3 % friction
+/// bands and a 0.6 % deadband (modelled by `diagnose`), and the 1.5 % valve once more
+/// (modelled by `identify`, as pin-cart II is).
+pub fn lineup() -> Vec<LineupValve> {
+    let entry = |name: &str, valve, by| LineupValve {
+        name: name.to_string(),
+        valve,
+        by,
+    };
+    let mut valves = vec![
+        entry(
+            "pin-cart II",
+            bundled(ModelKind::Pincart2),
+            ModelledBy::Identify,
+        ),
+        entry(
+            "physical, healthy",
+            physical::healthy(),
+            ModelledBy::Diagnose,
+        ),
+    ];
     for band in [1.0, 1.5, 3.0] {
-        valves.push((
-            format!("physical, {band} % band"),
+        valves.push(entry(
+            &format!("physical, {band} % band"),
             physical::with_effect(Effect::Backlash, band),
+            ModelledBy::Diagnose,
         ));
     }
-    valves.push((
-        "physical, 0.6 % deadband".into(),
+    valves.push(entry(
+        "physical, 0.6 % deadband",
         physical::with_effect(Effect::Deadband, 0.6),
+        ModelledBy::Diagnose,
     ));
-    valves.push((
-        BY_IDENTIFY.into(),
+    valves.push(entry(
+        "physical, 1.5 % band, identify's pin-cart II",
         physical::with_effect(Effect::Backlash, 1.5),
+        ModelledBy::Identify,
     ));
     valves
 }
 
-/// The valve `name` of [`lineup`] with the compensator (default settings but `kick_share`) of
-/// the model identified from its own log.
-pub fn bench_valve(
-    name: &str,
-    valve: ModelSpec,
-    kick_share: f64,
-) -> Result<BenchValve, BenchError> {
-    let physical = valve.model == ModelKind::Physical && name != BY_IDENTIFY;
-    let excitation = if physical {
-        Excitation::Mixed { low_pct: 40.0 }
-    } else {
-        Excitation::RandomSteps
+/// A valve of [`lineup`] with the compensator (default settings but `kick_share`) of the
+/// model found from its own log.
+pub fn bench_valve(entry: LineupValve, kick_share: f64) -> Result<BenchValve, BenchError> {
+    let LineupValve { name, valve, by } = entry;
+    let excitation = match by {
+        ModelledBy::Diagnose => Excitation::Mixed { low_pct: 40.0 },
+        ModelledBy::Identify => Excitation::RandomSteps,
     };
-    let named = || name.to_string();
+    let named = || name.clone();
     let rec = synth::generate(&valve, excitation, LOG_S, DT, 0.0, LOG_SEED).map_err(|source| {
         BenchError::Log {
             valve: named(),
             source: Box::new(source),
         }
     })?;
-    let model = if physical {
+    let model = if by == ModelledBy::Diagnose {
         diagnose::diagnose(&rec.view(), None, &|_, _| {})
             .map_err(|source| BenchError::Diagnose {
                 valve: named(),
@@ -141,7 +170,7 @@ pub fn bench_valve(
         }
     })?;
     Ok(BenchValve {
-        name: named(),
+        name,
         valve,
         compensator,
     })
