@@ -31,6 +31,11 @@ const SURVEY_ITERS: u64 = 40;
 const REFINE_ITERS: u64 = 120;
 /// Simplex iterations of each start of the baseline fit.
 const BASELINE_ITERS: u64 = 150;
+/// Share of the fit error within which a lower stop wind-up fits as well ([`least_windup`]):
+/// far below the differences a refit keeps (a thousandth), above the rounding of sums.
+const WINDUP_FLAT_SHARE: f64 = 1e-6;
+/// Halvings of [`least_windup`]'s search: its box (400 %) to a tenth of a per cent.
+const WINDUP_HALVINGS: usize = 12;
 
 /// A knob to fit: its box and scale, and where the search starts.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,11 +146,51 @@ pub(crate) fn refit_from(
         (REFIT_STEP / 2.0, REFINE_ITERS),
         Stage::Fit,
     );
-    if refined_errors.fit <= errors.fit {
+    let (fitted, fitted_errors) = if refined_errors.fit <= errors.fit {
         (refined, refined_errors)
     } else {
         (best, errors)
+    };
+    if free.iter().any(|f| f.knob == Knob::Windup) {
+        least_windup(scorer, fitted, fitted_errors)
+    } else {
+        (fitted, fitted_errors)
     }
+}
+
+/// `spec` with its stop wind-up lowered to the least that fits the fit blocks as well (within
+/// [`WINDUP_FLAT_SHARE`] of their error `errors.fit`), found by halving. The drive winds up
+/// only while V_P is held at the stop, so a wind-up beyond what the fit blocks' stays at the
+/// stop reach changes none of their simulations: the search leaves it wherever it drifted, up
+/// to its box, and a longer stay in a held-out block would then keep the model at the stop long
+/// after the valve left it. The least wind-up the fit blocks allow is the most they measure.
+fn least_windup(scorer: &Scorer, spec: ModelSpec, errors: Errors) -> (ModelSpec, Errors) {
+    let target = errors.fit * (1.0 + WINDUP_FLAT_SHARE);
+    let with = |w: f64| {
+        let mut s = spec.clone();
+        composed::set(&mut s, Knob::Windup, w);
+        s
+    };
+    let fits = |w: f64| scorer.fit_error(&with(w)) <= target;
+    let (mut lo, mut hi) = (0.0, composed::get(&spec, Knob::Windup));
+    if hi <= 0.0 {
+        return (spec, errors);
+    }
+    if fits(lo) {
+        hi = lo;
+    } else {
+        for _ in 0..WINDUP_HALVINGS {
+            let mid = 0.5 * (lo + hi);
+            if fits(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+    }
+    let least = with(hi);
+    let least_errors = scorer.errors(&least);
+    (least, least_errors)
 }
 
 /// The knobs of `free`, each starting at its value in `spec`.
@@ -211,4 +256,66 @@ pub(crate) fn fit_baseline(scorer: &Scorer, facts: &Facts) -> ModelSpec {
         .min_by(|a, b| a.1.fit.total_cmp(&b.1.fit))
         .map(|(s, _)| s)
         .unwrap_or(start)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vb_core::model::bundled;
+    use vb_core::testkit::{answer, Columns};
+
+    #[test]
+    fn a_wind_up_beyond_what_the_fit_blocks_reach_is_lowered_to_that_reach() {
+        // 600 s at 100 Hz (blocks of 30 s, fit and held out in turn): O_P at 50 %, and in each
+        // block at 0 %, below the valve's 20 % stop, for 20 s in the fit blocks and for 1 s in
+        // the held-out ones. The valve's drive may wind up 100 % past the stop; the long stays
+        // wind it up to most of that, and any wind-up from there up fits the fit blocks alike.
+        let dt = 0.01;
+        let op: Vec<f64> = (0..60_000)
+            .map(|k| {
+                let stay = if (k / 3000) % 2 == 0 { 2000 } else { 100 };
+                if (500..500 + stay).contains(&(k % 3000)) {
+                    0.0
+                } else {
+                    50.0
+                }
+            })
+            .collect();
+        let mut truth = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        composed::set(&mut truth, Knob::TravelMin, 20.0);
+        composed::set(&mut truth, Knob::Slew, 20.0);
+        composed::set(&mut truth, Knob::Windup, 100.0);
+        let rec = Columns::new(op.clone(), answer(&truth, &op, dt), dt);
+        let scorer = Scorer::new(&rec.view());
+        // A search that drifted the wind-up to 390 %: the fit blocks cannot tell, the short
+        // stays of the held-out blocks can.
+        let mut drifted = truth.clone();
+        composed::set(&mut drifted, Knob::Windup, 390.0);
+        let before = scorer.errors(&drifted);
+        assert!(before.fit < 1e-9 && before.held > 1e6, "{before:?}");
+        let (least, after) = least_windup(&scorer, drifted, before);
+        let w = composed::get(&least, Knob::Windup);
+        let fit_at = |w: f64| {
+            let mut s = least.clone();
+            composed::set(&mut s, Knob::Windup, w);
+            scorer.fit_error(&s)
+        };
+        assert!(w > 50.0 && w <= 100.0, "{w}");
+        assert!(
+            fit_at(w - 0.2) > before.fit * (1.0 + WINDUP_FLAT_SHARE),
+            "{w}"
+        );
+        assert!(
+            after.fit <= before.fit * (1.0 + WINDUP_FLAT_SHARE),
+            "{after:?}"
+        );
+        assert!(after.held < 0.01 * before.held, "{after:?}");
+        // Below that reach the fit blocks see the wind-up: it stays (within what changes their
+        // error by less than the flat share).
+        let mut short = truth.clone();
+        composed::set(&mut short, Knob::Windup, 50.0);
+        let (kept, _) = least_windup(&scorer, short.clone(), scorer.errors(&short));
+        let kept = composed::get(&kept, Knob::Windup);
+        assert!((kept - 50.0).abs() < 0.5, "{kept}");
+    }
 }
