@@ -164,6 +164,8 @@ pub(crate) fn refit_from(
 /// stop reach changes none of their simulations: the search leaves it wherever it drifted, up
 /// to its box, and a longer stay in a held-out block would then keep the model at the stop long
 /// after the valve left it. The least wind-up the fit blocks allow is the most they measure.
+/// Where they measure none (no wind-up at all fits them worse), the search's value stays: no
+/// lower value is any better founded.
 fn least_windup(scorer: &Scorer, spec: ModelSpec, errors: Errors) -> (ModelSpec, Errors) {
     let target = errors.fit * (1.0 + WINDUP_FLAT_SHARE);
     let with = |w: f64| {
@@ -173,19 +175,15 @@ fn least_windup(scorer: &Scorer, spec: ModelSpec, errors: Errors) -> (ModelSpec,
     };
     let fits = |w: f64| scorer.fit_error(&with(w)) <= target;
     let (mut lo, mut hi) = (0.0, composed::get(&spec, Knob::Windup));
-    if hi <= 0.0 {
+    if hi <= 0.0 || fits(lo) {
         return (spec, errors);
     }
-    if fits(lo) {
-        hi = lo;
-    } else {
-        for _ in 0..WINDUP_HALVINGS {
-            let mid = 0.5 * (lo + hi);
-            if fits(mid) {
-                hi = mid;
-            } else {
-                lo = mid;
-            }
+    for _ in 0..WINDUP_HALVINGS {
+        let mid = 0.5 * (lo + hi);
+        if fits(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
         }
     }
     let least = with(hi);
@@ -317,5 +315,15 @@ mod tests {
         let (kept, _) = least_windup(&scorer, short.clone(), scorer.errors(&short));
         let kept = composed::get(&kept, Knob::Windup);
         assert!((kept - 50.0).abs() < 0.5, "{kept}");
+        // Fit blocks that never reach the stop measure no wind-up: the search's value stays.
+        let blind: Vec<f64> = (op.iter().enumerate())
+            .map(|(k, &u)| if (k / 3000) % 2 == 0 { 50.0 } else { u })
+            .collect();
+        let rec = Columns::new(blind.clone(), answer(&truth, &blind, dt), dt);
+        let scorer = Scorer::new(&rec.view());
+        let mut guessed = truth.clone();
+        composed::set(&mut guessed, Knob::Windup, 47.0);
+        let (kept, _) = least_windup(&scorer, guessed.clone(), scorer.errors(&guessed));
+        assert_eq!(composed::get(&kept, Knob::Windup), 47.0);
     }
 }
