@@ -164,7 +164,7 @@ pub(crate) fn refit_from(
 /// stop reach changes none of their simulations: the search leaves it wherever it drifted, up
 /// to its box, and a longer stay in a held-out block would then keep the model at the stop long
 /// after the valve left it. The least wind-up the fit blocks allow is the most they measure.
-/// Where they measure none (no wind-up at all fits them worse), the search's value stays: no
+/// Where they measure none (a wind-up of zero fits them as well), the search's value stays: no
 /// lower value is any better founded.
 fn least_windup(scorer: &Scorer, spec: ModelSpec, errors: Errors) -> (ModelSpec, Errors) {
     let target = errors.fit * (1.0 + WINDUP_FLAT_SHARE);
