@@ -504,7 +504,11 @@ pub(crate) fn fit(
     let beyond_smooth =
         evident as f64 >= EVIDENT_RATIO * evident_model.max(evident_smooth).max(1) as f64;
     let quiet = 2.0 * stats::noise_sd(scorer.op, Differences::First) < threshold;
-    let no_rival = quiet && by_evidence && beyond_smooth && evident >= RIVAL_SLIPS;
+    // Under a quiet command, a rival the valve outnumbers five times over explains none of its
+    // slips (no lean is asked of it); when the valve is also named by evidence with
+    // [`RIVAL_SLIPS`] evident slips or more, the rival vetoes nothing.
+    let outnumbered = quiet && beyond_smooth;
+    let no_rival = outnumbered && by_evidence && evident >= RIVAL_SLIPS;
     if smooth_distance <= stick_distance && !no_rival {
         return None;
     }
@@ -522,7 +526,7 @@ pub(crate) fn fit(
                 && held.distance_after < held.distance_before));
     let candidate = Candidate {
         distance_all: (before.iter().sum(), after.iter().sum()),
-        smooth_lean: (evident_smooth > evident_model && !(quiet && beyond_smooth)).then(|| {
+        smooth_lean: (evident_smooth > evident_model && !outnumbered).then(|| {
             let lean = |held| stats::signed_rank_p(&drops(&pieces, &smooth, &after, held));
             (lean(Some(true)), lean(None))
         }),
