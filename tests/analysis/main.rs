@@ -29,6 +29,7 @@ mod diagnose_blind_readme;
 mod diagnose_blind_score;
 mod diagnose_cases;
 mod diagnose_concealed;
+mod diagnose_dead_time;
 mod diagnose_linkage_play;
 mod diagnose_min_speed;
 mod diagnose_physical;

@@ -11,6 +11,7 @@
 //!
 //! Not here: the refit ([`super::refit`]) or the decision ([`super::judge`]).
 
+use super::delay::MAX_DEAD_TIME_S;
 use super::facts::Facts;
 use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
 use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
@@ -18,8 +19,9 @@ use vb_core::model::ModelSpec;
 
 /// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).
 const SLOWEST_PCT_PER_S: f64 = 0.05;
-/// Longest dead time a diagnosis fits, s.
-pub(super) const MAX_DEAD_TIME_S: f64 = 3.0;
+/// Shortest time constant a dead time's refit starts the positioner with, s
+/// ([`keeping_the_lag`]).
+const SHORTEST_START_LAG_S: f64 = 0.05;
 /// Longest crossing time of lost motion a fit considers, s: a friction band of 6 % crossed at
 /// pin-cart II's pace (0.3-0.8 s per % of band) takes 3 s at mid travel and nearly 5 s fully
 /// open, and a fit pinned at the edge of its box is not named.
@@ -102,13 +104,35 @@ pub(crate) fn jobs(
 /// gain, the dead time up to `td_hi` and, while it is a healthy one, the stroke-speed limit;
 /// those `own` frees already are left out.
 pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free]) -> Vec<Free> {
-    let mut rest = vec![free_gain(spec, dt)];
+    let mut rest = vec![keeping_the_lag(free_gain(spec, dt), spec, own)];
     if !own.iter().any(|f| f.knob == Knob::DeadTime) {
         let td = composed::get(spec, Knob::DeadTime);
         rest.push(Free::new(Knob::DeadTime, 0.0, td_hi.max(td), td));
     }
     rest.extend(healthy_slew(spec, own));
     rest
+}
+
+/// The gain `gain` (of `spec`) starting fast enough that a dead time `own` starts longer than
+/// `spec`'s leaves the model's whole lag (dead time and time constant) as it was, down to a
+/// time constant of [`SHORTEST_START_LAG_S`]: a longer delay with the same positioner would
+/// lag twice, and the simplex from there seldom finds a delay whose valley is narrow (a loop's
+/// chatter repeated late). Unchanged when `own` frees no dead time.
+fn keeping_the_lag(gain: Free, spec: &ModelSpec, own: &[Free]) -> Free {
+    let td = composed::get(spec, Knob::DeadTime);
+    let Some(start) = own
+        .iter()
+        .find(|f| f.knob == Knob::DeadTime)
+        .map(|f| f.init)
+    else {
+        return gain;
+    };
+    if start <= td {
+        return gain;
+    }
+    let lag = td + 1.0 / gain.init.max(gain.def.lo);
+    let fast = 1.0 / (lag - start).max(SHORTEST_START_LAG_S);
+    gain.from(fast.clamp(gain.init, gain.def.hi))
 }
 
 /// The stroke-speed limit of `spec` free within a healthy positioner's range, when it lies
@@ -176,12 +200,17 @@ pub(crate) fn variants(
         // From the baseline's dead time, and from its whole lag (dead time and time
         // constant): a baseline that took a long delay for a slow positioner has the lag
         // right and its parts wrong, and a simplex from its dead time does not find the delay.
+        // And from where V_P's increments answer O_P's, when longer: a loop's chatter repeated
+        // late leaves a valley too narrow for a simplex from the lag ([`super::delay`]).
         Effect::DeadTime if td_max < MAX_DEAD_TIME_S => {
             let td = get(Knob::DeadTime);
             let lag = td + 1.0 / get(Knob::Gain).max(0.05);
+            let answer = facts.answer_delay_s.filter(|&d| d > td.max(0.3));
             [td.max(0.3), lag.clamp(0.3, 0.9 * MAX_DEAD_TIME_S)]
+                .into_iter()
+                .chain(answer)
                 .map(|start| vec![f(Knob::DeadTime, 0.0, MAX_DEAD_TIME_S, start)])
-                .to_vec()
+                .collect()
         }
         // Lost motion either as pin-cart II's crossing time (eq. 7) or as a friction band the
         // positioner crosses at its own speed (the lost time then depends on the move); the
@@ -447,5 +476,43 @@ mod tests {
             [(Knob::Slew, 1.5, 6.0), (Knob::ClosingSlew, 2.0, 8.0)]
         );
         assert!(boxes(&spec, Effect::Backlash).is_empty());
+    }
+
+    #[test]
+    fn a_longer_dead_time_starts_with_a_positioner_that_keeps_the_whole_lag() {
+        let (mut facts, mut spec) = following_steps();
+        composed::set(&mut spec, Knob::DeadTime, 0.1);
+        composed::set(&mut spec, Knob::Gain, 0.5);
+        let starts = |facts: &Facts, effect| {
+            let at = |free: &[Free], knob| free.iter().find(|f| f.knob == knob).map(|f| f.init);
+            (jobs(&[effect], &spec, facts, 0.01, 0.2)[0].starts.iter())
+                .map(|free| (at(free, Knob::DeadTime), at(free, Knob::Gain)))
+                .collect::<Vec<_>>()
+        };
+        // The increments answer 1.5 s late: a start there, besides the floor, a share of the
+        // box and the whole lag (2.1 s). Each start's time constant is what its dead time
+        // leaves of that lag, 0.05 s at least.
+        facts.answer_delay_s = Some(1.5);
+        let with = starts(&facts, Effect::DeadTime);
+        let mut tds: Vec<f64> = (with.iter())
+            .filter_map(|s| s.0.map(|td| (td * 1e3).round() / 1e3))
+            .collect();
+        tds.sort_by(f64::total_cmp);
+        tds.dedup();
+        assert_eq!(tds, [0.3, 1.2, 1.5, 2.1]);
+        for (td, gain) in &with {
+            let td = td.unwrap_or(f64::NAN);
+            let expected = 1.0 / (2.1 - td).max(0.05);
+            assert!(
+                gain.is_some_and(|g| (g - expected).abs() < 1e-9),
+                "{with:?}"
+            );
+        }
+        facts.answer_delay_s = None;
+        assert_eq!(starts(&facts, Effect::DeadTime).len(), with.len() - 1);
+        // Another effect's starts leave the dead time and the gain where the model has them.
+        for (td, gain) in starts(&facts, Effect::Backlash) {
+            assert_eq!((td, gain), (Some(0.1), Some(0.5)));
+        }
     }
 }

@@ -5,6 +5,7 @@
 //! Diagnosis quotes these as evidence a person can check against the plots, and uses a few to
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
+use super::delay::answer_delay;
 use super::speeds::{limit_speeds, speeds, WINDOWS_S};
 use vb_core::metrics::stats::{self, median, quantile, Differences};
 use vb_core::metrics::steps::{self, StepOptions};
@@ -74,6 +75,9 @@ pub struct Facts {
     /// How many times faster V_P answers O_P low in [`Facts::vp_span_pct`] than high in it
     /// (see [`speed_ratio`]), when the recording shows it.
     pub speed_ratio: Option<f64>,
+    /// The lag at which V_P's increments follow O_P's most closely, s, when that stands out of
+    /// the noise (see [`answer_delay`]): the transport delay, also where O_P never steps.
+    pub answer_delay_s: Option<f64>,
 }
 
 /// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
@@ -105,6 +109,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         op_span_pct: span(op),
         vp_span_pct,
         speed_ratio: speed_ratio(op, vp, dt, sigma, vp_span_pct),
+        answer_delay_s: answer_delay(rec),
     }
 }
 

@@ -734,6 +734,7 @@ mod tests {
             op_span_pct: (20.0, 80.0),
             vp_span_pct: (20.0, 80.0),
             speed_ratio: None,
+            answer_delay_s: None,
         }
     }
 

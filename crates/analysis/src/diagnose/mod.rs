@@ -31,6 +31,7 @@
 //! [`crate::fit::search::nelder_mead`].
 
 mod candidates;
+mod delay;
 mod diagnosis;
 pub mod evidence;
 pub mod facts;

@@ -21,7 +21,8 @@
 use rayon::prelude::*;
 use serde_json::Value;
 
-use super::candidates::{self, MAX_DEAD_TIME_S, WINDUP_RANGE_PCT};
+use super::candidates::{self, WINDUP_RANGE_PCT};
+use super::delay::MAX_DEAD_TIME_S;
 use super::diagnosis::{params, Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
