@@ -72,7 +72,12 @@ pub(crate) fn jobs(
                 td_max.max(td)
             };
             for mut free in spread_starts(variant) {
-                let rest = rest_of_model(current, dt, td_hi, &free);
+                let mut rest = rest_of_model(current, dt, td_hi, &free);
+                if effect == Effect::DeadTime && at_the_answer(&free, facts) {
+                    for gain in rest.iter_mut().filter(|f| f.knob == Knob::Gain) {
+                        *gain = keeping_the_lag(*gain, current, &free);
+                    }
+                }
                 free.extend(rest);
                 if effect == Effect::DeadTime {
                     free.extend(named_slow_stroke(current));
@@ -104,7 +109,7 @@ pub(crate) fn jobs(
 /// gain, the dead time up to `td_hi` and, while it is a healthy one, the stroke-speed limit;
 /// those `own` frees already are left out.
 pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free]) -> Vec<Free> {
-    let mut rest = vec![keeping_the_lag(free_gain(spec, dt), spec, own)];
+    let mut rest = vec![free_gain(spec, dt)];
     if !own.iter().any(|f| f.knob == Knob::DeadTime) {
         let td = composed::get(spec, Knob::DeadTime);
         rest.push(Free::new(Knob::DeadTime, 0.0, td_hi.max(td), td));
@@ -113,11 +118,19 @@ pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free])
     rest
 }
 
+/// Whether `own` starts the dead time where V_P's increments answer O_P's
+/// ([`Facts::answer_delay_s`]).
+fn at_the_answer(own: &[Free], facts: &Facts) -> bool {
+    let at = |f: &Free| f.knob == Knob::DeadTime && Some(f.init) == facts.answer_delay_s;
+    own.iter().any(at)
+}
+
 /// The gain `gain` (of `spec`) starting fast enough that a dead time `own` starts longer than
 /// `spec`'s leaves the model's whole lag (dead time and time constant) as it was, down to a
-/// time constant of [`SHORTEST_START_LAG_S`]: a longer delay with the same positioner would
-/// lag twice, and the simplex from there seldom finds a delay whose valley is narrow (a loop's
-/// chatter repeated late). Unchanged when `own` frees no dead time.
+/// time constant of [`SHORTEST_START_LAG_S`]: where V_P's answer starts, what is left of the
+/// lag is the positioner's, and a longer delay with the same positioner would lag twice; the
+/// simplex from there seldom finds a delay whose valley is narrow (a loop's chatter repeated
+/// late). Unchanged when `own` frees no dead time.
 fn keeping_the_lag(gain: Free, spec: &ModelSpec, own: &[Free]) -> Free {
     let td = composed::get(spec, Knob::DeadTime);
     let Some(start) = own
@@ -479,7 +492,7 @@ mod tests {
     }
 
     #[test]
-    fn a_longer_dead_time_starts_with_a_positioner_that_keeps_the_whole_lag() {
+    fn the_dead_time_also_starts_where_the_increments_answer_keeping_the_whole_lag() {
         let (mut facts, mut spec) = following_steps();
         composed::set(&mut spec, Knob::DeadTime, 0.1);
         composed::set(&mut spec, Knob::Gain, 0.5);
@@ -490,8 +503,8 @@ mod tests {
                 .collect::<Vec<_>>()
         };
         // The increments answer 1.5 s late: a start there, besides the floor, a share of the
-        // box and the whole lag (2.1 s). Each start's time constant is what its dead time
-        // leaves of that lag, 0.05 s at least.
+        // box and the whole lag (2.1 s), with a time constant of what its dead time leaves of
+        // that lag; the other starts keep the model's gain.
         facts.answer_delay_s = Some(1.5);
         let with = starts(&facts, Effect::DeadTime);
         let mut tds: Vec<f64> = (with.iter())
@@ -501,8 +514,7 @@ mod tests {
         tds.dedup();
         assert_eq!(tds, [0.3, 1.2, 1.5, 2.1]);
         for (td, gain) in &with {
-            let td = td.unwrap_or(f64::NAN);
-            let expected = 1.0 / (2.1 - td).max(0.05);
+            let expected = if *td == Some(1.5) { 1.0 / 0.6 } else { 0.5 };
             assert!(
                 gain.is_some_and(|g| (g - expected).abs() < 1e-9),
                 "{with:?}"
