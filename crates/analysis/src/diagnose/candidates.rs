@@ -73,9 +73,10 @@ pub(crate) fn jobs(
             };
             for mut free in spread_starts(variant) {
                 let mut rest = rest_of_model(current, dt, td_hi, &free);
-                if effect == Effect::DeadTime && at_the_answer(&free, facts) {
+                let answer = answer_start(&free, facts).filter(|_| effect == Effect::DeadTime);
+                if let Some(start) = answer {
                     for gain in rest.iter_mut().filter(|f| f.knob == Knob::Gain) {
-                        *gain = keeping_the_lag(*gain, current, &free);
+                        *gain = keeping_the_lag(*gain, current, start);
                     }
                 }
                 free.extend(rest);
@@ -118,32 +119,22 @@ pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free])
     rest
 }
 
-/// Whether `own` starts the dead time where V_P's increments answer O_P's
+/// The dead time `own` starts from, when that is where V_P's increments answer O_P's
 /// ([`Facts::answer_delay_s`]).
-fn at_the_answer(own: &[Free], facts: &Facts) -> bool {
-    let at = |f: &Free| f.knob == Knob::DeadTime && Some(f.init) == facts.answer_delay_s;
-    own.iter().any(at)
+fn answer_start(own: &[Free], facts: &Facts) -> Option<f64> {
+    let answer = facts.answer_delay_s?;
+    let at = |f: &Free| f.knob == Knob::DeadTime && f.init == answer;
+    own.iter().any(at).then_some(answer)
 }
 
-/// The gain `gain` (of `spec`) starting fast enough that a dead time `own` starts longer than
-/// `spec`'s leaves the model's whole lag (dead time and time constant) as it was, down to a
-/// time constant of [`SHORTEST_START_LAG_S`]: where V_P's answer starts, what is left of the
-/// lag is the positioner's, and a longer delay with the same positioner would lag twice; the
-/// simplex from there seldom finds a delay whose valley is narrow (a loop's chatter repeated
-/// late). Unchanged when `own` frees no dead time.
-fn keeping_the_lag(gain: Free, spec: &ModelSpec, own: &[Free]) -> Free {
-    let td = composed::get(spec, Knob::DeadTime);
-    let Some(start) = own
-        .iter()
-        .find(|f| f.knob == Knob::DeadTime)
-        .map(|f| f.init)
-    else {
-        return gain;
-    };
-    if start <= td {
-        return gain;
-    }
-    let lag = td + 1.0 / gain.init.max(gain.def.lo);
+/// The gain `gain` (of `spec`) starting fast enough that a dead time starting at `start`
+/// leaves the model's whole lag (dead time and time constant) as it was, down to a time
+/// constant of [`SHORTEST_START_LAG_S`]: where V_P's answer starts, what is left of the lag is
+/// the positioner's, and a longer delay with the same positioner would lag twice; the simplex
+/// from there seldom finds a delay whose valley is narrow (a loop's chatter repeated late).
+/// Never slower than `gain` starts.
+fn keeping_the_lag(gain: Free, spec: &ModelSpec, start: f64) -> Free {
+    let lag = composed::get(spec, Knob::DeadTime) + 1.0 / gain.init.max(gain.def.lo);
     let fast = 1.0 / (lag - start).max(SHORTEST_START_LAG_S);
     gain.from(fast.clamp(gain.init, gain.def.hi))
 }
