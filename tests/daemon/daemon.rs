@@ -268,6 +268,37 @@ fn replayed_recording_matches_offline_simulation_exactly() {
     assert!(worst <= 0.5e-4 + 1e-9, "simulate differs by {worst} %");
 }
 
+/// A machine that stalls the loop around the end of a run makes its stop action take a later
+/// slot; the run still had the slots its duration gives, and the summary says so. The stall
+/// (SIGSTOP for 60 ms) is swept across the end, so one of the runs stalls right at it.
+#[test]
+fn a_stall_at_the_end_of_a_run_does_not_add_slots_to_it() {
+    for offset_ms in (1950..=2150).step_by(40) {
+        let dir = tempfile::tempdir().unwrap();
+        let child = Command::new(BIN)
+            .args(["run", "--duration", "2"])
+            .current_dir(dir.path())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(offset_ms));
+        let stopped = common::signal(&child, libc::SIGSTOP);
+        std::thread::sleep(Duration::from_millis(60));
+        assert!(!stopped || common::signal(&child, libc::SIGCONT));
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let stdout = text(&out.stdout);
+        assert!(
+            stdout.contains("run: 200 slots at 100 Hz (2.00 s), stopped: duration reached"),
+            "stalled at {offset_ms} ms: {stdout}"
+        );
+        let rows = read_log(&only_log(&dir.path().join("logs")));
+        assert_eq!(rows.len(), 201, "stalled at {offset_ms} ms");
+        assert_on_grid(&rows);
+    }
+}
+
 #[test]
 fn sigterm_stops_cleanly_with_the_safe_action_logged() {
     let dir = tempfile::tempdir().unwrap();

@@ -200,10 +200,12 @@ impl Loop {
         let cycles = std::panic::catch_unwind(AssertUnwindSafe(|| {
             self.cycles(&rt, &mut schedule, &mut at)
         }));
-        let (ended, k_end, lateness_end) = match cycles {
-            Ok(Ok((reason, k, lateness))) => (Ok(reason), k, lateness),
-            Ok(Err(e)) => (Err(e), at.0 + 1, at.1),
-            Err(_) => (Err(DaemonError::Panicked("loop")), at.0 + 1, at.1),
+        // `slots`: the slots the run had, before it ended; `k_end`: the slot its stop action
+        // takes, later than that where a stalled machine made the loop miss the slots between.
+        let (ended, slots, k_end, lateness_end) = match cycles {
+            Ok(Ok((reason, slots, k, lateness))) => (Ok(reason), slots, k, lateness),
+            Ok(Err(e)) => (Err(e), at.0 + 1, at.0 + 1, at.1),
+            Err(_) => (Err(DaemonError::Panicked("loop")), at.0 + 1, at.0 + 1, at.1),
         };
         let mut safe = Vec::with_capacity(self.lanes.len());
         let mut ended = ended;
@@ -217,10 +219,10 @@ impl Loop {
         let reason = ended.inspect_err(|e| {
             tracing::error!("the loop stopped on an error, after its stop action: {e}")
         })?;
-        tracing::info!(%reason, slots = k_end, "loop stopped");
+        tracing::info!(%reason, slots, stop_slot = k_end, "loop stopped");
         Ok(LoopEnd {
             reason,
-            slots: k_end,
+            slots,
             valves: (self.lanes.into_iter().zip(safe))
                 .map(|(lane, safe)| LaneEnd {
                     link: lane.backend.link_stats(),
@@ -233,18 +235,23 @@ impl Loop {
     }
 
     /// The cycles until the loop is asked to stop, the duration is reached or a source ends:
-    /// why it ended, at which slot and how late that slot was. `at` follows the last slot run,
-    /// for the stop action after a failure.
+    /// why it ended, the slots the run had, the slot the stop action takes and how late that
+    /// slot was. `at` follows the last slot run, for the stop action after a failure.
     fn cycles(
         &mut self,
         rt: &tokio::runtime::Runtime,
         schedule: &mut Schedule,
         at: &mut (u64, Duration),
-    ) -> Result<(StopReason, u64, Duration), DaemonError> {
+    ) -> Result<(StopReason, u64, u64, Duration), DaemonError> {
+        // The first slot found past the end; slots missed after it are not the run's.
+        let mut end: Option<u64> = None;
         loop {
             let slot = schedule.next_slot();
             let k = slot.k();
             let ending = self.max_slots.is_some_and(|m| k >= m) || self.stop.load(Ordering::SeqCst);
+            if ending && end.is_none() {
+                end = Some(k);
+            }
             let lateness = match slot {
                 // Past the end, a missed slot is not logged: the stop action takes the next one.
                 Slot::Skipped { .. } if ending => continue,
@@ -260,7 +267,7 @@ impl Loop {
                 } else {
                     StopReason::Duration
                 };
-                return Ok((reason, k, lateness));
+                return Ok((reason, end.unwrap_or(k), k, lateness));
             }
             *at = (k, lateness);
             let t_s = schedule.t_s(k);
@@ -274,7 +281,7 @@ impl Loop {
                 }
             }
             if ended {
-                return Ok((StopReason::SourceEnded, k, lateness));
+                return Ok((StopReason::SourceEnded, k, k, lateness));
             }
             if let Some(m) = &self.metrics {
                 m.timing(lateness);
