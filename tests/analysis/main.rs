@@ -33,6 +33,7 @@ mod diagnose_dead_time;
 mod diagnose_linkage_play;
 mod diagnose_min_speed;
 mod diagnose_physical;
+mod diagnose_slow_positioner;
 mod diagnose_smooth_slips;
 mod diagnose_stiction_or_not;
 mod diagnose_stop_windup;

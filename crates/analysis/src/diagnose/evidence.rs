@@ -172,6 +172,10 @@ pub enum Detail {
         /// The closing limit of a model with a limit each way (`slew_pct_per_s` opens), %/s.
         #[serde(skip_serializing_if = "Option::is_none")]
         closing_slew_pct_per_s: Option<f64>,
+        /// The positioner's gain, 1/s, of a valve slow through it: its speed stays proportional
+        /// to its error and reaches no limit (`slew_pct_per_s` is then not its stroke).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        gain_per_s: Option<f64>,
     },
     Asymmetry(Uneven),
     MinSpeed {
@@ -394,6 +398,7 @@ fn detail(
             close_speed: facts.close_speed,
             slew_pct_per_s: g(Knob::Slew),
             closing_slew_pct_per_s: Some(g(Knob::ClosingSlew)).filter(|&c| c > 0.0),
+            gain_per_s: None,
         },
         Effect::Asymmetry => {
             let ((open_speed, close_speed), held) = facts.measured_speeds();

@@ -193,7 +193,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
             f.facts.in_final(f.effect, &current, data.facts, data.sigma);
         }
     }
-    slow::slow_both_ways(
+    slow::slow_findings(
         (&mut findings, &traces),
         &current,
         data,

@@ -18,21 +18,23 @@
 //!
 //! A valve whose model holds a speed limit each way (an asymmetry finding, or a trace of one)
 //! is slow too when the faster of them is: [`slow_both_ways`] names the slew-rate limit that
-//! model already has.
+//! model already has. A valve whose model moves it at a gain below a valve in good order's,
+//! and no faster than that gain allows, is slow through its positioner: [`slow_gain`] names it
+//! with the stroke speed the recording bounds.
 //! A valve slow at half travel only because its opening slows it has the slowdown named first
 //! ([`slowdown_first`]).
 //!
 //! Not here: the speed limits a model is given (`candidates`) or judged by (`judge`).
 
 use super::diagnosis::{self, Note, Support, Trace};
-use super::evidence::Evidence;
+use super::evidence::{Detail, Evidence};
 use super::facts::Facts;
 use super::judge::{beyond_chance, bic_change, blocks_helped, shares};
 use super::rounds::Data;
 use super::size;
 use super::speeds::{speeds, WINDOWS_S};
 use super::{Finding, Measure};
-use vb_core::model::composed::{self, Effect, Knob};
+use vb_core::model::composed::{self, Effect, Knob, Size};
 use vb_core::model::{bundled, FopdtParams, ModelKind, ModelSpec, Valve};
 
 /// Smallest O_P step, %, that asks a valve in good order for the stroke speed worth
@@ -45,6 +47,14 @@ const GOOD_GAIN_PER_S: f64 = 2.0;
 const LEAST_ASKED_PCT_PER_S: f64 = 4.0;
 /// Share of what a valve in good order reaches below which a valve could not keep up.
 const SLOW_SHARE: f64 = 0.5;
+/// Share of the slowest gain of a valve in good order below which a valve is slow through its
+/// gain: twice as slow as the slowest in good order (a physical valve on small steps whose
+/// chamber slows it when open was fitted at 1.2 /s with no slowdown named).
+const SLOW_GAIN_SHARE: f64 = 0.5;
+/// Largest error, %, at which a positioner in good order drives its valve at full speed (its
+/// proportional band): a valve whose speed stays proportional to its error strokes at most its
+/// gain times this.
+const FULL_DRIVE_ERROR_PCT: f64 = 10.0;
 
 /// The fastest opening and closing moves of a valve in good order following `op` (sampled
 /// every `dt` s), %/s: the project's first-order model at [`GOOD_GAIN_PER_S`] (a time
@@ -111,7 +121,28 @@ pub(super) fn slow_strokes(facts: &Facts, op: &[f64], worth_pct_per_s: f64) -> O
     })
 }
 
-/// Adds to `findings` the slew-rate finding of a valve uneven and slow both ways. A
+/// Adds to `findings` the slew-rate finding of a valve slow both ways: uneven and slow at its
+/// faster side too ([`slow_both_ways`], after the others), or slow through its positioner's
+/// gain ([`slow_gain`], first).
+pub(super) fn slow_findings(
+    (findings, traces): (&mut Vec<Finding>, &[Trace]),
+    spec: &ModelSpec,
+    data: Data,
+    noise: (f64, f64),
+) {
+    if findings.iter().any(|f| f.effect == Effect::Asymmetry) {
+        findings.retain(|f| f.effect != Effect::SlewRate);
+    }
+    if let Some(slow) = slow_both_ways((findings, traces), spec, data, noise) {
+        findings.push(slow);
+    } else if let Some(slow) = slow_gain(findings, spec, data, noise) {
+        // The baseline took the slowness in before any round ran: what was named since was
+        // fitted around it.
+        findings.insert(0, slow);
+    }
+}
+
+/// The slew-rate finding of a valve uneven and slow both ways. A
 /// `slew_rate` named in a round before the unevenness is, in the final model, the
 /// unevenness's slower side: it is taken out and judged so too (seed 32's digital valve 324:
 /// opening at 9.5 %/s named slow before its unevenness, closing at 37 %/s).
@@ -127,28 +158,12 @@ pub(super) fn slow_strokes(facts: &Facts, op: &[f64], worth_pct_per_s: f64) -> O
 /// is named when the recording shows it: the asymmetry's ratio is bounded above (the recording
 /// asked the faster side for its speed), and on the held-out blocks `spec` beats the valve
 /// slow one way only (the faster limit raised to the speed worth maintenance, the slower as
-/// it is) by what a finding must: beyond noise in `min_blocks` blocks, a real share of the
-/// error above the noise floor, BIC agreeing (`noise`: what noise alone leaves on the
-/// held-out blocks, and the residual's correlation length).
-pub(super) fn slow_both_ways(
-    (findings, traces): (&mut Vec<Finding>, &[Trace]),
-    spec: &ModelSpec,
-    data: Data,
-    noise: (f64, f64),
-) {
-    if findings.iter().any(|f| f.effect == Effect::Asymmetry) {
-        findings.retain(|f| f.effect != Effect::SlewRate);
-    }
-    let slow = slow_both_ways_finding((findings, traces), spec, data, noise);
-    findings.extend(slow);
-}
-
-/// [`slow_both_ways`]'s finding, or `None`.
-fn slow_both_ways_finding(
+/// it is) by what a finding must ([`judged`]).
+fn slow_both_ways(
     (findings, traces): (&[Finding], &[Trace]),
     spec: &ModelSpec,
     data: Data,
-    (held_noise, corr_len): (f64, f64),
+    noise: (f64, f64),
 ) -> Option<Finding> {
     let (scorer, tuning) = (data.scorer, data.tuning);
     let (uneven, traced) = match findings.iter().find(|f| f.effect == Effect::Asymmetry) {
@@ -185,7 +200,81 @@ fn slow_both_ways_finding(
     let mut not_slow = spec.clone();
     let fast = size::speed_knobs(spec).1;
     composed::set(&mut not_slow, fast, worth_speed * composed::half_open(spec));
-    let (sim_before, sim_after) = (scorer.simulate(&not_slow), scorer.simulate(spec));
+    let sized = (data.facts, data.rec.op, tuning);
+    let now = size::size(Effect::SlewRate, spec, data.facts, data.rec.op, tuning);
+    let size = size::interval(now, Effect::SlewRate, spec, scorer, sized);
+    judged(
+        (spec, &not_slow),
+        size,
+        vec![Knob::Slew, Knob::ClosingSlew],
+        data,
+        noise,
+    )
+}
+
+/// The slew-rate finding of a valve slow through its positioner: `spec` (the final model)
+/// moves at its gain times the error, below the slowest gain of a valve in good order
+/// ([`GOOD_GAIN_PER_S`]), and never reaches a speed limit. A digital positioner drives its
+/// pilots with a duty proportional to the error up to its full-drive error, so a valve whose
+/// stroke is slow (small orifices, a low supply) keeps that proportion at every error a
+/// closed loop makes and is fitted as a slow valve without a speed limit, at a gain below
+/// [`SLOW_GAIN_SHARE`] of the good one (seed 42's digital
+/// valve 297: a stroke of 0.56 %/s in a level loop, fitted at 0.23 /s, with a dead time of
+/// 0.50 s named instead). Its stroke speed is then at least the fastest speed V_P shows
+/// ([`Facts::open_speed`], noise taken out) and at most the gain times
+/// [`FULL_DRIVE_ERROR_PCT`] (or the model's speed limit, if lower): the size is their
+/// geometric mean, those ends its interval. Named when no speed finding is, the fastest speed
+/// shown lies below that upper end (a valve seen moving faster is not slow through its gain),
+/// and `spec` beats the same model at the good gain by what a finding must ([`judged`]).
+fn slow_gain(
+    findings: &[Finding],
+    spec: &ModelSpec,
+    data: Data,
+    noise: (f64, f64),
+) -> Option<Finding> {
+    let speed_named =
+        (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
+    let gain = composed::get(spec, Knob::Gain);
+    let half = composed::half_open(spec);
+    let shown = data.facts.open_speed.max(data.facts.close_speed);
+    let most = (gain * FULL_DRIVE_ERROR_PCT).min(size::faster_limit(spec)) / half;
+    if speed_named || gain >= SLOW_GAIN_SHARE * GOOD_GAIN_PER_S || !(shown > 0.0 && shown < most) {
+        return None;
+    }
+    let mut not_slow = spec.clone();
+    composed::set(&mut not_slow, Knob::Gain, GOOD_GAIN_PER_S);
+    let worth_speed = data.tuning.worth_speed();
+    let value = (shown * most).sqrt();
+    let size = Size {
+        name: "stroke_speed_pct_per_s",
+        unit: "%/s",
+        value,
+        low: shown,
+        high: most,
+        worth: worth_speed / value,
+        worth_low: worth_speed / most,
+    };
+    let mut found = judged((spec, &not_slow), size, vec![Knob::Gain], data, noise)?;
+    if let Detail::SlewRate { gain_per_s, .. } = &mut found.facts.detail {
+        *gain_per_s = Some(gain);
+    }
+    Some(found)
+}
+
+/// A slew-rate finding of `size` on the knobs `knobs` of `spec`, when the recording shows the
+/// valve as slow as `spec` has it: on the held-out blocks `spec` beats `not_slow` (the same
+/// valve faster) beyond noise in enough blocks, by a real share of the error above the noise
+/// floor, BIC agreeing (`noise`: what noise alone leaves on the held-out blocks, and the
+/// residual's correlation length), and the size is worth maintenance at its less material end.
+fn judged(
+    (spec, not_slow): (&ModelSpec, &ModelSpec),
+    size: Size,
+    knobs: Vec<Knob>,
+    data: Data,
+    (held_noise, corr_len): (f64, f64),
+) -> Option<Finding> {
+    let (scorer, tuning) = (data.scorer, data.tuning);
+    let (sim_before, sim_after) = (scorer.simulate(not_slow), scorer.simulate(spec));
     let (before, after) = (scorer.errors_of(&sim_before), scorer.errors_of(&sim_after));
     let helped = blocks_helped(
         &scorer.paired(&sim_before, &sim_after),
@@ -194,29 +283,25 @@ fn slow_both_ways_finding(
     );
     let (excess_share, heldout_share) = shares(before.held, after.held, held_noise);
     let delta_bic = bic_change(&before, &after, 0, scorer.n_scored(), corr_len);
-    let sized = (data.facts, data.rec.op, tuning);
-    let now = size::size(Effect::SlewRate, spec, data.facts, data.rec.op, tuning);
-    let size = size::interval(now, Effect::SlewRate, spec, scorer, sized);
     tracing::debug!(
-        faster,
+        size = size.value,
         held_before = before.held,
         held_after = after.held,
         helped,
         excess_share,
         delta_bic,
         worth_low = size.worth_low,
-        "slow both ways"
+        "slow valve"
     );
     let shown = beyond_chance(helped, excess_share, delta_bic, tuning)
         && heldout_share >= tuning.min_heldout_share
         && size.worth_low >= tuning.materiality;
-    let knobs = vec![Knob::Slew, Knob::ClosingSlew];
     shown.then(|| Finding {
         effect: Effect::SlewRate,
         facts: Evidence::of(
             Effect::SlewRate,
             spec,
-            &not_slow,
+            not_slow,
             data.facts,
             data.windows,
             data.sigma,
@@ -273,6 +358,59 @@ mod tests {
                 x + e
             })
             .collect()
+    }
+
+    /// V_P of a valve driven at `full` %/s times its error over `band` % (at full speed beyond),
+    /// read with 0.1 % of noise: a pulse-width-modulated positioner written here, apart from
+    /// the project's models.
+    fn driven(op: &[f64], full: f64, band: f64) -> Vec<f64> {
+        let e = noise(op.len(), 0.1);
+        let mut x = op[0];
+        (op.iter().zip(e))
+            .map(|(&u, e)| {
+                x += full * ((u - x) / band).clamp(-1.0, 1.0) * DT;
+                x + e
+            })
+            .collect()
+    }
+
+    /// `n` samples of O_P from a level loop: slow swings of a few % and the controller's
+    /// chatter.
+    fn level_loop(n: usize) -> Vec<f64> {
+        let chatter = noise(2 * n, 0.3);
+        (0..n)
+            .map(|k| {
+                let t = k as f64 * DT;
+                let swing = 2.0 * (t / 70.0 * std::f64::consts::TAU).sin()
+                    + 1.5 * (t / 23.0 * std::f64::consts::TAU + 1.0).sin();
+                50.0 + swing + chatter[n + k]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_valve_moving_at_a_slow_gain_over_every_error_is_named_slow_first() {
+        let op = level_loop(30_000);
+        let diagnosed = |full: f64| {
+            let rec = Columns::new(op.clone(), driven(&op, full, 2.5), DT);
+            crate::diagnose::diagnose(&rec.view(), None, &|_, _| {}).unwrap()
+        };
+        // 0.6 %/s at full drive: a gain of 0.24 /s over every error of the loop.
+        let slow = diagnosed(0.6);
+        let first = &slow.findings[0];
+        assert_eq!(first.effect, Effect::SlewRate, "{:?}", slow.findings);
+        assert!(
+            first.size.low <= 0.6 && 0.6 <= first.size.high,
+            "{:?}",
+            first.size
+        );
+        // 50 %/s at full drive, a gain of 20 /s: in good order.
+        let fast = diagnosed(50.0);
+        assert!(
+            fast.findings.iter().all(|f| f.effect != Effect::SlewRate),
+            "{:?}",
+            fast.findings
+        );
     }
 
     /// The note on a valve following `op` at `gain` /s, no faster than `limit` %/s.

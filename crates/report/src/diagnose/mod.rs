@@ -224,9 +224,15 @@ pub fn evidence(f: &Finding) -> String {
             close_speed,
             slew_pct_per_s,
             closing_slew_pct_per_s,
+            gain_per_s,
         } => format!(
             "{moves}V_P never moves faster than {open_speed:.1} %/s opening and {close_speed:.1} %/s closing (99.9th percentile): {}",
-            slew_limits(*slew_pct_per_s, *closing_slew_pct_per_s)
+            match gain_per_s {
+                Some(g) => format!(
+                    "it moves at its positioner's gain of {g:.2} /s times the error and reaches no speed limit"
+                ),
+                None => slew_limits(*slew_pct_per_s, *closing_slew_pct_per_s),
+            }
         ),
         Detail::Asymmetry(u) => uneven_text(u),
         Detail::MinSpeed {
