@@ -57,6 +57,13 @@
 //!   physical valve 78 (an unevenness of 1.8 on random steps, a static excess of 0.009 %) was
 //!   named `stiction` 0.36 % beside the unevenness, for 7 % of the held-out error left, while
 //!   V_P made not one evident slip. The unevenness alone is named, intact and as logged.
+//! - A digital positioner with a wide tolerance band leaves it with a pulse and rests at its
+//!   edge again: on ramps V_P climbs a staircase of equal steps, which sticks and then jumps
+//!   like stick-slip (seed 43 valve 312: a 2.9 % band on ramps, steps of 0.30 %; seed 37 valve
+//!   330: 2.2 % in a closed loop, steps of 0.34 %). Steps of a quarter of the band or less are
+//!   the band's: deadband alone is named, intact and as logged. Stick-slip inside a band,
+//!   with slips of a third of it or more (seed 40 valve 198: 0.71 % in 2.9 %; seed 42 valve
+//!   177: 0.86 % in 1.6 %, both of the physical family), is still named beside it.
 
 use valve_bridge::diagnose::{self, Diagnosis, Effect};
 use valve_bridge::synth::logged;
@@ -253,5 +260,34 @@ fn a_smooth_mismatch_without_one_evident_slip_is_not_named_stiction() {
         let (case, d) = diagnosed_as(33, 78, as_logged);
         assert_eq!(case.labels, [Effect::Asymmetry]);
         assert_eq!(named(&d), [Effect::Asymmetry], "as logged: {as_logged}");
+    }
+}
+
+#[test]
+fn a_tolerance_band_left_in_small_pulsed_steps_is_named_deadband_not_stiction() {
+    for (seed, index) in [(43, 312), (37, 330)] {
+        for as_logged in [false, true] {
+            let (case, d) = diagnosed_as(seed, index, as_logged);
+            let at = format!("seed {seed} valve {index}, as logged: {as_logged}");
+            assert_eq!(case.labels, [Effect::Deadband], "{at}");
+            assert_eq!(named(&d), [Effect::Deadband], "{at}: {:?}", d.findings);
+        }
+    }
+}
+
+#[test]
+fn stick_slip_inside_a_band_with_slips_of_a_third_of_it_is_still_named() {
+    for (seed, index) in [(40, 198), (42, 177)] {
+        for as_logged in [false, true] {
+            let (case, d) = diagnosed_as(seed, index, as_logged);
+            let at = format!("seed {seed} valve {index}, as logged: {as_logged}");
+            assert_eq!(case.labels, [Effect::Stiction, Effect::Deadband], "{at}");
+            let found = named(&d);
+            assert!(
+                found.contains(&Effect::Stiction) && found.contains(&Effect::Deadband),
+                "{at}: {found:?}"
+            );
+            assert!(holds(&case, &d, Effect::Stiction), "{at}: {:?}", d.findings);
+        }
     }
 }

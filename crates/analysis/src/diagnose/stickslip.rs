@@ -69,6 +69,9 @@
 //!   positioner following a noisy controller output, and stick-slip is not judged, unless
 //!   the current model misses fifteen slips a minute as above (slips the noise hides are not
 //!   the evident ones).
+//! - **Steps of a band**: beside a deadband (in the current model, or the band that rivals a
+//!   stick-slip winner), slips of a quarter of the band or less are a pulsing positioner's
+//!   steps back into its tolerance band, and stick-slip is not judged.
 //!
 //! Quantization (a lattice step is not a slip), sensor spikes (no level change), O_P steps and
 //! smooth moves or slewing (no rest before and after) cannot produce slips, so they cannot be
@@ -122,6 +125,14 @@ const RIVAL_SLIPS: usize = 2 * EVIDENT_SLIPS;
 /// a valve whose slips the current model misses at [`EVIDENT_PER_MIN`] in the fit and the
 /// held-out blocks alike (hunting whose slips the noise hides one by one).
 const MIN_EVIDENT: usize = 10;
+/// Largest share of a deadband's width (the valve's rest anywhere in a band around its target)
+/// that V_P's median step may have for those steps to be the positioner's own: a digital
+/// positioner leaves its tolerance band with a pulse, moving the valve a small part of the band
+/// and resting again at its edge (a ramp becomes a staircase of equal steps), since steps as
+/// large as the band would carry it across and never let it settle. Stick-slip's jump is set by
+/// the stem's friction, not by the band, and beside a band it is judged only when it is the
+/// larger: steps of a quarter of the band or less are named the band's ([`band_steps`]).
+const BAND_STEP_SHARE: f64 = 0.25;
 
 type Histogram = [f64; BINS];
 
@@ -480,6 +491,9 @@ pub(crate) fn fit(
         }
     };
     let size = median_slip(&measured_slips, scorer, missed.0 >= MIN_MISSED);
+    if band_steps(size, current) {
+        return None;
+    }
     let gain = composed::get(current, Knob::Gain);
     let closest = |grid: Vec<Vec<(Knob, f64)>>| {
         grid.par_iter()
@@ -575,8 +589,25 @@ pub(crate) fn jumps(
         rest.evident(&facts::slips(&reference, &read, scale), &read)
     });
     tracing::debug!(evident, follows, evident_smooth, "jumps of V_P");
+    let in_band =
+        smooth.is_some_and(|smooth| band_steps(median_slip(&slips, scorer, false), smooth));
     stuck_then_jumps(evident, follows)
         && evident as f64 >= EVIDENT_RATIO * evident_smooth.max(1) as f64
+        && !in_band
+}
+
+/// Whether V_P's median step `slip` (%) is no more than [`BAND_STEP_SHARE`] of the deadband of
+/// `spec`: a pulsing positioner's steps at the edge of its band, not stick-slip. Which it is
+/// cannot be told from V_P when a stem sticks inside a wide band; narrowing the band tells
+/// them apart (stick-slip keeps its jumps, the steps shrink with the band).
+fn band_steps(slip: f64, spec: &ModelSpec) -> bool {
+    let band =
+        composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband));
+    let steps = slip <= BAND_STEP_SHARE * band;
+    if steps {
+        tracing::debug!(slip, band, "steps of V_P within its deadband");
+    }
+    steps
 }
 
 /// A stem that sticks, then jumps: at least [`MIN_EVIDENT`] evident slips, and V_P stuck
@@ -597,6 +628,19 @@ fn with_knobs(current: &ModelSpec, knobs: &[(Knob, f64)]) -> ModelSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vb_core::model::{bundled, ModelKind};
+
+    #[test]
+    fn steps_of_a_quarter_of_a_deadband_or_less_are_the_bands() {
+        let smooth = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
+        assert!(!band_steps(0.3, &smooth), "no band, no band steps");
+        for knob in [Knob::Deadband, Knob::PositionerDeadband] {
+            let band = with_knobs(&smooth, &[(knob, 2.4)]);
+            assert!(band_steps(0.3, &band), "{knob:?}");
+            assert!(band_steps(0.6, &band), "{knob:?}");
+            assert!(!band_steps(0.7, &band), "{knob:?}");
+        }
+    }
 
     #[test]
     fn histogram_distance_counts_slips_of_the_wrong_size_or_number() {
