@@ -220,10 +220,11 @@ fn slow_both_ways(
 /// closed loop makes and is fitted as a slow valve without a speed limit, at a gain below
 /// [`SLOW_GAIN_SHARE`] of the good one (seed 42's digital
 /// valve 297: a stroke of 0.56 %/s in a level loop, fitted at 0.23 /s, with a dead time of
-/// 0.50 s named instead). Its stroke speed is then at least the fastest speed V_P shows
-/// ([`Facts::open_speed`], noise taken out) and at most the gain times
-/// [`FULL_DRIVE_ERROR_PCT`] (or the model's speed limit, if lower): the size is their
-/// geometric mean, those ends its interval. Named when no speed finding is, the fastest speed
+/// 0.50 s named instead). Its stroke speed (the geometric mean of the two directions') is
+/// then at least the geometric mean of the fastest speeds V_P shows each way
+/// ([`Facts::open_speed`], noise taken out; the faster one where only one is measured) and at
+/// most the gain times [`FULL_DRIVE_ERROR_PCT`] (or the model's speed limit, if lower): the
+/// size is the geometric mean of those ends, which are its interval. Named when no speed finding is, the fastest speed
 /// shown lies below that upper end (a valve seen moving faster is not slow through its gain),
 /// and `spec` beats the same model at the good gain by what a finding must ([`judged`]).
 fn slow_gain(
@@ -236,20 +237,26 @@ fn slow_gain(
         (findings.iter()).any(|f| matches!(f.effect, Effect::SlewRate | Effect::Asymmetry));
     let gain = composed::get(spec, Knob::Gain);
     let half = composed::half_open(spec);
-    let shown = data.facts.open_speed.max(data.facts.close_speed);
+    let (open, close) = (data.facts.open_speed, data.facts.close_speed);
+    let shown = open.max(close);
     let most = (gain * FULL_DRIVE_ERROR_PCT).min(size::faster_limit(spec)) / half;
     if speed_named || gain >= SLOW_GAIN_SHARE * GOOD_GAIN_PER_S || !(shown > 0.0 && shown < most) {
         return None;
     }
+    let least = if open.min(close) > 0.0 {
+        (open * close).sqrt()
+    } else {
+        shown
+    };
     let mut not_slow = spec.clone();
     composed::set(&mut not_slow, Knob::Gain, GOOD_GAIN_PER_S);
     let worth_speed = data.tuning.worth_speed();
-    let value = (shown * most).sqrt();
+    let value = (least * most).sqrt();
     let size = Size {
         name: "stroke_speed_pct_per_s",
         unit: "%/s",
         value,
-        low: shown,
+        low: least,
         high: most,
         worth: worth_speed / value,
         worth_low: worth_speed / most,
