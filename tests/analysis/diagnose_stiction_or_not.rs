@@ -65,7 +65,7 @@
 //!   with slips of a third of it or more (seed 40 valve 198: 0.71 % in 2.9 %; seed 42 valve
 //!   177: 0.86 % in 1.6 %, both of the physical family), is still named beside it.
 
-use valve_bridge::diagnose::{self, Diagnosis, Effect};
+use valve_bridge::diagnose::{self, Diagnosis, Effect, Note};
 use valve_bridge::synth::logged;
 
 use crate::cases::{self, Case};
@@ -271,6 +271,16 @@ fn a_tolerance_band_left_in_small_pulsed_steps_is_named_deadband_not_stiction() 
             let at = format!("seed {seed} valve {index}, as logged: {as_logged}");
             assert_eq!(case.labels, [Effect::Deadband], "{at}");
             assert_eq!(named(&d), [Effect::Deadband], "{at}: {:?}", d.findings);
+            // The report says the steps were the band's, and how to tell small stick-slip.
+            let steps = d.notes.iter().find_map(|n| match *n {
+                Note::StepsInBand { step_pct, band_pct } => Some((step_pct, band_pct)),
+                _ => None,
+            });
+            let (step, band) = steps.unwrap_or_else(|| panic!("{at}: {:?}", d.notes));
+            assert!(
+                (0.25..0.4).contains(&step) && step <= band / 4.0,
+                "{at}: {step} in {band}"
+            );
         }
     }
 }

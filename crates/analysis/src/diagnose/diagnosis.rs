@@ -126,6 +126,10 @@ pub enum Note {
         heldout_sse_before: f64,
         heldout_sse_after: f64,
     },
+    /// V_P steps (median `step_pct`) by a quarter of the model's deadband (`band_pct`) or
+    /// less: a pulsing positioner's steps back into its tolerance band, not judged stick-slip
+    /// (a stem sticking by that little inside the band looks the same).
+    StepsInBand { step_pct: f64, band_pct: f64 },
     /// Too few reversals of O_P to test the effects that show at reversals.
     FewReversals { reversals: usize },
     /// The valve strokes slower than a valve in good order in a direction the recording asked

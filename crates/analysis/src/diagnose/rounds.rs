@@ -587,15 +587,16 @@ impl<'a> Search<'a> {
         if stuck {
             return;
         }
-        let Some(c) = stickslip::fit(
+        let c = match stickslip::fit(
             self.data.scorer,
             &smooth,
             self.data.facts,
             self.data.sigma,
             self.data.tuning,
-        )
-        .filter(|c| c.passes()) else {
-            return;
+        ) {
+            Ok(c) if c.passes() => c,
+            Ok(_) | Err(None) => return,
+            Err(Some(note)) => return self.notes.push(note),
         };
         let tuning = self.data.tuning;
         let (value, low, high) = c.slip_size(self.data.scorer);

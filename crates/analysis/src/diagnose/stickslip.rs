@@ -79,6 +79,7 @@
 
 use rayon::prelude::*;
 
+use super::diagnosis::Note;
 use super::facts::{self, Facts, Slip};
 use super::measure::Measure;
 use super::rests::{Rest, FOLLOWS};
@@ -431,9 +432,10 @@ fn smooth_grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
 }
 
 /// Fits stick-slip to the measured slips and compares it with `current` on the held-out
-/// blocks; `None` when the current model misses too few slips to fit anything, or when a
-/// smooth valve ([`smooth_grid`]) makes slips at least as like the measured ones as the best
-/// stick-slip does: slips alone are then no evidence of stick-slip.
+/// blocks; an error when the current model misses too few slips to fit anything, when they
+/// are steps of the current model's deadband ([`band_steps`]: the error is then the note that
+/// says so), or when a smooth valve ([`smooth_grid`]) makes slips at least as like the
+/// measured ones as the best stick-slip does: slips alone are then no evidence of stick-slip.
 ///
 /// Slips are counted against the current (smooth) model's V_P. Every simulation gets the same
 /// seeded sensor noise (and lattice) the recording has, so the slips that noise alone makes
@@ -446,7 +448,7 @@ pub(crate) fn fit(
     facts: &Facts,
     sigma: f64,
     tuning: &Tuning,
-) -> Option<Candidate> {
+) -> Result<Candidate, Option<Note>> {
     let scale = &facts.slip_scale;
     let threshold = scale.threshold_pct;
     let pieces = Pieces::new(scorer);
@@ -480,7 +482,7 @@ pub(crate) fn fit(
     let per_min = EVIDENT_PER_MIN * scorer.n_fit() as f64 * scorer.dt / 60.0;
     let hunting = missed.0.min(missed.1) >= per_min;
     if !(stuck_then_jumps(evident, follows) || hunting) || !(both_halves || by_evidence) {
-        return None;
+        return Err(None);
     }
     // Fitted on the fit blocks; on all of them when those hold too few slips to fit.
     let fit_on = |d: &[f64]| {
@@ -492,7 +494,10 @@ pub(crate) fn fit(
     };
     let size = median_slip(&measured_slips, scorer, missed.0 >= MIN_MISSED);
     if band_steps(size, current) {
-        return None;
+        return Err(Some(Note::StepsInBand {
+            step_pct: size,
+            band_pct: band(current),
+        }));
     }
     let gain = composed::get(current, Knob::Gain);
     let closest = |grid: Vec<Vec<(Knob, f64)>>| {
@@ -505,8 +510,8 @@ pub(crate) fn fit(
             })
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
     };
-    let (spec, knobs, stick_distance, _) = closest(grid(size, gain))?;
-    let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain))?;
+    let (spec, knobs, stick_distance, _) = closest(grid(size, gain)).ok_or(None)?;
+    let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain)).ok_or(None)?;
     let (read_smooth, slips_smooth, smooth, _) = score(&scorer.simulate(&smooth_spec));
     let evident_smooth = rest.evident(&slips_smooth, &read_smooth);
     tracing::debug!(
@@ -524,7 +529,7 @@ pub(crate) fn fit(
     let outnumbered = quiet && beyond_smooth;
     let no_rival = outnumbered && by_evidence && evident >= RIVAL_SLIPS;
     if smooth_distance <= stick_distance && !no_rival {
-        return None;
+        return Err(None);
     }
     let (_, slips_after, after, _) = score(&scorer.simulate(&spec));
     let held = Match::new(
@@ -558,7 +563,7 @@ pub(crate) fn fit(
         passes = candidate.passes(),
         "stick-slip by slip statistics"
     );
-    Some(candidate)
+    Ok(candidate)
 }
 
 /// Whether V_P sticks, then jumps, against the current model `current`: at least
@@ -601,13 +606,17 @@ pub(crate) fn jumps(
 /// cannot be told from V_P when a stem sticks inside a wide band; narrowing the band tells
 /// them apart (stick-slip keeps its jumps, the steps shrink with the band).
 fn band_steps(slip: f64, spec: &ModelSpec) -> bool {
-    let band =
-        composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband));
+    let band = band(spec);
     let steps = slip <= BAND_STEP_SHARE * band;
     if steps {
         tracing::debug!(slip, band, "steps of V_P within its deadband");
     }
     steps
+}
+
+/// The deadband of `spec` (on the input or in the positioner), %.
+fn band(spec: &ModelSpec) -> f64 {
+    composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband))
 }
 
 /// A stem that sticks, then jumps: at least [`MIN_EVIDENT`] evident slips, and V_P stuck

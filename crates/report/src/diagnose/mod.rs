@@ -367,6 +367,15 @@ pub fn note(n: &Note) -> String {
             asked_pct_per_s,
             worth_pct_per_s,
         ),
+        Note::StepsInBand {
+            step_pct,
+            band_pct,
+        } => format!(
+            "V_P steps by {step_pct:.2} % at a time inside the deadband of {band_pct:.2} %, a quarter of it or less: \
+             a pulsing positioner's steps back into its tolerance band, not judged stick-slip; a stem that sticks \
+             and jumps by that little inside the band looks the same, and narrowing the band tells them apart \
+             (stick-slip keeps its jumps, the positioner's steps shrink with the band)"
+        ),
         Note::FewReversals { reversals } => format!(
             "only {reversals} reversals of O_P: backlash, deadband and state-dependent delay show at reversals; {} would test for them",
             experiment(Effect::Backlash, None)
@@ -564,5 +573,13 @@ mod tests {
         );
         let few = note(&Note::FewReversals { reversals: 2 });
         assert!(few.contains("valve-bridge response-test"), "{few}");
+        let steps = note(&Note::StepsInBand {
+            step_pct: 0.306,
+            band_pct: 2.42,
+        });
+        assert!(
+            steps.contains("0.31 %") && steps.contains("2.42 %"),
+            "{steps}"
+        );
     }
 }
