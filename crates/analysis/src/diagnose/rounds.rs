@@ -596,7 +596,12 @@ impl<'a> Search<'a> {
         ) {
             Ok(c) if c.passes() => c,
             Ok(_) | Err(None) => return,
-            Err(Some(note)) => return self.notes.push(note),
+            Err(Some(steps)) => {
+                return self.notes.push(Note::StepsInBand {
+                    step_pct: steps.step_pct,
+                    band_pct: steps.band_pct,
+                })
+            }
         };
         let tuning = self.data.tuning;
         let (value, low, high) = c.slip_size(self.data.scorer);

@@ -79,7 +79,6 @@
 
 use rayon::prelude::*;
 
-use super::diagnosis::Note;
 use super::facts::{self, Facts, Slip};
 use super::measure::Measure;
 use super::rests::{Rest, FOLLOWS};
@@ -249,6 +248,13 @@ impl Match {
             && ratio(nm as f64, ns as f64) <= 2.5
             && ratio(sm, ss) <= 1.5
     }
+}
+
+/// V_P's median step and the deadband it lies in (both %), when those steps are the band's
+/// ([`band_steps`]), not stick-slip's.
+pub(crate) struct BandSteps {
+    pub step_pct: f64,
+    pub band_pct: f64,
 }
 
 /// A stick-slip candidate and how its slips compare with the measured ones.
@@ -433,9 +439,9 @@ fn smooth_grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
 
 /// Fits stick-slip to the measured slips and compares it with `current` on the held-out
 /// blocks; an error when the current model misses too few slips to fit anything, when they
-/// are steps of the current model's deadband ([`band_steps`]: the error is then the note that
-/// says so), or when a smooth valve ([`smooth_grid`]) makes slips at least as like the
-/// measured ones as the best stick-slip does: slips alone are then no evidence of stick-slip.
+/// are steps of the current model's deadband ([`band_steps`]: the error then says how large),
+/// or when a smooth valve ([`smooth_grid`]) makes slips at least as like the measured ones as
+/// the best stick-slip does: slips alone are then no evidence of stick-slip.
 ///
 /// Slips are counted against the current (smooth) model's V_P. Every simulation gets the same
 /// seeded sensor noise (and lattice) the recording has, so the slips that noise alone makes
@@ -448,7 +454,7 @@ pub(crate) fn fit(
     facts: &Facts,
     sigma: f64,
     tuning: &Tuning,
-) -> Result<Candidate, Option<Note>> {
+) -> Result<Candidate, Option<BandSteps>> {
     let scale = &facts.slip_scale;
     let threshold = scale.threshold_pct;
     let pieces = Pieces::new(scorer);
@@ -494,7 +500,7 @@ pub(crate) fn fit(
     };
     let size = median_slip(&measured_slips, scorer, missed.0 >= MIN_MISSED);
     if band_steps(size, current) {
-        return Err(Some(Note::StepsInBand {
+        return Err(Some(BandSteps {
             step_pct: size,
             band_pct: band(current),
         }));
