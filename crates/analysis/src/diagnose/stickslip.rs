@@ -499,11 +499,8 @@ pub(crate) fn fit(
         }
     };
     let size = median_slip(&measured_slips, scorer, missed.0 >= MIN_MISSED);
-    if band_steps(size, current) {
-        return Err(Some(BandSteps {
-            step_pct: size,
-            band_pct: band(current),
-        }));
+    if let Some(steps) = band_steps(size, current) {
+        return Err(Some(steps));
     }
     let gain = composed::get(current, Knob::Gain);
     let closest = |grid: Vec<Vec<(Knob, f64)>>| {
@@ -600,29 +597,28 @@ pub(crate) fn jumps(
         rest.evident(&facts::slips(&reference, &read, scale), &read)
     });
     tracing::debug!(evident, follows, evident_smooth, "jumps of V_P");
-    let in_band =
-        smooth.is_some_and(|smooth| band_steps(median_slip(&slips, scorer, false), smooth));
+    let in_band = smooth
+        .is_some_and(|smooth| band_steps(median_slip(&slips, scorer, false), smooth).is_some());
     stuck_then_jumps(evident, follows)
         && evident as f64 >= EVIDENT_RATIO * evident_smooth.max(1) as f64
         && !in_band
 }
 
-/// Whether V_P's median step `slip` (%) is no more than [`BAND_STEP_SHARE`] of the deadband of
-/// `spec`: a pulsing positioner's steps at the edge of its band, not stick-slip. Which it is
-/// cannot be told from V_P when a stem sticks inside a wide band; narrowing the band tells
-/// them apart (stick-slip keeps its jumps, the steps shrink with the band).
-fn band_steps(slip: f64, spec: &ModelSpec) -> bool {
-    let band = band(spec);
-    let steps = slip <= BAND_STEP_SHARE * band;
-    if steps {
+/// V_P's median step `slip` (%) with the deadband of `spec`, when the step is no more than
+/// [`BAND_STEP_SHARE`] of it: a pulsing positioner's steps at the edge of its band, not
+/// stick-slip. Which it is cannot be told from V_P when a stem sticks inside a wide band;
+/// narrowing the band tells them apart (stick-slip keeps its jumps, the steps shrink with the
+/// band).
+fn band_steps(slip: f64, spec: &ModelSpec) -> Option<BandSteps> {
+    let band =
+        composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband));
+    (slip <= BAND_STEP_SHARE * band).then(|| {
         tracing::debug!(slip, band, "steps of V_P within its deadband");
-    }
-    steps
-}
-
-/// The deadband of `spec` (on the input or in the positioner), %.
-fn band(spec: &ModelSpec) -> f64 {
-    composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband))
+        BandSteps {
+            step_pct: slip,
+            band_pct: band,
+        }
+    })
 }
 
 /// A stem that sticks, then jumps: at least [`MIN_EVIDENT`] evident slips, and V_P stuck
@@ -648,12 +644,13 @@ mod tests {
     #[test]
     fn steps_of_a_quarter_of_a_deadband_or_less_are_the_bands() {
         let smooth = composed::compose(&bundled(ModelKind::Fopdt), 0.01);
-        assert!(!band_steps(0.3, &smooth), "no band, no band steps");
+        assert!(band_steps(0.3, &smooth).is_none(), "no band, no band steps");
         for knob in [Knob::Deadband, Knob::PositionerDeadband] {
             let band = with_knobs(&smooth, &[(knob, 2.4)]);
-            assert!(band_steps(0.3, &band), "{knob:?}");
-            assert!(band_steps(0.6, &band), "{knob:?}");
-            assert!(!band_steps(0.7, &band), "{knob:?}");
+            let steps = |slip| band_steps(slip, &band).map(|b| (b.step_pct, b.band_pct));
+            assert_eq!(steps(0.3), Some((0.3, 2.4)), "{knob:?}");
+            assert_eq!(steps(0.6), Some((0.6, 2.4)), "{knob:?}");
+            assert_eq!(steps(0.7), None, "{knob:?}");
         }
     }
 
