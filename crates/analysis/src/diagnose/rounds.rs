@@ -597,10 +597,11 @@ impl<'a> Search<'a> {
             Ok(c) if c.passes() => c,
             Ok(_) | Err(None) => return,
             Err(Some(steps)) => {
-                return self.notes.push(Note::StepsInBand {
+                self.notes.push(Note::StepsInBand {
                     step_pct: steps.step_pct,
                     band_pct: steps.band_pct,
-                })
+                });
+                return;
             }
         };
         let tuning = self.data.tuning;

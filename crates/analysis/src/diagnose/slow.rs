@@ -224,9 +224,10 @@ fn slow_both_ways(
 /// then at least the geometric mean of the fastest speeds V_P shows each way
 /// ([`Facts::open_speed`], noise taken out; the faster one where only one is measured) and at
 /// most the gain times [`FULL_DRIVE_ERROR_PCT`] (or the model's speed limit, if lower): the
-/// size is the geometric mean of those ends, which are its interval. Named when no speed finding is, the fastest speed
-/// shown lies below that upper end (a valve seen moving faster is not slow through its gain),
-/// and `spec` beats the same model at the good gain by what a finding must ([`judged`]).
+/// size is the geometric mean of those ends, which are its interval. Named when no speed
+/// finding is, the fastest speed shown lies below that upper end (a valve seen moving faster
+/// is not slow through its gain), and `spec` beats the same model at the good gain by what a
+/// finding must ([`judged`]).
 fn slow_gain(
     findings: &[Finding],
     spec: &ModelSpec,
