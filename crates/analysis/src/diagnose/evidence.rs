@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use super::facts::Facts;
 use super::locate::{Context, Window};
+use super::size;
 use super::stickslip;
 use vb_core::metrics::stats;
 use vb_core::metrics::steps::Population;
@@ -430,7 +431,7 @@ fn detail(
                 holds_opening: nu,
                 offset_after_closing_pct: down,
                 holds_closing: nd,
-                deadband_pct: g(Knob::Deadband).max(g(Knob::PositionerDeadband)),
+                deadband_pct: size::deadband(spec),
             }
         }
         Effect::Saturation => Detail::Saturation {

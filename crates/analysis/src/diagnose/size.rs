@@ -290,11 +290,7 @@ fn measure(
             "%",
             g(Knob::Breakaway).max(g(Knob::Stickband) * g(Knob::JumpFraction)),
         ),
-        Effect::Deadband => (
-            "deadband_pct",
-            "%",
-            g(Knob::Deadband).max(g(Knob::PositionerDeadband)),
-        ),
+        Effect::Deadband => ("deadband_pct", "%", deadband(spec)),
         Effect::Saturation => {
             let high = 100.0 - spec.travel.max_pct >= spec.travel.min_pct;
             let stop = if high {
@@ -400,6 +396,11 @@ pub(crate) fn speed_knobs(spec: &ModelSpec) -> (Knob, Knob) {
 /// The faster of the speed limits of `spec` (closed, where the valve is fastest), %/s.
 pub(crate) fn faster_limit(spec: &ModelSpec) -> f64 {
     composed::get(spec, speed_knobs(spec).1)
+}
+
+/// The deadband of `spec`, on the valve's input or in its positioner, %.
+pub(crate) fn deadband(spec: &ModelSpec) -> f64 {
+    composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband))
 }
 
 /// The knob whose profile gives the interval of `effect`'s size in `spec`, and whether its

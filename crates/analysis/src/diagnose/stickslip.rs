@@ -84,6 +84,7 @@ use super::measure::Measure;
 use super::rests::{Rest, FOLLOWS};
 use super::scorer::Scorer;
 use super::sensor::Sensor;
+use super::size;
 use super::tuning::Tuning;
 use vb_core::metrics::stats::{self, Differences};
 use vb_core::model::composed::{self, Knob};
@@ -610,8 +611,7 @@ pub(crate) fn jumps(
 /// narrowing the band tells them apart (stick-slip keeps its jumps, the steps shrink with the
 /// band).
 fn band_steps(slip: f64, spec: &ModelSpec) -> Option<BandSteps> {
-    let band =
-        composed::get(spec, Knob::Deadband).max(composed::get(spec, Knob::PositionerDeadband));
+    let band = size::deadband(spec);
     (slip <= BAND_STEP_SHARE * band).then(|| {
         tracing::debug!(slip, band, "steps of V_P within its deadband");
         BandSteps {
