@@ -54,6 +54,9 @@ pub struct Facts {
     pub lattice_pct: f64,
     /// Noise of the V_P reading (standard deviation), %.
     pub noise_pct: f64,
+    /// Noise of O_P (standard deviation from its second differences), %: the sample-to-sample
+    /// jitter of a controller's output, which a band narrower than it cannot hold still.
+    pub op_noise_pct: f64,
     /// Number of direction reversals of O_P.
     pub reversals: usize,
     /// Where O_P turned back, through a hysteresis above its own noise (see [`turns`]).
@@ -91,9 +94,11 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (open_speed, close_speed) = (quick.0.max(held_speeds.0), quick.1.max(held_speeds.1));
     let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     let vp_span_pct = span(vp);
+    let op_noise_pct = stats::noise_sd(op, Differences::Second);
     Facts {
+        op_noise_pct,
         reversals: count_reversals(op),
-        turns: turns(op),
+        turns: turns(op, op_noise_pct),
         dt,
         steps: step_responses(rec),
         holds: holds(op, vp, dt),
@@ -230,10 +235,10 @@ fn stop(op: &[f64], vp: &[f64], dt: f64, sensor: (f64, f64), high: bool) -> Opti
 }
 
 /// Where O_P turned back: the extremes of a travel accumulator with a hysteresis of 0.1 % or
-/// three times the noise of O_P (a controller's noisy output turns back all the time; the
-/// valve sees its trend), each turn at the sample where the extreme was reached.
-fn turns(op: &[f64]) -> Vec<usize> {
-    let band = (3.0 * stats::noise_sd(op, Differences::Second)).max(0.1);
+/// three times the noise of O_P, `op_noise` (a controller's noisy output turns back all the
+/// time; the valve sees its trend), each turn at the sample where the extreme was reached.
+fn turns(op: &[f64], op_noise: f64) -> Vec<usize> {
+    let band = (3.0 * op_noise).max(0.1);
     let mut out = Vec::new();
     let (mut dir, mut extreme) = (0.0, 0);
     for k in 1..op.len() {

@@ -12,9 +12,10 @@
 //! - **A real share** of the held-out error above the noise floor is removed (10 %).
 //! - **BIC agrees**, counting independent samples (the residual's correlation length).
 //! - **It is plausible**: it agrees with what the recording shows directly ([`plausible`]: a
-//!   speed limit must be reached by the measured V_P, ...), and its fitted value is not pinned
-//!   at the edge of its box (then it stands in for something else rather than measuring
-//!   itself).
+//!   speed limit must be reached by the measured V_P, a band worth maintenance must be wider
+//!   than what the jitter of O_P shakes ([`dithered`]), ...), and its fitted value is not
+//!   pinned at the edge of its box (then it stands in for something else rather than
+//!   measuring itself).
 //! - **It is material**: its size in engineering units ([`super::size`]) is worth maintenance,
 //!   and it removes a real share of the whole held-out error.
 //!
@@ -153,6 +154,7 @@ impl Judge<'_> {
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
             && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
             && (effect != Effect::Stiction || !self.stop_departure(ya, &yb))
+            && !(dithered(effect, &size, self.facts) && size.worth >= tuning.materiality)
             && self.does_the_work(effect, &spec, own, &errors);
         let material = plausible
             && size.worth >= tuning.materiality
@@ -532,6 +534,26 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
     }
 }
 
+/// Widest band, in O_P's noise (standard deviations), that the jitter of O_P shakes: a band
+/// of b has its edges at ±b/2 around where the valve rests, and noise of σ carries O_P beyond
+/// ±σ/4 in four samples of five (2Φ(0.25) − 1 = 0.20 stay within).
+const DITHERED_BAND: f64 = 0.5;
+
+/// Whether `size`, a deadband or a friction band in %, is shaken by the jitter of O_P
+/// ([`Facts::op_noise_pct`], [`DITHERED_BAND`]): a controller's output that leaves the band
+/// in most samples never lets it hold the valve still, and a band so shaken only takes a
+/// little off the valve's answer to the jitter, as a lower gain or a lag would (the chamber of
+/// a healthy valve filters a noisy loop's output that way). The recording cannot tell such a
+/// band from the valve's dynamics, so one worth maintenance is not plausible (seed 44's
+/// healthy 225: a deadband of 0.35 % under O_P noise of 1.50 %). One below worth is a trace by
+/// its size whatever shakes it and is judged as any other (seed 40's 273: a friction band of
+/// 0.06 % under O_P noise of 0.45 %, put in the model before its slow stroke is judged).
+fn dithered(effect: Effect, size: &Size, facts: &Facts) -> bool {
+    matches!(effect, Effect::Deadband | Effect::Backlash)
+        && size.unit == "%"
+        && size.value <= DITHERED_BAND * facts.op_noise_pct
+}
+
 /// How many times the held-out error above noise an asymmetry leaves a calibration offset may
 /// leave for the two to be alike ([`offset_alike`]).
 const OFFSET_ALIKE: f64 = 1.25;
@@ -735,6 +757,7 @@ mod tests {
             vp_span_pct: (20.0, 80.0),
             speed_ratio: None,
             answer_delay_s: None,
+            op_noise_pct: 0.0,
         }
     }
 
@@ -864,6 +887,38 @@ mod tests {
             ..tails(|e| (5.0 * e).max(5.0))
         };
         assert!(!material(Effect::MinSpeed, &floor, &never_faster));
+    }
+
+    #[test]
+    fn a_band_the_jitter_of_op_leaves_four_samples_in_five_is_shaken() {
+        let band = |name, unit, value| Size {
+            name,
+            unit,
+            value,
+            low: value,
+            high: value,
+            worth: value / 0.3,
+            worth_low: value / 0.3,
+        };
+        let noisy = |op_noise_pct| Facts {
+            op_noise_pct,
+            ..facts(50.0, 50.0)
+        };
+        let deadband = band("deadband_pct", "%", 0.35);
+        // Seed 44's healthy 225 (O_P noise 1.50 %) and a closed loop's 0.45 %.
+        assert!(dithered(Effect::Deadband, &deadband, &noisy(1.5)));
+        assert!(!dithered(Effect::Deadband, &deadband, &noisy(0.45)));
+        let friction = band("friction_band_pct", "%", 0.35);
+        assert!(dithered(Effect::Backlash, &friction, &noisy(0.7)));
+        assert!(!dithered(Effect::Backlash, &friction, &noisy(0.69)));
+        // A crossing time is no band, and other effects are not bands.
+        let crossing = band("crossing_half_open_s", "s", 0.35);
+        assert!(!dithered(Effect::Backlash, &crossing, &noisy(1.5)));
+        assert!(!dithered(
+            Effect::Stiction,
+            &band("slip_pct", "%", 0.35),
+            &noisy(1.5)
+        ));
     }
 
     #[test]
