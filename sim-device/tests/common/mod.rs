@@ -79,12 +79,21 @@ pub(crate) fn run_to_end(args: &[&str]) -> (bool, String) {
     )
 }
 
-/// A TCP port that was free a moment ago.
+/// A TCP port that was free a moment ago, below the ephemeral ports the kernel hands out (from
+/// 32768 on Linux): a device killed and restarted on it cannot lose it meanwhile to another
+/// test's device listening on port 0, or to a client's own end of a connection. Each call
+/// starts its search one port further than the last, so two tests asking at once do not get
+/// the same one.
 pub(crate) fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .expect("a free port")
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    const LOW: u32 = 20_000;
+    const SPAN: u32 = 12_000;
+    let from = std::process::id().wrapping_add(NEXT.fetch_add(1, Ordering::Relaxed));
+    (0..SPAN)
+        .map(|k| (LOW + from.wrapping_add(k) % SPAN) as u16)
+        .find(|&port| std::net::TcpListener::bind(("127.0.0.1", port)).is_ok())
+        .expect("a free port below the ephemeral range")
 }
 
 /// The value at quantile `q` (0-1) of ascending `sorted` values (nearest rank); 0 when empty.
