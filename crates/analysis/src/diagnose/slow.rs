@@ -219,11 +219,12 @@ fn slow_both_ways(
 /// stroke is slow (small orifices, a low supply) keeps that proportion at every error a
 /// closed loop makes and is fitted as a slow valve without a speed limit, at a gain below
 /// [`SLOW_GAIN_SHARE`] of the good one (seed 42's digital valve 297: a stroke of 0.56 %/s in
-/// a level loop, fitted at 0.23 /s, with a dead time of 0.50 s named instead). Its stroke speed (the geometric mean of the two directions') is
-/// then at least the geometric mean of the fastest speeds V_P shows each way
-/// ([`Facts::open_speed`], noise taken out; the faster one where only one is measured) and at
-/// most the gain times [`FULL_DRIVE_ERROR_PCT`] (or the model's speed limit, if lower): the
-/// size is the geometric mean of those ends, which are its interval. Named when no speed
+/// a level loop, fitted at 0.23 /s, with a dead time of 0.50 s named instead). Its stroke
+/// speed (the geometric mean of the two directions') is then at least the geometric mean of
+/// the fastest speeds V_P shows each way ([`Facts::open_speed`], noise taken out; the faster
+/// one where only one is measured) and at most the gain times [`FULL_DRIVE_ERROR_PCT`] (or the
+/// model's speed limit, if lower): the size is the geometric mean of those ends, which are its
+/// interval. Named when no speed
 /// finding is, the fastest speed shown lies below that upper end (a valve seen moving faster
 /// is not slow through its gain), and `spec` beats the same model at the good gain by what a
 /// finding must ([`judged`]).
