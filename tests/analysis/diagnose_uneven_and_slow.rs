@@ -24,6 +24,13 @@
 //!   blocks barely better than the offset, and the valve's fastest moves each way are alike:
 //!   the offset is put in first and no unevenness is named. The two limits go in as a trace,
 //!   and the valve is named slow (0.50 %/s).
+//! - seed 45 valve 129 as logged (physical, closed loop, sensor noise 0.1 %, read per
+//!   mille): closing 43.5 times slower than opening. The median second difference of a
+//!   reading rounded to 0.1 % made its noise 0.12 %; taken out of V_P's fastest moves, that
+//!   left the valve closing at under half its closing limit, the unevenness was not plausible
+//!   and a calibration offset went in first. Measured by a trimmed mean square, the noise is
+//!   0.106 % (sqrt(0.1² + 0.1²/12) = 0.104), and the unevenness is named, its interval
+//!   holding the drawn ratio.
 //! - seed 22 valve 126 (physical, quiet closed loop, sensor noise 0.02 %): even at 0.38 %/s.
 //!   The valve never holds a speed long enough for one limit to be plausible; two limits
 //!   alike, uneven by too little to name, go in the model as a trace. Both are slower than a
@@ -138,4 +145,17 @@ fn a_dead_time_beside_a_slow_stroke_is_named_with_it() {
     assert_eq!(named(&d), [Effect::SlewRate, Effect::DeadTime]);
     assert!(holds(&case, &d, Effect::DeadTime), "{:?}", d.findings);
     assert!(holds(&case, &d, Effect::SlewRate), "{:?}", d.findings);
+}
+
+#[test]
+fn an_uneven_valve_logged_in_per_mille_is_uneven() {
+    let (case, d) = diagnosed_as(45, 129, true);
+    assert_eq!(case.labels, [Effect::Asymmetry]);
+    assert!(
+        (d.noise_floor_pct - 0.104).abs() < 0.005,
+        "{}",
+        d.noise_floor_pct
+    );
+    assert_eq!(named(&d), [Effect::Asymmetry], "{:?}", d.findings);
+    assert!(holds(&case, &d, Effect::Asymmetry), "{:?}", d.findings);
 }

@@ -84,6 +84,11 @@ pub enum DiagnoseError {
     Model(#[from] vb_core::model::ModelError),
 }
 
+/// Noise, in steps of the sensor lattice, below which V_P's median second difference is too
+/// coarse a measure of it (a multiple of the step: noise of 0.1 % read in steps of 0.1 % comes
+/// out 0.12 %), and a trimmed mean square is taken instead ([`stats::noise_sd_trimmed`]).
+const COARSE_MEDIAN_STEPS: f64 = 2.0;
+
 /// Runs the whole diagnosis of a recording, starting from the user's model `base` or, without
 /// one, a fitted FOPDT, with the default [`Tuning`]. `progress(done, total)` is called as the
 /// rounds finish.
@@ -125,9 +130,17 @@ pub fn diagnose_with(
         return Err(DiagnoseError::TooShort(n));
     }
     // On a sensor lattice, the reading errs by up to half a step: a quiet sensor's noise is
-    // at least the rounding's (q / sqrt 12), which the differences of V_P do not show.
+    // at least the rounding's (q / sqrt 12), which the differences of V_P do not show, and
+    // their median is a multiple of the step, too coarse where the noise is within
+    // [`COARSE_MEDIAN_STEPS`] steps (a trimmed mean square is not).
     let lattice = facts::lattice(rec.vp);
-    let sigma = locate::noise_floor(rec.vp).max(lattice / 12f64.sqrt());
+    let median = locate::noise_floor(rec.vp);
+    let noise = if lattice > 0.0 && median < COARSE_MEDIAN_STEPS * lattice {
+        stats::noise_sd_trimmed(rec.vp)
+    } else {
+        median
+    };
+    let sigma = noise.max(lattice / 12f64.sqrt());
     let facts = facts::measure(rec, sigma, lattice);
     let scorer = Scorer::new(rec);
     let (base_spec, base_label, td_max) = match base {
