@@ -59,19 +59,7 @@ pub fn noise_sd(x: &[f64], order: Differences) -> f64 {
     if x.len() < 5 {
         return 0.0;
     }
-    // Differences that touch a missing sample (NaN) are left out.
-    let mut d: Vec<f64> = match order {
-        Differences::First => x
-            .windows(2)
-            .map(|w| (w[1] - w[0]).abs())
-            .filter(|d| d.is_finite())
-            .collect(),
-        Differences::Second => x
-            .windows(3)
-            .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
-            .filter(|d| d.is_finite())
-            .collect(),
-    };
+    let mut d = abs_differences(x, order);
     if d.is_empty() {
         return 0.0;
     }
@@ -80,6 +68,21 @@ pub fn noise_sd(x: &[f64], order: Differences) -> f64 {
     match order {
         Differences::First => *med / (0.6745 * std::f64::consts::SQRT_2),
         Differences::Second => *med / 0.6745 / 6f64.sqrt(),
+    }
+}
+
+/// The absolute differences of `x` of the chosen order; those that touch a missing sample
+/// (NaN) are left out.
+fn abs_differences(x: &[f64], order: Differences) -> Vec<f64> {
+    match order {
+        Differences::First => (x.windows(2))
+            .map(|w| (w[1] - w[0]).abs())
+            .filter(|d| d.is_finite())
+            .collect(),
+        Differences::Second => (x.windows(3))
+            .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+            .filter(|d| d.is_finite())
+            .collect(),
     }
 }
 
@@ -98,16 +101,16 @@ const TRIMMED_MEAN_SQUARE: f64 = 0.368_6;
 /// often each multiple occurs and, trimmed, still ignores moves. On an unrounded reading the
 /// two agree. 0 for fewer than five samples.
 pub fn noise_sd_trimmed(x: &[f64]) -> f64 {
-    let mut d: Vec<f64> = (x.windows(3))
-        .map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2))
-        .filter(|d| d.is_finite())
-        .collect();
+    if x.len() < 5 {
+        return 0.0;
+    }
+    let mut d = abs_differences(x, Differences::Second);
     let keep = (d.len() as f64 * TRIM_KEEP) as usize;
-    if x.len() < 5 || keep == 0 {
+    if keep == 0 {
         return 0.0;
     }
     d.select_nth_unstable_by(keep - 1, f64::total_cmp);
-    let mean_square = d[..keep].iter().sum::<f64>() / keep as f64;
+    let mean_square = d[..keep].iter().map(|d| d * d).sum::<f64>() / keep as f64;
     (mean_square / (6.0 * TRIMMED_MEAN_SQUARE)).sqrt()
 }
 
