@@ -34,6 +34,8 @@ pub struct Hold {
     pub approach: f64,
     /// Largest jump of V_P inside the settled part of the hold, %.
     pub max_jump_pct: f64,
+    /// Mean V_P over the hold's last half second less that over the half second before, %.
+    pub drift_pct: f64,
 }
 
 /// Everything measured from the recording.
@@ -323,6 +325,8 @@ fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
                 vp_pct: mean,
                 approach: (op[a] - op[a - 1]).signum(),
                 max_jump_pct: max_jump,
+                drift_pct: finite_mean(&vp[b - settle / 2..b])
+                    - finite_mean(&vp[b - settle..b - settle / 2]),
             });
         }
         a = b;
