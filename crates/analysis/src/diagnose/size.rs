@@ -104,9 +104,9 @@ fn open_vs_closed_across(q: f64, (lo, hi): (f64, f64)) -> f64 {
 }
 
 /// `size` with its interval widened to at least its model spread ([`MODEL_SPREAD`]) either
-/// side of its value (a ratio's no lower than 1, a dead time's down to [`STEM_LAG_S`] below); the slowdown's to its spread across
-/// `visited` (V_P's openings, %; [`SLOWDOWN_SPREAD`]; from 1 up, open-ended, when V_P stayed at
-/// one opening). Its `worth_low` stays the held-out
+/// side of its value (a ratio's no lower than 1, a dead time's down to [`STEM_LAG_S`] below
+/// it); the slowdown's to its spread across `visited` (V_P's openings, %; [`SLOWDOWN_SPREAD`];
+/// from 1 up, open-ended, when V_P stayed at one opening). Its `worth_low` stays the held-out
 /// blocks' own: whether the recording shows an effect worth maintenance is judged on its
 /// evidence, the spread says how far the number may be from the valve's.
 pub(crate) fn with_model_spread(size: Size, visited: (f64, f64)) -> Size {
