@@ -19,6 +19,14 @@ use vb_core::model::ModelSpec;
 
 /// Slowest stroke speed a fit considers, %/s (a full stroke in over half an hour).
 const SLOWEST_PCT_PER_S: f64 = 0.05;
+/// Share of the speed V_P holds for a second or more each way ([`Facts::sustained_speeds`])
+/// below which no fit puts a stroke-speed limit that way: the valve was seen moving that fast,
+/// so its limit is no slower. The share leaves room for what a single limit averages over: a
+/// reading's gain, and a chamber that fills faster near closed than at half travel. A fit
+/// whose blocks never ask the valve for its speed one way leaves that limit where nothing
+/// holds it, even below what the held-out blocks show the valve doing (seed 48's physical
+/// valve 219, opening at 20 %/s in a held-out block, was given an opening limit of 8.0 %/s).
+const SUSTAINED_SHARE: f64 = 0.6;
 /// Shortest time constant a dead time's refit starts the positioner with, s
 /// ([`keeping_the_lag`]).
 const SHORTEST_START_LAG_S: f64 = 0.05;
@@ -104,6 +112,44 @@ pub(crate) fn jobs(
         }
     }
     jobs
+}
+
+/// A slew-rate limit slower than the model's `slew`, from the fastest speed measured (`speed`)
+/// or `slew` if slower; none when the valve held a speed above `slew` for a second.
+fn slower_limit(slew: f64, speed: f64, facts: &Facts) -> Vec<Vec<Free>> {
+    let held = facts.sustained_speeds.0.max(facts.sustained_speeds.1);
+    let limit = speed_limit(
+        Knob::Slew,
+        held,
+        slew.min(FASTEST_PCT_PER_S),
+        speed.min(slew),
+    );
+    match limit.floor < limit.def.hi {
+        true => vec![vec![limit]],
+        false => Vec::new(),
+    }
+}
+
+/// An opening and a closing limit, from the fastest move measured each way and from each side
+/// three times faster.
+fn uneven_limits(facts: &Facts) -> Vec<Vec<Free>> {
+    let (open, close) = (facts.open_speed.max(0.5), facts.close_speed.max(0.5));
+    let (held_open, held_close) = facts.sustained_speeds;
+    let limit = |knob, held, start| speed_limit(knob, held, FASTEST_PCT_PER_S, start);
+    [(open, close), (3.0 * open, close), (open, 3.0 * close)]
+        .map(|(o, c)| {
+            vec![
+                limit(Knob::Slew, held_open, o),
+                limit(Knob::ClosingSlew, held_close, c),
+            ]
+        })
+        .to_vec()
+}
+
+/// A stroke-speed limit `knob` searched up to `hi` from `start`, in a direction V_P was seen
+/// holding `held` %/s for a second or more: never given less than [`SUSTAINED_SHARE`] of that.
+fn speed_limit(knob: Knob, held: f64, hi: f64, start: f64) -> Free {
+    Free::new(knob, SLOWEST_PCT_PER_S, hi, start).at_least(SUSTAINED_SHARE * held)
 }
 
 /// The model's own knobs a candidate refits with those of its effect (`own`): the positioner
@@ -234,24 +280,13 @@ pub(crate) fn variants(
         Effect::SlewRate
             if slew >= NOMINAL_MIN_SLEW_PCT_PER_S && spec.effects.closing_slew_pct_per_s == 0.0 =>
         {
-            vec![vec![f(
-                Knob::Slew,
-                SLOWEST_PCT_PER_S,
-                slew.min(FASTEST_PCT_PER_S),
-                speed.min(slew),
-            )]]
+            slower_limit(slew, speed, facts)
         }
         // From the fastest move measured each way, and from each side three times faster: a
         // valve in a busy loop never moves far enough either way to show its limits, and how
         // much faster one side is shows only in where the valve rests (below O_P when it
         // closes faster, and by more the faster it closes).
-        Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => {
-            let (open, close) = (facts.open_speed.max(0.5), facts.close_speed.max(0.5));
-            let limit = |knob, start| f(knob, SLOWEST_PCT_PER_S, FASTEST_PCT_PER_S, start);
-            [(open, close), (3.0 * open, close), (open, 3.0 * close)]
-                .map(|(o, c)| vec![limit(Knob::Slew, o), limit(Knob::ClosingSlew, c)])
-                .to_vec()
-        }
+        Effect::Asymmetry if spec.effects.closing_slew_pct_per_s == 0.0 => uneven_limits(facts),
         // A positioner's creep floor can be as fast as a slow stroke: up to the slew limit.
         // Where the floor is slower than the valve closes its small errors it does nothing and
         // a fit feels no slope, so it also starts from a tenth and three tenths of the limit
@@ -454,6 +489,26 @@ mod tests {
             starts,
             [(open, close), (3.0 * open, close), (open, 3.0 * close)]
         );
+    }
+
+    #[test]
+    fn no_limit_is_searched_below_a_speed_the_valve_held_for_a_second() {
+        let (mut facts, mut spec) = following_steps();
+        composed::set(&mut spec, Knob::Slew, 100.0);
+        facts.sustained_speeds = (20.0, 12.0);
+        let lows = |effect, facts: &Facts| {
+            (variants(effect, &spec, facts, 1.0).iter())
+                .map(|v| v.iter().map(|f| (f.knob, f.floor)).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        };
+        // Opening held at 20 %/s and closing at 12 %/s: each side of an unevenness from 0.6
+        // of its own, one limit for both from 0.6 of the faster.
+        let uneven = vec![(Knob::Slew, 0.6 * 20.0), (Knob::ClosingSlew, 0.6 * 12.0)];
+        assert_eq!(lows(Effect::Asymmetry, &facts), vec![uneven; 3]);
+        assert_eq!(lows(Effect::SlewRate, &facts), [[(Knob::Slew, 0.6 * 20.0)]]);
+        // A valve held faster than the model's limit: no slower limit is worth a try.
+        facts.sustained_speeds = (200.0, 12.0);
+        assert!(lows(Effect::SlewRate, &facts).is_empty());
     }
 
     #[test]

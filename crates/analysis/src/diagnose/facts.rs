@@ -6,7 +6,7 @@
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
 use super::delay::answer_delay;
-use super::speeds::{limit_speeds, speeds, WINDOWS_S};
+use super::speeds::{limit_speeds, speeds, sustained_speeds, WINDOWS_S};
 use vb_core::metrics::stats::{self, median, quantile, Differences};
 use vb_core::metrics::steps::{self, StepOptions};
 use vb_core::recording::RecordingView;
@@ -52,6 +52,8 @@ pub struct Facts {
     /// small error with a short burst, has slowed by then to under half its peak, and a stem
     /// that sticks and jumps has landed.
     pub held_speeds: (f64, f64),
+    /// Fastest speeds V_P holds for 1 s or more each way ([`sustained_speeds`]), %/s.
+    pub sustained_speeds: (f64, f64),
     /// Spacing of the V_P lattice, % (0 when V_P is not on a lattice).
     pub lattice_pct: f64,
     /// Noise of the V_P reading (standard deviation), %.
@@ -89,12 +91,10 @@ pub struct Facts {
 /// `lattice_pct` (0 = none, see [`lattice`]).
 pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let (op, vp, dt) = (rec.op, rec.vp, rec.dt);
-    // The fastest speeds are the largest over every window length: those of the shortest
-    // windows or the held ones, measured once each.
+    // The fastest speeds: of the shortest windows or the held ones, measured once each.
     let held_speeds = speeds(vp, dt, sigma, &WINDOWS_S[1..]);
     let quick = speeds(vp, dt, sigma, &WINDOWS_S[..1]);
     let (open_speed, close_speed) = (quick.0.max(held_speeds.0), quick.1.max(held_speeds.1));
-    let slip_scale = SlipScale::new(dt, sigma, lattice_pct);
     let vp_span_pct = span(vp);
     let op_noise_pct = stats::noise_sd(op, Differences::Second);
     Facts {
@@ -107,9 +107,10 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         open_speed,
         close_speed,
         held_speeds,
+        sustained_speeds: sustained_speeds(vp, rec.restarts, dt, sigma),
         lattice_pct,
         noise_pct: sigma,
-        slip_scale,
+        slip_scale: SlipScale::new(dt, sigma, lattice_pct),
         stop_high_pct: stop(op, vp, dt, (sigma, lattice_pct), true),
         stop_low_pct: stop(op, vp, dt, (sigma, lattice_pct), false),
         approach: approach(op, vp, dt),

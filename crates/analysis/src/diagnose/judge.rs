@@ -443,7 +443,7 @@ fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
         let v = composed::get(spec, f.knob);
         // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
         // of 74-78 % is not pinned at 75 %.
-        let at_low = v <= f.def.lo + 0.02 * f.def.lo.abs().min(f.def.hi - f.def.lo);
+        let at_low = v <= f.floor + 0.02 * f.floor.abs().min(f.def.hi - f.floor);
         // A stroke-speed limit refitted with another effect (an opening-dependent slowdown)
         // may sit at the fastest a fit considers: the recording never asks for it. At its
         // slowest it is pinned: the valve is slow even closed, which is `slew_rate`'s to say.
@@ -766,6 +766,7 @@ mod tests {
             open_speed: open,
             close_speed: close,
             held_speeds: (open, close),
+            sustained_speeds: (open, close),
             lattice_pct: 0.0,
             noise_pct: 0.1,
             reversals: 0,

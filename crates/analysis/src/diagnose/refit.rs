@@ -43,6 +43,10 @@ pub(crate) struct Free {
     pub knob: Knob,
     pub def: ParamDef,
     pub init: f64,
+    /// The least value the knob is given wherever the search goes (the box's lower edge
+    /// unless [`Free::at_least`] raised it): below it the fit error is flat, and the search
+    /// over the box is the same as without it wherever it stays above.
+    pub floor: f64,
 }
 
 impl Free {
@@ -52,6 +56,7 @@ impl Free {
             knob,
             def: ParamDef::new(knob.label(), knob.unit(), lo, hi),
             init,
+            floor: lo,
         }
     }
 
@@ -60,9 +65,22 @@ impl Free {
         Free { init, ..self }
     }
 
-    /// Whether `other` frees the same knob in the same box.
+    /// The same knob and box, never given less than `floor` (nor started below it).
+    pub(super) fn at_least(self, floor: f64) -> Self {
+        let floor = floor.max(self.def.lo);
+        Free {
+            floor,
+            init: self.init.max(floor),
+            ..self
+        }
+    }
+
+    /// Whether `other` frees the same knob in the same box, with the same floor.
     pub(super) fn same_box(&self, other: &Free) -> bool {
-        self.knob == other.knob && self.def.lo == other.def.lo && self.def.hi == other.def.hi
+        self.knob == other.knob
+            && self.def.lo == other.def.lo
+            && self.def.hi == other.def.hi
+            && self.floor == other.floor
     }
 }
 
@@ -76,7 +94,7 @@ pub(crate) fn free_gain(spec: &ModelSpec, dt: f64) -> Free {
 fn build(spec: &ModelSpec, free: &[Free], u: &[f64]) -> ModelSpec {
     let mut s = spec.clone();
     for (f, &v) in free.iter().zip(u) {
-        composed::set(&mut s, f.knob, f.def.from_unit(v));
+        composed::set(&mut s, f.knob, f.def.from_unit(v).max(f.floor));
     }
     s
 }

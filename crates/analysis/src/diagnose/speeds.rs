@@ -55,6 +55,23 @@ pub(super) fn speeds(vp: &[f64], dt: f64, sigma: f64, windows_s: &[f64]) -> (f64
     best
 }
 
+/// The fastest opening and closing speeds V_P holds for 1 s or more ([`speeds`] over the
+/// windows of 1 and 3 s), %/s, within each stretch between `restarts` (a time gap's jump is
+/// no move): a speed limit is never slower, and the jump of a stem that sticks and slips adds
+/// little over a second.
+pub(super) fn sustained_speeds(vp: &[f64], restarts: &[usize], dt: f64, sigma: f64) -> (f64, f64) {
+    let cuts = (restarts.iter().copied()).filter(|&r| r > 0 && r < vp.len());
+    let ends: Vec<usize> = cuts.chain(std::iter::once(vp.len())).collect();
+    let mut from = 0;
+    let mut best = (0.0f64, 0.0f64);
+    for end in ends {
+        let (open, close) = speeds(&vp[from..end.max(from)], dt, sigma, &WINDOWS_S[2..]);
+        best = (best.0.max(open), best.1.max(close));
+        from = end.max(from);
+    }
+    best
+}
+
 /// The opening and closing speeds of V_P as its speed limits show in them, %/s, from its
 /// fastest moves each way (`fastest`) and the speeds it holds for 0.3 s or more (`held`), and
 /// whether they are the held ones: those when the fastest are alike ([`differ`]) and the held
@@ -121,6 +138,24 @@ mod tests {
             assert!((open - (2.0 - allowance(measured))).abs() < 1e-9, "{open}");
             assert_eq!(close, 0.0);
         }
+    }
+
+    #[test]
+    fn a_held_speed_is_measured_within_each_stretch_between_restarts() {
+        // V_P opens at 2 %/s for 30 s, then, after a time gap, at 1 %/s from 20 % lower: the
+        // gap's jump is no move, and the faster stretch gives the speed.
+        let (dt, sigma) = (0.01, 0.0);
+        let vp: Vec<f64> = (0..6000)
+            .map(|k| match k < 3000 {
+                true => 2.0 * k as f64 * dt,
+                false => 40.0 + (k - 3000) as f64 * dt,
+            })
+            .collect();
+        let (open, close) = sustained_speeds(&vp, &[3000], dt, sigma);
+        assert!((open - 2.0).abs() < 1e-9, "{open}");
+        assert_eq!(close, 0.0);
+        // Read as one stretch, the jump is a closing move of 20 % within a 3 s window.
+        assert!(sustained_speeds(&vp, &[], dt, sigma).1 > 1.0);
     }
 
     #[test]
