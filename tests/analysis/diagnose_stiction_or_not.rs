@@ -196,6 +196,23 @@ fn a_smooth_rival_without_the_valves_rests_cannot_veto_stick_slip() {
 }
 
 #[test]
+fn stick_slip_that_hunts_at_some_set_points_and_rests_at_others_is_named() {
+    // Seed 50's physical valve 45 (static band 0.97 %, Coulomb 0.10 %, a slow positioner at
+    // 3.3 /s): it hunts around a steady O_P until a slip lands inside its tolerance band. Stick-
+    // slip without a band hunts at every set-point (over 300 slips where the valve makes 87
+    // evident ones), so it was never named.
+    let (case, d) = diagnosed_as(50, 45, false);
+    assert_eq!(case.labels, [Effect::Stiction]);
+    assert_eq!(named(&d), [Effect::Stiction]);
+    assert!(
+        holds(&case, &d, Effect::Stiction),
+        "{:?}, drawn {:?}",
+        d.findings[0].size,
+        case.truth
+    );
+}
+
+#[test]
 fn stick_slip_the_noise_hides_one_slip_at_a_time_is_named_by_their_number() {
     let (case, d) = diagnosed(12, 270);
     assert_eq!(case.labels, [Effect::Stiction]);

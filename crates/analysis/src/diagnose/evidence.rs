@@ -63,8 +63,13 @@ pub struct Delays {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum StickSlipModel {
-    /// Inside the positioner loop: sticks when slow, breaks away this far beyond, overshoots.
-    Breakaway { breakaway_pct: f64, gain_per_s: f64 },
+    /// Inside the positioner loop: sticks when slow, breaks away this far beyond, overshoots;
+    /// the positioner rests once a slip lands inside its tolerance band (0 = none).
+    Breakaway {
+        breakaway_pct: f64,
+        gain_per_s: f64,
+        tolerance_band_pct: f64,
+    },
     /// Choudhury's on the valve's input.
     Input {
         stickband_pct: f64,
@@ -80,6 +85,7 @@ impl StickSlipModel {
             StickSlipModel::Breakaway {
                 breakaway_pct: g(Knob::Breakaway),
                 gain_per_s: g(Knob::Gain),
+                tolerance_band_pct: g(Knob::PositionerDeadband),
             }
         } else {
             StickSlipModel::Input {

@@ -34,7 +34,8 @@
 //! time at the current opening. On a valve that really crosses in a fixed time, kicks change
 //! nothing. A stroke speed the model's log did not determine (`stroke_speed_undetermined`) is
 //! not used: the compensator's models have no speed limit but the positioner's gain. Stick-slip
-//! (`stickband_pct`, `breakaway_pct`) is not compensated.
+//! (`stickband_pct`, `breakaway_pct`) is not compensated, nor a positioner tolerance band fitted
+//! with a breakaway (where the hunting ends).
 //!
 //! Guard rails: the set-point stays within the source's `op_min_pct..op_max_pct`; what
 //! compensation adds to the controller's O_P changes by at most `max_rate_pct_per_s`; and the
@@ -533,12 +534,19 @@ fn inverse_model(
 ) -> (ModelSpec, Identified) {
     let mut spec = composed::compose(model, dt);
     let e = spec.effects;
+    // A tolerance band fitted with stick-slip inside the loop is where its hunting ends: a
+    // step across it starts the next slip, so it goes uncompensated with the stick-slip.
+    let stepped_band = if e.breakaway_pct > 0.0 {
+        0.0
+    } else {
+        e.positioner_deadband_pct
+    };
     let mut identified = Identified {
         band_pct: 0.0,
         open_slowdown: e.open_slowdown,
         gain_per_s: 0.0,
-        deadband_pct: e.deadband_pct.max(e.positioner_deadband_pct),
-        deadband_in_positioner: e.positioner_deadband_pct > e.deadband_pct,
+        deadband_pct: e.deadband_pct.max(stepped_band),
+        deadband_in_positioner: stepped_band > e.deadband_pct,
         calibration_gain: e.calibration_gain,
         calibration_offset_pct: e.calibration_offset_pct,
         stroke_speed_known: !model.stroke_speed_undetermined,

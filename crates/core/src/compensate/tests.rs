@@ -142,6 +142,20 @@ fn a_deadband_trace_smaller_than_twice_the_smallest_move_is_left_alone() {
 }
 
 #[test]
+fn a_tolerance_band_fitted_with_a_breakaway_is_not_stepped_across() {
+    // Stick-slip inside the loop with a band of 0.2 %, where its hunting ends: no deadband
+    // step (it would start the next slip); the same band without the breakaway is stepped for.
+    let op = levels((50.0, 300), (49.5, 600), (50.2, 600));
+    let mut hunting = band_valve(1.5);
+    hunting.effects.positioner_deadband_pct = 0.2;
+    hunting.effects.breakaway_pct = 0.2;
+    let mut comp = compensator(&hunting);
+    let (sent, _) = run(&band_valve(1.5), Some(&mut comp), &op);
+    assert_eq!((sent[899], sent[1499]), (49.5, 50.2));
+    assert!(!comp.describe().contains("deadband"), "{}", comp.describe());
+}
+
+#[test]
 fn the_deadband_step_is_on_the_side_of_the_move_closing_as_well_as_opening() {
     // A band on the input (the form diagnose writes for a positioner deadband seen through a
     // log) and one in the positioner, each compensated with its own model; and a valve with a
