@@ -184,15 +184,20 @@ fn stick_slip_in_a_closed_loop_is_still_named_by_its_slips() {
 fn a_smooth_rival_without_the_valves_rests_cannot_veto_stick_slip() {
     for (seed, index) in [(13, 55), (11, 309)] {
         let (case, d) = diagnosed_as(seed, index, false);
-        assert_eq!(case.labels, [Effect::Stiction], "seed {seed} valve {index}");
-        assert_eq!(named(&d), [Effect::Stiction], "seed {seed} valve {index}");
-        assert!(
-            holds(&case, &d, Effect::Stiction),
-            "seed {seed} valve {index}: {:?}, drawn {:?}",
-            d.findings[0].size,
-            case.truth
-        );
+        stick_slip_alone_named_and_sized(&case, &d, &format!("seed {seed} valve {index}"));
     }
+}
+
+/// `case` holds stick-slip alone, and `d` names it alone with an interval holding its slip.
+fn stick_slip_alone_named_and_sized(case: &Case, d: &Diagnosis, which: &str) {
+    assert_eq!(case.labels, [Effect::Stiction], "{which}");
+    assert_eq!(named(d), [Effect::Stiction], "{which}");
+    assert!(
+        holds(case, d, Effect::Stiction),
+        "{which}: {:?}, drawn {:?}",
+        d.findings[0].size,
+        case.truth
+    );
 }
 
 #[test]
@@ -202,27 +207,13 @@ fn stick_slip_that_hunts_at_some_set_points_and_rests_at_others_is_named() {
     // slip without a band hunts at every set-point (over 300 slips where the valve makes 87
     // evident ones), so it was never named.
     let (case, d) = diagnosed_as(50, 45, false);
-    assert_eq!(case.labels, [Effect::Stiction]);
-    assert_eq!(named(&d), [Effect::Stiction]);
-    assert!(
-        holds(&case, &d, Effect::Stiction),
-        "{:?}, drawn {:?}",
-        d.findings[0].size,
-        case.truth
-    );
+    stick_slip_alone_named_and_sized(&case, &d, "seed 50 valve 45");
 }
 
 #[test]
 fn stick_slip_the_noise_hides_one_slip_at_a_time_is_named_by_their_number() {
     let (case, d) = diagnosed(12, 270);
-    assert_eq!(case.labels, [Effect::Stiction]);
-    assert_eq!(named(&d), [Effect::Stiction]);
-    assert!(
-        holds(&case, &d, Effect::Stiction),
-        "{:?}, drawn {:?}",
-        d.findings[0].size,
-        case.truth
-    );
+    stick_slip_alone_named_and_sized(&case, &d, "seed 12 valve 270 as logged");
 }
 
 #[test]

@@ -106,26 +106,26 @@ fn stick_slip_model(m: &StickSlipModel, capital: bool) -> String {
             breakaway_pct,
             gain_per_s,
             tolerance_band_pct,
-        } if capital => format!(
-            "Stick-slip inside the positioner loop (breakaway {breakaway_pct:.2} %, positioner gain {gain_per_s:.2} /s{})",
-            if tolerance_band_pct > 0.0 {
-                format!(", tolerance band {tolerance_band_pct:.2} %")
+        } => {
+            let band = |text: &str| {
+                if tolerance_band_pct > 0.0 {
+                    format!("{text} {tolerance_band_pct:.2} %")
+                } else {
+                    String::new()
+                }
+            };
+            if capital {
+                format!(
+                    "Stick-slip inside the positioner loop (breakaway {breakaway_pct:.2} %, positioner gain {gain_per_s:.2} /s{})",
+                    band(", tolerance band")
+                )
             } else {
-                String::new()
+                format!(
+                    "stick-slip inside the positioner loop: the valve sticks when it slows and breaks away {breakaway_pct:.2} % later, overshooting and hunting{}",
+                    band(" until a slip lands inside the positioner's tolerance band of")
+                )
             }
-        ),
-        StickSlipModel::Breakaway {
-            breakaway_pct,
-            tolerance_band_pct,
-            ..
-        } => format!(
-            "stick-slip inside the positioner loop: the valve sticks when it slows and breaks away {breakaway_pct:.2} % later, overshooting and hunting{}",
-            if tolerance_band_pct > 0.0 {
-                format!(" until a slip lands inside the positioner's tolerance band of {tolerance_band_pct:.2} %")
-            } else {
-                String::new()
-            }
-        ),
+        }
         StickSlipModel::Input {
             stickband_pct,
             jump_pct,
