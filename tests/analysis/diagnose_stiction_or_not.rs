@@ -211,6 +211,18 @@ fn stick_slip_that_hunts_at_some_set_points_and_rests_at_others_is_named() {
 }
 
 #[test]
+fn a_deadband_named_before_stick_slip_stays_as_named() {
+    // Seed 50's digital valve 258 (a tolerance band of 2.8 % and stick-slip of 0.71 %, on
+    // ramps): the deadband is named first, and stick-slip's fit puts no band of its own in the
+    // model beside it (it once added one of 1.13 %).
+    let (case, d) = diagnosed_as(50, 258, false);
+    assert_eq!(case.labels, [Effect::Stiction, Effect::Deadband]);
+    assert_eq!(named(&d), [Effect::Deadband, Effect::Stiction]);
+    let stick = &d.findings[1].params;
+    assert!(!stick.contains_key("positioner_deadband_pct"), "{stick:?}");
+}
+
+#[test]
 fn stick_slip_the_noise_hides_one_slip_at_a_time_is_named_by_their_number() {
     let (case, d) = diagnosed(12, 270);
     stick_slip_alone_named_and_sized(&case, &d, "seed 12 valve 270 as logged");

@@ -587,9 +587,10 @@ impl<'a> Search<'a> {
         if stuck {
             return;
         }
+        let band_named = self.findings.iter().any(|f| f.effect == Effect::Deadband);
         let c = match stickslip::fit(
             self.data.scorer,
-            &smooth,
+            (&smooth, band_named),
             self.data.facts,
             self.data.sigma,
             self.data.tuning,

@@ -398,18 +398,19 @@ fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
 
 /// The stick-slip variants to try on top of a model with positioner gain `gain`, seeded from
 /// the median measured slip `size`: stick-slip inside the positioner loop (the breakaway is
-/// about the slip; a slower positioner hunts with a longer period), alone or with a positioner
-/// tolerance band of half or all of the breakaway, and Choudhury's stick-slip on the input
-/// (the jump J is about the slip, S from J to 4 J; a fast positioner passes the jump on as a
-/// jump). Slip sizes from half to twice the median. Without a band the loop hunts at every
+/// about the slip; a slower positioner hunts with a longer period), alone or, unless a
+/// deadband is already named (`band_named`: it stays as named), with a positioner tolerance
+/// band of half or all of the breakaway, and Choudhury's stick-slip on the input (the jump J
+/// is about the slip, S from J to 4 J; a fast positioner passes the jump on as a jump). Slip sizes from half to twice the median. Without a band the loop hunts at every
 /// set-point it sticks short of; a valve whose positioner rests once a slip lands inside its
 /// band hunts at some set-points and not at others (seed 50's physical valve 45: 87 evident
 /// slips, where stick-slip without a band made over 300 at its own gain).
-fn grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
+fn grid(size: f64, gain: f64, band_named: bool) -> Vec<Vec<(Knob, f64)>> {
     let sizes = || (0..=8).map(move |i| size * 2f64.powf(i as f64 / 4.0 - 1.0));
     let breakaway = sizes().flat_map(|b| {
         [None, Some(0.5), Some(1.0)]
             .into_iter()
+            .filter(move |band| band.is_none() || !band_named)
             .flat_map(move |band| {
                 (-4..=3).map(move |j| {
                     let mut knobs = vec![(Knob::Breakaway, b), (Knob::Gain, gain * 2f64.powi(j))];
@@ -455,8 +456,8 @@ fn smooth_grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
     band.chain(deadband).collect()
 }
 
-/// Fits stick-slip to the measured slips and compares it with `current` on the held-out
-/// blocks; an error when the current model misses too few slips to fit anything, when they
+/// Fits stick-slip to the measured slips and compares it with `current` (whose deadband, if
+/// `band_named`, is a finding the fit leaves as it is) on the held-out blocks; an error when the current model misses too few slips to fit anything, when they
 /// are steps of the current model's deadband ([`band_steps`]: the error then says how large),
 /// or when a smooth valve ([`smooth_grid`]) makes slips at least as like the measured ones as
 /// the best stick-slip does: slips alone are then no evidence of stick-slip.
@@ -468,7 +469,7 @@ fn smooth_grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
 /// judge a limit cycle).
 pub(crate) fn fit(
     scorer: &Scorer,
-    current: &ModelSpec,
+    (current, band_named): (&ModelSpec, bool),
     facts: &Facts,
     sigma: f64,
     tuning: &Tuning,
@@ -531,7 +532,7 @@ pub(crate) fn fit(
             })
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
     };
-    let (spec, knobs, stick_distance, _) = closest(grid(size, gain)).ok_or(None)?;
+    let (spec, knobs, stick_distance, _) = closest(grid(size, gain, band_named)).ok_or(None)?;
     let (smooth_spec, _, smooth_distance, _) = closest(smooth_grid(size, gain)).ok_or(None)?;
     let (read_smooth, slips_smooth, smooth, _) = score(&scorer.simulate(&smooth_spec));
     let evident_smooth = rest.evident(&slips_smooth, &read_smooth);
@@ -677,6 +678,30 @@ mod tests {
             assert_eq!(steps(0.6), Some((0.6, 2.4)), "{knob:?}");
             assert_eq!(steps(0.7), None, "{knob:?}");
         }
+    }
+
+    #[test]
+    fn stick_slip_in_the_loop_is_tried_with_a_band_unless_a_deadband_is_named() {
+        let banded = |named| {
+            let g = grid(0.4, 4.0, named);
+            let with_band =
+                |k: &Vec<(Knob, f64)>| k.iter().any(|&(k, _)| k == Knob::PositionerDeadband);
+            let breakaways = g.iter().filter(|k| k[0].0 == Knob::Breakaway).count();
+            (breakaways, g.iter().filter(|k| with_band(k)).count())
+        };
+        // Nine breakaways from 0.2 to 0.8 %, eight gains each, alone and with a band of half
+        // and all of the breakaway; with a deadband named, alone only.
+        assert_eq!(banded(false), (9 * 8 * 3, 9 * 8 * 2));
+        assert_eq!(banded(true), (9 * 8, 0));
+        let halves = grid(0.4, 4.0, false)
+            .into_iter()
+            .filter(|k| k.len() == 3 && k[2].0 == Knob::PositionerDeadband)
+            .all(|k| {
+                [0.5, 1.0]
+                    .iter()
+                    .any(|s| (k[2].1 - s * k[0].1).abs() < 1e-12)
+            });
+        assert!(halves);
     }
 
     #[test]
