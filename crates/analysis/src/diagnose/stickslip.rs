@@ -401,10 +401,11 @@ fn count_and_size(slips: &[Slip], scorer: &Scorer, held: bool) -> (usize, f64) {
 /// about the slip; a slower positioner hunts with a longer period), alone or, unless a
 /// deadband is already named (`band_named`: it stays as named), with a positioner tolerance
 /// band of half or all of the breakaway, and Choudhury's stick-slip on the input (the jump J
-/// is about the slip, S from J to 4 J; a fast positioner passes the jump on as a jump). Slip sizes from half to twice the median. Without a band the loop hunts at every
-/// set-point it sticks short of; a valve whose positioner rests once a slip lands inside its
-/// band hunts at some set-points and not at others (seed 50's physical valve 45: 87 evident
-/// slips, where stick-slip without a band made over 300 at its own gain).
+/// is about the slip, S from J to 4 J; a fast positioner passes the jump on as a jump). Slip
+/// sizes from half to twice the median. Without a band the loop hunts at every set-point it
+/// sticks short of; a valve whose positioner rests once a slip lands inside its band hunts at
+/// some set-points and not at others (seed 50's physical valve 45: 87 evident slips, where
+/// stick-slip without a band made over 300 at its own gain).
 fn grid(size: f64, gain: f64, band_named: bool) -> Vec<Vec<(Knob, f64)>> {
     let sizes = || (0..=8).map(move |i| size * 2f64.powf(i as f64 / 4.0 - 1.0));
     let breakaway = sizes().flat_map(|b| {
@@ -457,10 +458,11 @@ fn smooth_grid(size: f64, gain: f64) -> Vec<Vec<(Knob, f64)>> {
 }
 
 /// Fits stick-slip to the measured slips and compares it with `current` (whose deadband, if
-/// `band_named`, is a finding the fit leaves as it is) on the held-out blocks; an error when the current model misses too few slips to fit anything, when they
-/// are steps of the current model's deadband ([`band_steps`]: the error then says how large),
-/// or when a smooth valve ([`smooth_grid`]) makes slips at least as like the measured ones as
-/// the best stick-slip does: slips alone are then no evidence of stick-slip.
+/// `band_named`, is a finding the fit leaves as it is) on the held-out blocks; an error when
+/// the current model misses too few slips to fit anything, when they are steps of the current
+/// model's deadband ([`band_steps`]: the error then says how large), or when a smooth valve
+/// ([`smooth_grid`]) makes slips at least as like the measured ones as the best stick-slip
+/// does: slips alone are then no evidence of stick-slip.
 ///
 /// Slips are counted against the current (smooth) model's V_P. Every simulation gets the same
 /// seeded sensor noise (and lattice) the recording has, so the slips that noise alone makes
