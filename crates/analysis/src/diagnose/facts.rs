@@ -6,6 +6,7 @@
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
 use super::delay::answer_delay;
+use super::settled::{holds, minutes, Hold};
 use super::speeds::{limit_speeds, speeds, sustained_speeds, WINDOWS_S};
 use vb_core::metrics::stats::{self, median, quantile, Differences};
 use vb_core::metrics::steps::{self, StepOptions};
@@ -24,25 +25,14 @@ pub struct StepResponse {
     pub delay_s: f64,
 }
 
-/// A hold of O_P long enough for the valve to settle.
-#[derive(Debug, Clone, Copy)]
-pub struct Hold {
-    pub op_pct: f64,
-    /// Mean V_P over the last second of the hold, %.
-    pub vp_pct: f64,
-    /// +1 when the valve came from below (opening), -1 from above.
-    pub approach: f64,
-    /// Largest jump of V_P inside the settled part of the hold, %.
-    pub max_jump_pct: f64,
-    /// Mean V_P over the hold's last half second less that over the half second before, %.
-    pub drift_pct: f64,
-}
-
 /// Everything measured from the recording.
 #[derive(Debug, Clone)]
 pub struct Facts {
     pub steps: Vec<StepResponse>,
     pub holds: Vec<Hold>,
+    /// Means of O_P and V_P over each whole minute of the recording (rows with a measured
+    /// V_P), %: a loop that never holds O_P still shows a reading error there instead.
+    pub minutes: Vec<(f64, f64)>,
     /// Fastest opening and closing speed of V_P, noise taken out (99.9th percentiles over
     /// windows of 0.1 to 3 s), %/s.
     pub open_speed: f64,
@@ -104,6 +94,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         dt,
         steps: step_responses(rec),
         holds: holds(op, vp, dt),
+        minutes: minutes(op, vp, dt),
         open_speed,
         close_speed,
         held_speeds,
@@ -296,43 +287,6 @@ fn step_responses(rec: &RecordingView) -> Vec<StepResponse> {
             })
         })
         .collect()
-}
-
-/// Stretches of constant O_P of at least 3 s, with the settled V_P of their last second (the
-/// rows of it with a measured V_P; a hold without any is left out).
-fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
-    let n = op.len();
-    let min_hold = (3.0 / dt) as usize;
-    let settle = (1.0 / dt) as usize;
-    let mut holds = Vec::new();
-    let mut a = 0;
-    for b in 1..=n {
-        if b < n && (op[b] - op[b - 1]).abs() <= 1e-9 {
-            continue;
-        }
-        let mean = if b - a >= min_hold && a > 0 {
-            finite_mean(&vp[b - settle..b])
-        } else {
-            f64::NAN
-        };
-        if mean.is_finite() {
-            let max_jump = vp[a + settle..b]
-                .windows(2)
-                .map(|w| (w[1] - w[0]).abs())
-                .filter(|d| d.is_finite())
-                .fold(0.0, f64::max);
-            holds.push(Hold {
-                op_pct: op[a],
-                vp_pct: mean,
-                approach: (op[a] - op[a - 1]).signum(),
-                max_jump_pct: max_jump,
-                drift_pct: finite_mean(&vp[b - settle / 2..b])
-                    - finite_mean(&vp[b - settle..b - settle / 2]),
-            });
-        }
-        a = b;
-    }
-    holds
 }
 
 /// The 5th and 95th percentiles of the measured values of `x`, %.
@@ -632,12 +586,6 @@ impl Sums {
             n => (self.sum[b] - self.sum[a]) / n as f64,
         }
     }
-}
-
-/// Mean of the measured values of `x` (NaN when none was).
-fn finite_mean(x: &[f64]) -> f64 {
-    let s = Sums::new(x);
-    s.mean(0, x.len())
 }
 
 /// Mean of `x[k..k + h]` minus mean of `x[k - h..k]` (measured values), from the sums `s` of

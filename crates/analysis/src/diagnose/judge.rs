@@ -25,9 +25,10 @@
 //! Not here: what is refitted ([`super::candidates`]) or what is said about it
 //! ([`super::evidence`]).
 
-use super::facts::{self, Facts, Hold};
+use super::facts::{self, Facts};
 use super::refit::Free;
 use super::scorer::{Errors, Scorer};
+use super::settled;
 use super::size::{self, Size};
 use super::speeds::differ;
 use super::tuning::Tuning;
@@ -524,36 +525,22 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
         }
         // Stick-slip is sized by its slip (a stickband without a jump is a deadband on the
         // input, and weighs nothing as stick-slip).
+        Effect::Deadband => {
+            let band = g(Knob::Deadband).max(g(Knob::PositionerDeadband));
+            settled::rests_short(band, &facts.holds, facts.noise_pct)
+        }
         Effect::Stiction
         | Effect::DeadTime
         | Effect::StateDependentDelay
-        | Effect::Deadband
         | Effect::Saturation
         | Effect::Quantization => true,
-        Effect::Calibration => explains_rests(g(Knob::CalGain), g(Knob::CalOffset), facts),
+        Effect::Calibration => settled::explains_rests(
+            (g(Knob::CalGain), g(Knob::CalOffset)),
+            &facts.holds,
+            &facts.minutes,
+            facts.noise_pct,
+        ),
     }
-}
-
-/// Share of the mean square offset of V_P from O_P at the valve's rests a reading error must
-/// leave at most ([`explains_rests`]). An offset c beside a band that stops the valve d short
-/// of its target from either side leaves d² of c² + d²: under this share for any c beyond d/2.
-const RESTS_LEFT: f64 = 0.8;
-
-/// Whether a reading error V_P = `gain` O_P + `offset` explains where the valve comes to rest:
-/// at the holds over whose last second V_P has settled (its last half second within 0.8 noise
-/// standard deviations of the half second before, four standard deviations of that difference,
-/// or within 0.1 %), it must leave at most [`RESTS_LEFT`] of their mean square offset from O_P.
-/// A reading error shows wherever the valve rests; one the fit puts in to bend the shape of
-/// slow moves does not (seed 47's digital 300, a slow stroke: settled rests within 0.05 % of
-/// O_P where the fitted reading error put them 0.3 % off; it left 2.2 times their offset).
-/// Without three settled holds the recording cannot tell, and the reading error stays.
-fn explains_rests(gain: f64, offset: f64, facts: &Facts) -> bool {
-    let still = (0.8 * facts.noise_pct).max(0.1);
-    let settled = || (facts.holds.iter()).filter(move |h| h.drift_pct.abs() <= still);
-    let square = |f: &dyn Fn(&Hold) -> f64| settled().map(|h| f(h).powi(2)).sum::<f64>();
-    let before = square(&|h| h.vp_pct - h.op_pct);
-    let after = square(&|h| h.vp_pct - (gain * h.op_pct + offset));
-    settled().count() < 3 || after <= RESTS_LEFT * before
 }
 
 /// Widest band, in O_P's noise (standard deviations), that the jitter of O_P shakes: a band
@@ -763,6 +750,7 @@ mod tests {
         Facts {
             steps: vec![],
             holds: vec![],
+            minutes: vec![],
             open_speed: open,
             close_speed: close,
             held_speeds: (open, close),
@@ -782,43 +770,6 @@ mod tests {
             answer_delay_s: None,
             op_noise_pct: 0.0,
         }
-    }
-
-    /// A hold at `op_pct` whose V_P settles `off` away from it after coming from `approach`
-    /// (+1 from below), having moved `drift` % over its last second's two halves.
-    fn hold(op_pct: f64, off: f64, approach: f64, drift: f64) -> Hold {
-        Hold {
-            op_pct,
-            vp_pct: op_pct + off,
-            approach,
-            max_jump_pct: 0.0,
-            drift_pct: drift,
-        }
-    }
-
-    #[test]
-    fn a_reading_error_must_explain_where_the_valve_rests() {
-        let mut f = facts(50.0, 50.0);
-        // Read 0.5 % high, a band stopping the valve 0.2 % short from either side: the offset
-        // leaves 0.04 of the 0.29 %² mean square (and 1.04 %² the wrong way).
-        f.holds = (0..8)
-            .map(|i| {
-                let up = if i % 2 == 0 { 1.0 } else { -1.0 };
-                hold(20.0 + 8.0 * i as f64, 0.5 - 0.2 * up, up, 0.0)
-            })
-            .collect();
-        assert!(explains_rests(1.0, 0.5, &f));
-        assert!(!explains_rests(1.0, -0.5, &f));
-        // Seed 47's digital 300's shape: rests within 0.05 % of O_P, a fitted line
-        // 0.986 O_P + 0.63 % that puts them 0.2-0.35 % off at 20-30 %.
-        f.holds = (0..8)
-            .map(|i| hold(20.0 + 1.5 * i as f64, 0.05 * (i % 2) as f64, 1.0, 0.0))
-            .collect();
-        assert!(!explains_rests(0.986, 0.63, &f));
-        // The same rests with V_P still creeping in (0.3 % over half a second, noise 0.1 %):
-        // none has settled, and the recording cannot tell.
-        (f.holds.iter_mut()).for_each(|h| h.drift_pct = 0.3);
-        assert!(explains_rests(0.986, 0.63, &f));
     }
 
     #[test]

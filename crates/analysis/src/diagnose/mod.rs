@@ -43,6 +43,7 @@ mod rests;
 mod rounds;
 mod scorer;
 mod sensor;
+mod settled;
 pub mod size;
 mod slow;
 mod speeds;
