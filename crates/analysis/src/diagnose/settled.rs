@@ -134,8 +134,8 @@ const SHORT_OF_BAND: f64 = 0.25;
 
 /// Whether a deadband of `band` % shows where the valve comes to rest: a positioner that stops
 /// acting once its error is inside the band leaves the valve short of its target on the side
-/// it came from, by up to half the band (on ten deadband valves of the bench's seeds 52 and
-/// 53, a median shortfall of 0.44-0.56 of the fitted band). The median shortfall of the
+/// it came from, by up to half the band (on twelve deadband valves of the bench's seeds 52
+/// and 53, a shortfall of 0.44-0.56 of the fitted band). The median shortfall of the
 /// settled `holds` (under a reading noise of `noise_pct`) approached from below and that of
 /// those approached from above, averaged (a reading offset moves the one up and the other
 /// down), must be at least [`SHORT_OF_BAND`] of the band. A band the fit puts in to shape a
