@@ -526,8 +526,7 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
         // Stick-slip is sized by its slip (a stickband without a jump is a deadband on the
         // input, and weighs nothing as stick-slip).
         Effect::Deadband => {
-            let band = g(Knob::Deadband).max(g(Knob::PositionerDeadband));
-            settled::rests_short(band, &facts.holds, facts.noise_pct)
+            settled::rests_short(size::deadband(spec), &facts.holds, facts.noise_pct)
         }
         Effect::Stiction
         | Effect::DeadTime
