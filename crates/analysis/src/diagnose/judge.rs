@@ -450,10 +450,16 @@ fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
         // slowest it is pinned: the valve is slow even closed, which is `slew_rate`'s to say.
         let subject = matches!(effect, Effect::SlewRate | Effect::Asymmetry);
         let at_high = f.def.to_unit(v) > 0.98 && (f.knob != Knob::Slew || subject);
+        // An uneven valve's faster limit is one its moves may never ask for (ramps slower
+        // than it): the recording bounds it from below only, at the fastest a fit considers
+        // or at the least V_P showed that way ([`size::open_ended`] leaves its ratio without
+        // an upper end then). The slower limit is the one that measures the valve.
+        let unasked = effect == Effect::Asymmetry && f.knob == size::speed_knobs(spec).1;
         !matches!(
             f.knob,
             Knob::Gain | Knob::DeadTime | Knob::JumpFraction | Knob::Windup
-        ) && (at_low || at_high)
+        ) && !unasked
+            && (at_low || at_high)
     })
 }
 
@@ -735,12 +741,26 @@ mod tests {
         assert!(pinned(&band, &at(Knob::Deadband, 0.0505), Effect::Deadband));
         assert!(!pinned(&band, &at(Knob::Deadband, 0.06), Effect::Deadband));
         // The stroke-speed limit refitted with a slowdown: free to sit at the fastest, not at
-        // the slowest; an asymmetry's own limit is pinned at either end.
+        // the slowest; a slew limit is pinned at either end.
         let limit = [Free::new(Knob::Slew, 40.0, 1000.0, 100.0)];
         let slowdown = Effect::StateDependentDelay;
         assert!(!pinned(&limit, &at(Knob::Slew, 995.0), slowdown));
         assert!(pinned(&limit, &at(Knob::Slew, 40.2), slowdown));
-        assert!(pinned(&limit, &at(Knob::Slew, 995.0), Effect::Asymmetry));
+        assert!(pinned(&limit, &at(Knob::Slew, 995.0), Effect::SlewRate));
+        // An uneven valve opening at 5 %/s: its faster, closing limit may sit at the fastest
+        // or at its floor (ramps never asked for it); its slower one is pinned at its floor.
+        let uneven = [
+            Free::new(Knob::Slew, 0.5, 1000.0, 10.0).at_least(5.0),
+            Free::new(Knob::ClosingSlew, 0.5, 1000.0, 30.0).at_least(24.0),
+        ];
+        let limits = |open, close| {
+            let mut s = at(Knob::Slew, open);
+            composed::set(&mut s, Knob::ClosingSlew, close);
+            s
+        };
+        assert!(!pinned(&uneven, &limits(7.0, 995.0), Effect::Asymmetry));
+        assert!(!pinned(&uneven, &limits(7.0, 24.1), Effect::Asymmetry));
+        assert!(pinned(&uneven, &limits(5.01, 60.0), Effect::Asymmetry));
     }
 
     /// The facts of a recording whose V_P opens at `open` and closes at `close` %/s at most,

@@ -31,7 +31,7 @@ use super::scorer::Scorer;
 use super::tuning::Tuning;
 use vb_core::metrics::stats;
 pub use vb_core::model::composed::Size;
-use vb_core::model::composed::{self, Effect, Knob};
+use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use vb_core::model::{slower_at, ModelSpec};
 
 /// How far the composed model's reading of each size strays from the valve's own value, as
@@ -184,15 +184,31 @@ pub(crate) fn open_ended(effect: Effect, size: Size, spec: &ModelSpec, scorer: &
             sum(&tried) <= sum(&fitted)
         })
         .count();
-    if no_worse as f64 >= 0.05 * RESAMPLES as f64 {
-        Size {
+    if (no_worse as f64) < 0.05 * RESAMPLES as f64 {
+        return size;
+    }
+    // A faster limit at the fastest a fit considers is one the recording never found (ramps
+    // slower than it): the fitted ratio is then the box's, and what the recording says is
+    // the least ratio it bounds, the lower end.
+    if composed::get(spec, knob) < UNFOUND_SHARE * FASTEST_PCT_PER_S || size.value <= size.low {
+        return Size {
             high: f64::INFINITY,
             ..size
-        }
-    } else {
-        size
+        };
+    }
+    let worth = size.worth * (size.low - 1.0) / (size.value - 1.0).max(1e-9);
+    Size {
+        value: size.low,
+        worth,
+        worth_low: size.worth_low.min(worth),
+        high: f64::INFINITY,
+        ..size
     }
 }
+
+/// Share of [`FASTEST_PCT_PER_S`] above which a speed ratio's faster limit is one the fit
+/// never found ([`open_ended`]).
+const UNFOUND_SHARE: f64 = 0.9;
 
 /// Grid points of a profile on each side of the fitted value.
 const PROFILE_SIDE: i32 = 6;
@@ -826,6 +842,33 @@ mod tests {
         let large = sized(1500, &[30.0, 70.0, 40.0, 65.0, 35.0]);
         assert!(large.high.is_finite(), "{large:?}");
         assert!(large.low <= 10.0 && 10.0 <= large.high, "{large:?}");
+    }
+
+    #[test]
+    fn a_speed_ratio_whose_faster_limit_was_never_found_is_the_least_the_recording_bounds() {
+        // A valve closing at 4 %/s whose opening limit sits at the fastest a fit considers:
+        // small steps never ask for it, and the box's ratio of 250 is no size.
+        let dt = 0.01;
+        let mut truth = composed::compose(&bundled(ModelKind::Fopdt), dt);
+        composed::set(&mut truth, Knob::Gain, 5.0);
+        composed::set(&mut truth, Knob::Slew, FASTEST_PCT_PER_S);
+        composed::set(&mut truth, Knob::ClosingSlew, 4.0);
+        let op = steps(40_000, 400, &LEVELS);
+        let rec = read(&truth, &op, dt);
+        let scorer = Scorer::new(&rec.view());
+        let facts = super::super::facts::measure(&rec.view(), 0.05, 0.0);
+        let tuning = Tuning::default();
+        let fitted = size(Effect::Asymmetry, &truth, &facts, &op, &tuning);
+        assert_eq!(fitted.value, 250.0);
+        let sized = (&facts, op.as_slice(), &tuning);
+        let s = interval(fitted, Effect::Asymmetry, &truth, &scorer, sized);
+        let s = open_ended(Effect::Asymmetry, s, &truth, &scorer);
+        assert!(s.high.is_infinite(), "{s:?}");
+        assert!(
+            s.value == s.low && s.value < 250.0 && s.value >= 1.0,
+            "{s:?}"
+        );
+        assert!(s.worth < fitted.worth && s.worth_low <= s.worth, "{s:?}");
     }
 
     #[test]
