@@ -162,7 +162,9 @@ const FASTER_TRIED: f64 = 4.0;
 /// held-out blocks no worse in at least 5 % of their resamples (the other end of a 90 %
 /// interval). A closed loop or small steps on a valve that opens fast and closes slowly never
 /// ask it to open at its full speed, so they say how much slower it closes than it was seen to
-/// open, not than it can. Other sizes as they are.
+/// open, not than it can; where the fit put that limit at [`UNFOUND_SHARE`] of the fastest it
+/// considers or above, the ratio is its lower end (its worth scaled alike). Other sizes as
+/// they are.
 pub(crate) fn open_ended(effect: Effect, size: Size, spec: &ModelSpec, scorer: &Scorer) -> Size {
     if effect != Effect::Asymmetry || !size.high.is_finite() {
         return size;
