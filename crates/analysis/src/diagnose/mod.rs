@@ -202,7 +202,7 @@ fn conclude(data: Data, search: Search, mut baseline: Baseline, sim_before: Vec<
         if matches!(f.measure, Measure::HeldoutSse { .. }) {
             let now = size::size(f.effect, &current, data.facts, rec.op, data.tuning);
             let now = size::interval(now, f.effect, &current, scorer, sized);
-            f.size = size::open_ended(f.effect, now, &current, scorer);
+            f.size = size::open_ended(f.effect, now, &current, scorer, data.tuning);
             f.params = diagnosis::params(&current, f.knobs.iter().copied());
             f.facts.in_final(f.effect, &current, data.facts, data.sigma);
         }

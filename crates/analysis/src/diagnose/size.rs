@@ -163,9 +163,15 @@ const FASTER_TRIED: f64 = 4.0;
 /// interval). A closed loop or small steps on a valve that opens fast and closes slowly never
 /// ask it to open at its full speed, so they say how much slower it closes than it was seen to
 /// open, not than it can; where the fit put that limit at [`UNFOUND_SHARE`] of the fastest it
-/// considers or above, the ratio is its lower end (its worth scaled alike). Other sizes as
-/// they are.
-pub(crate) fn open_ended(effect: Effect, size: Size, spec: &ModelSpec, scorer: &Scorer) -> Size {
+/// considers or above, the ratio is its lower end (and worth what that end is). Other sizes
+/// as they are.
+pub(crate) fn open_ended(
+    effect: Effect,
+    size: Size,
+    spec: &ModelSpec,
+    scorer: &Scorer,
+    tuning: &Tuning,
+) -> Size {
     if effect != Effect::Asymmetry || !size.high.is_finite() {
         return size;
     }
@@ -198,7 +204,7 @@ pub(crate) fn open_ended(effect: Effect, size: Size, spec: &ModelSpec, scorer: &
             ..size
         };
     }
-    let worth = size.worth * (size.low - 1.0) / (size.value - 1.0).max(1e-9);
+    let worth = ratio_worth(size.low, tuning);
     Size {
         value: size.low,
         worth,
@@ -206,6 +212,11 @@ pub(crate) fn open_ended(effect: Effect, size: Size, spec: &ModelSpec, scorer: &
         high: f64::INFINITY,
         ..size
     }
+}
+
+/// What a speed ratio of `value` is worth, in units of what is worth maintenance.
+fn ratio_worth(value: f64, tuning: &Tuning) -> f64 {
+    (value - 1.0) / tuning.worth.speed_ratio_excess
 }
 
 /// Share of [`FASTEST_PCT_PER_S`] above which a speed ratio's faster limit is one the fit
@@ -262,7 +273,7 @@ pub(crate) fn size(
             let faster = faster_limit(spec) / composed::half_open(spec);
             w.stroke_speed_pct_per_s / value.max(faster).max(1e-9)
         }
-        Effect::Asymmetry => (value - 1.0) / w.speed_ratio_excess,
+        Effect::Asymmetry => ratio_worth(value, tuning),
         Effect::MinSpeed => value / g(Knob::Gain).max(1e-9) / w.min_speed_band_pct,
         Effect::Stiction => value / w.slip_pct.max(1.5 * facts.noise_pct),
         Effect::Deadband => value / w.deadband_pct,
@@ -830,7 +841,7 @@ mod tests {
                 (&facts, &op, &tuning),
             );
             with_model_spread(
-                open_ended(Effect::Asymmetry, s, &truth, &scorer),
+                open_ended(Effect::Asymmetry, s, &truth, &scorer, &tuning),
                 facts.vp_span_pct,
             )
         };
@@ -864,7 +875,7 @@ mod tests {
         assert_eq!(fitted.value, 250.0);
         let sized = (&facts, op.as_slice(), &tuning);
         let s = interval(fitted, Effect::Asymmetry, &truth, &scorer, sized);
-        let s = open_ended(Effect::Asymmetry, s, &truth, &scorer);
+        let s = open_ended(Effect::Asymmetry, s, &truth, &scorer, &tuning);
         assert!(s.high.is_infinite(), "{s:?}");
         assert!(
             s.value == s.low && s.value < 250.0 && s.value >= 1.0,

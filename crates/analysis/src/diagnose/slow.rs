@@ -171,7 +171,7 @@ fn slow_both_ways(
         None => {
             let t = traces.iter().find(|t| t.effect == Effect::Asymmetry)?;
             (
-                size::open_ended(Effect::Asymmetry, t.size, spec, scorer),
+                size::open_ended(Effect::Asymmetry, t.size, spec, scorer, tuning),
                 true,
             )
         }
