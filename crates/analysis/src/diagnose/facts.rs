@@ -69,9 +69,6 @@ pub struct Facts {
     pub op_span_pct: (f64, f64),
     /// The openings V_P visits: its 5th and 95th percentiles, %.
     pub vp_span_pct: (f64, f64),
-    /// How many times faster V_P answers O_P low in [`Facts::vp_span_pct`] than high in it
-    /// (see [`speed_ratio`]), when the recording shows it.
-    pub speed_ratio: Option<f64>,
     /// The lag at which V_P's increments follow O_P's most closely, s, when that stands out of
     /// the noise (see [`answer_delay`]): the transport delay, also where O_P never steps.
     pub answer_delay_s: Option<f64>,
@@ -85,7 +82,6 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     let held_speeds = speeds(vp, dt, sigma, &WINDOWS_S[1..]);
     let quick = speeds(vp, dt, sigma, &WINDOWS_S[..1]);
     let (open_speed, close_speed) = (quick.0.max(held_speeds.0), quick.1.max(held_speeds.1));
-    let vp_span_pct = span(vp);
     let op_noise_pct = stats::noise_sd(op, Differences::Second);
     Facts {
         op_noise_pct,
@@ -106,8 +102,7 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         stop_low_pct: stop(op, vp, dt, (sigma, lattice_pct), false),
         approach: approach(op, vp, dt),
         op_span_pct: span(op),
-        vp_span_pct,
-        speed_ratio: speed_ratio(op, vp, dt, sigma, vp_span_pct),
+        vp_span_pct: span(vp),
         answer_delay_s: answer_delay(rec),
     }
 }
@@ -295,42 +290,90 @@ fn span(x: &[f64]) -> (f64, f64) {
     (quantile(&mut seen, 0.05), quantile(&mut seen, 0.95))
 }
 
-/// Fewest windows in each third of the openings for [`speed_ratio`] to say anything.
+/// Fewest windows in each third of the openings for [`speed_ratio`] to say anything, counted
+/// over the bins of distance both thirds fill.
 const MIN_WINDOWS_PER_THIRD: usize = 50;
+/// Fewest windows of each third a bin of distance needs to count in [`speed_ratio`].
+const MIN_WINDOWS_PER_BIN: usize = 10;
+/// How many times wider each bin of distance from O_P is than the one before (see
+/// [`speed_ratio`]).
+const BIN_GROWTH: f64 = 1.5;
+/// Half the span, s, of the local mean of V_P a window of [`speed_ratio`] starts and ends on.
+const LOCAL_MEAN_HALF_S: f64 = 0.02;
 
 /// How many times faster V_P answers O_P in the lowest third of `span` (openings, %) than in
-/// its highest third: in each third, the median over 0.1 s windows (one starting at every
-/// sample) that start with V_P at least 1 % (and five noise sigmas) away from O_P of the speed
-/// toward O_P over that distance (a proportional positioner's gain, or its flow limit over the
-/// distance), the window's starting position deciding its third. `None` when either third
-/// has fewer than [`MIN_WINDOWS_PER_THIRD`] such windows. A chamber that fills more slowly
-/// when open shows here as a ratio above 1; how far above depends on the excitation too (how
-/// far from O_P V_P starts in each third), so it is read against the same statistic on a
-/// simulation driven by the same O_P.
-pub fn speed_ratio(op: &[f64], vp: &[f64], dt: f64, sigma: f64, span: (f64, f64)) -> Option<f64> {
+/// its highest third.
+///
+/// A window of 0.1 s starts at every sample where V_P is at least 1 % (and five noise sigmas)
+/// away from where O_P asked `delay_s` earlier (the transport delay: a window inside it says
+/// nothing of the valve's speed); its rate is the speed toward O_P over that distance (a
+/// proportional positioner's gain, or its flow limit over the distance). V_P is read at both
+/// ends as its mean over 0.04 s: windows chosen for starting far from O_P on one noisy
+/// sample would otherwise be those where noise pushed V_P away, and the next 0.1 s regresses
+/// toward O_P (an inflated rate, most where small distances are most frequent). The
+/// window's starting position decides its third. The ratio compares like with like: the
+/// distances are cut into bins each [`BIN_GROWTH`] times wider than the one before, and the
+/// ratio of the thirds' median rates in each bin both fill is averaged (geometrically,
+/// weighted by the smaller count), since a flow-limited valve answers a large distance at a
+/// lower rate than a small one, and a recording whose low third saw larger steps than its
+/// high third would otherwise read as a slowdown's opposite. `None` when the bins both thirds
+/// fill hold fewer than [`MIN_WINDOWS_PER_THIRD`] windows. A chamber that fills more slowly
+/// when open shows here as a ratio above 1; how far above depends on the excitation too, so
+/// it is read against the same statistic on a simulation driven by the same O_P.
+pub fn speed_ratio(
+    op: &[f64],
+    vp: &[f64],
+    dt: f64,
+    (sigma, delay_s): (f64, f64),
+    span: (f64, f64),
+) -> Option<f64> {
     let h = ((0.1 / dt).round() as usize).max(1);
-    let w = h as f64 * dt;
+    let (m, lag) = (
+        (LOCAL_MEAN_HALF_S / dt).round() as usize,
+        (delay_s / dt).round() as usize,
+    );
     let least = (5.0 * sigma).max(1.0);
     let third = (span.1 - span.0) / 3.0;
-    let (mut low, mut high): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
-    for k in h..vp.len() {
-        let (a, b) = (vp[k - h], vp[k]);
-        let e = op[k - h] - a;
+    let mean = |k: usize| vp[k - m..=k + m].iter().sum::<f64>() / (2 * m + 1) as f64;
+    let (mut low, mut high) = (Vec::<(f64, f64)>::new(), Vec::<(f64, f64)>::new());
+    for k in m.max(lag)..vp.len().saturating_sub(m + h) {
+        let (a, b) = (mean(k), mean(k + h));
+        let e = op[k - lag] - a;
         if !(a.is_finite() && b.is_finite()) || e.abs() < least {
             continue;
         }
-        let rate = (b - a) * e.signum() / w / e.abs();
+        let window = (e.abs(), (b - a) * e.signum() / (h as f64 * dt) / e.abs());
         if a < span.0 + third {
-            low.push(rate);
+            low.push(window);
         } else if a > span.1 - third {
-            high.push(rate);
+            high.push(window);
         }
     }
-    if third <= 0.0 || low.len().min(high.len()) < MIN_WINDOWS_PER_THIRD {
+    if third <= 0.0 {
         return None;
     }
-    let (fast_low, fast_high) = (median(&low)?, median(&high)?);
-    (fast_high > 0.0).then(|| fast_low / fast_high)
+    let (mut weight, mut log_sum) = (0usize, 0.0);
+    let mut edge = least;
+    while low.iter().chain(&high).any(|w| w.0 >= edge) {
+        let next = edge * BIN_GROWTH;
+        let in_bin = |ws: &[(f64, f64)]| -> Vec<f64> {
+            (ws.iter().filter(|w| (edge..next).contains(&w.0)))
+                .map(|w| w.1)
+                .collect()
+        };
+        let (l, hi) = (in_bin(&low), in_bin(&high));
+        let n = l.len().min(hi.len());
+        if n >= MIN_WINDOWS_PER_BIN {
+            if let (Some(fast_low), Some(fast_high)) = (median(&l), median(&hi)) {
+                if fast_low > 0.0 && fast_high > 0.0 {
+                    weight += n;
+                    log_sum += n as f64 * (fast_low / fast_high).ln();
+                }
+            }
+        }
+        edge = next;
+    }
+    (weight >= MIN_WINDOWS_PER_THIRD).then(|| (log_sum / weight as f64).exp())
 }
 
 /// The spacing of the lattice V_P lies on, or 0 when it does not lie on one.
@@ -798,23 +841,28 @@ mod tests {
         assert_eq!(f.holds[1].approach, -1.0);
     }
 
+    /// V_P of a valve moving toward O_P as it was `lag` samples earlier at `gain` |e| %/s, at
+    /// most `slew` %/s, divided by 1 + g V / 100 (a chamber that grows with travel), read with
+    /// 0.1 % of noise every 0.01 s.
+    fn chamber_valve(op: &[f64], (gain, slew): (f64, f64), g: f64, lag: usize) -> Vec<f64> {
+        let (e, mut x) = (noise(op.len(), 0.1), op[0]);
+        (0..op.len())
+            .map(|k| {
+                let err = op[k.saturating_sub(lag)] - x;
+                x += err.signum() * (gain * err.abs()).min(slew) / (1.0 + g * x / 100.0) * 0.01;
+                x + e[k]
+            })
+            .collect()
+    }
+
     #[test]
     fn answer_rate_by_opening_shows_a_valve_slower_when_open() {
-        // Steps between 10 and 90 % every 5 s; V_P moves at 8 |e| %/s at most 60 %/s, divided
-        // by 1 + g V / 100 (a chamber that grows with travel), read with 0.1 % of noise.
+        // Steps between 10 and 90 % every 5 s; V_P moves at 8 |e| %/s at most 60 %/s.
         let (dt, n) = (0.01, 20000);
         let op = steps(n, 500, &[10.0, 90.0, 30.0, 70.0]);
-        let e = noise(n, 0.1);
         let run = |g: f64| {
-            let mut x = op[0];
-            let vp: Vec<f64> = (0..n)
-                .map(|k| {
-                    let err = op[k] - x;
-                    x += err.signum() * (8.0 * err.abs()).min(60.0) / (1.0 + g * x / 100.0) * dt;
-                    x + e[k]
-                })
-                .collect();
-            speed_ratio(&op, &vp, dt, 0.1, (10.0, 90.0))
+            let vp = chamber_valve(&op, (8.0, 60.0), g, 0);
+            speed_ratio(&op, &vp, dt, (0.1, 0.0), (10.0, 90.0))
         };
         // The statistic depends on the excitation (how far from O_P V_P starts in each third),
         // so it is read against the same valve without the slowdown, driven alike.
@@ -827,7 +875,32 @@ mod tests {
         let barely = run(0.14).unwrap() / healthy;
         assert!((1.0..1.1).contains(&barely), "{barely}");
         // A valve that never leaves the lower third says nothing of the upper one.
-        assert!(speed_ratio(&op, &vec![20.0; n], dt, 0.1, (10.0, 90.0)).is_none());
+        assert!(speed_ratio(&op, &vec![20.0; n], dt, (0.1, 0.0), (10.0, 90.0)).is_none());
+    }
+
+    #[test]
+    fn answer_rate_by_opening_compares_like_distances_after_the_transport_delay() {
+        // Steps of 20 % low in the travel, of 3 % high in it, every 5 s: a valve limited to
+        // 30 %/s answers the large ones at a lower rate per % of distance, which is no slowdown
+        // (read on single windows, whatever their distance, about 0.8).
+        let (dt, n) = (0.01, 60000);
+        let levels = [
+            15.0, 35.0, 15.0, 35.0, 15.0, 35.0, 80.0, 83.0, 80.0, 83.0, 80.0, 83.0,
+        ];
+        let op = steps(n, 500, &levels);
+        let span = (10.0, 90.0);
+        let vp = chamber_valve(&op, (8.0, 30.0), 0.0, 0);
+        let healthy = speed_ratio(&op, &vp, dt, (0.1, 0.0), span).unwrap();
+        assert!((0.85..1.18).contains(&healthy), "{healthy}");
+        // Behind a transport delay of 1 s, read after it: twice as slow fully open shows
+        // against the same valve without the slowdown (read on windows inside the delay as
+        // well, about 3).
+        let late = |g: f64| {
+            let vp = chamber_valve(&op, (8.0, 30.0), g, 100);
+            speed_ratio(&op, &vp, dt, (0.1, 1.0), span).unwrap()
+        };
+        let slow = late(1.0) / late(0.0);
+        assert!((1.15..2.0).contains(&slow), "{slow}");
     }
 
     #[test]

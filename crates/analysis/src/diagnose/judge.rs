@@ -236,13 +236,13 @@ impl Judge<'_> {
         if size::slower_across(slowdown, span) < SLOWDOWN_SEEN {
             return false;
         }
-        let current = facts::speed_ratio(self.scorer.op, ya, dt, 0.0, span);
-        tracing::debug!(
-            recording = ?self.facts.speed_ratio,
-            ?current,
-            "answer rate low over high in travel"
-        );
-        match (self.facts.speed_ratio, current) {
+        // Both read alike: windows chosen by the recording's noise, after the candidate's
+        // transport delay.
+        let read = (self.facts.noise_pct, composed::get(spec, Knob::DeadTime));
+        let seen = facts::speed_ratio(self.scorer.op, self.scorer.vp, dt, read, span);
+        let current = facts::speed_ratio(self.scorer.op, ya, dt, read, span);
+        tracing::debug!(recording = ?seen, ?current, "answer rate low over high in travel");
+        match (seen, current) {
             (Some(seen), Some(cur)) => seen >= SLOWDOWN_SEEN * cur,
             _ => true,
         }
@@ -785,7 +785,6 @@ mod tests {
             approach: vec![],
             op_span_pct: (20.0, 80.0),
             vp_span_pct: (20.0, 80.0),
-            speed_ratio: None,
             answer_delay_s: None,
             op_noise_pct: 0.0,
         }
