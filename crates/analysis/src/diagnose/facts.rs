@@ -339,7 +339,7 @@ pub fn speed_ratio(
     for k in m.max(lag)..vp.len().saturating_sub(m + h) {
         let (a, b) = (mean(k), mean(k + h));
         let e = op[k - lag] - a;
-        if !(a.is_finite() && b.is_finite()) || e.abs() < least {
+        if !(a.is_finite() && b.is_finite() && e.is_finite()) || e.abs() < least {
             continue;
         }
         let window = (e.abs(), (b - a) * e.signum() / (h as f64 * dt) / e.abs());
@@ -352,14 +352,21 @@ pub fn speed_ratio(
     if third <= 0.0 {
         return None;
     }
+    // Sorted by distance once, each bin is a slice of either third.
+    for ws in [&mut low, &mut high] {
+        ws.sort_by(|x, y| x.0.total_cmp(&y.0));
+    }
+    let farthest = (low.last().into_iter().chain(high.last())).fold(0.0, |f, w| w.0.max(f));
     let (mut weight, mut log_sum) = (0usize, 0.0);
     let mut edge = least;
-    while low.iter().chain(&high).any(|w| w.0 >= edge) {
+    while edge <= farthest {
         let next = edge * BIN_GROWTH;
         let in_bin = |ws: &[(f64, f64)]| -> Vec<f64> {
-            (ws.iter().filter(|w| (edge..next).contains(&w.0)))
-                .map(|w| w.1)
-                .collect()
+            let (from, to) = (
+                ws.partition_point(|w| w.0 < edge),
+                ws.partition_point(|w| w.0 < next),
+            );
+            ws[from..to].iter().map(|w| w.1).collect()
         };
         let (l, hi) = (in_bin(&low), in_bin(&high));
         let n = l.len().min(hi.len());
