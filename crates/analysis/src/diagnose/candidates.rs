@@ -13,7 +13,9 @@
 
 use super::delay::MAX_DEAD_TIME_S;
 use super::facts::Facts;
-use super::refit::{free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S};
+use super::refit::{
+    free_gain, spread_starts, Free, NOMINAL_MIN_SLEW_PCT_PER_S, START_TIME_CONSTANT_S,
+};
 use vb_core::model::composed::{self, Effect, Knob, FASTEST_PCT_PER_S};
 use vb_core::model::ModelSpec;
 
@@ -86,9 +88,12 @@ pub(crate) fn jobs(
             for mut free in spread_starts(variant) {
                 let mut rest = rest_of_model(current, dt, td_hi, &free);
                 let answer = answer_start(&free, facts).filter(|_| effect == Effect::DeadTime);
-                if let Some(start) = answer {
-                    for gain in rest.iter_mut().filter(|f| f.knob == Knob::Gain) {
+                for gain in rest.iter_mut().filter(|f| f.knob == Knob::Gain) {
+                    if let Some(start) = answer {
                         *gain = keeping_the_lag(*gain, current, start);
+                    }
+                    if starts_wide(&free, facts) {
+                        *gain = gain.from(gain.init.max(1.0 / START_TIME_CONSTANT_S));
                     }
                 }
                 free.extend(rest);
@@ -149,6 +154,29 @@ pub(crate) fn rest_of_model(spec: &ModelSpec, dt: f64, td_hi: f64, own: &[Free])
     }
     rest.extend(healthy_slew(spec, own));
     rest
+}
+
+/// The first start of a deadband's refit, %.
+const BAND_START_PCT: f64 = 0.5;
+
+/// A positioner band twice as wide as the distance from O_P the valve rests at
+/// ([`Facts::rest_distance_pct`], the band's half width), when that is wider than twice
+/// [`BAND_START_PCT`]. In a closed loop (no holds) a slow positioner explains a wide band's
+/// waits as well, and the baseline fits one; a refit from a narrow band keeps that slow gain
+/// (seed 56's physical 75, a band of 2.19 % at a gain of 9.9 /s: fitted 0.78 % at 0.66 /s, and
+/// named a slow stroke).
+fn wide_band(facts: &Facts) -> Option<f64> {
+    let band = 2.0 * facts.rest_distance_pct;
+    (band > 2.0 * BAND_START_PCT).then_some(band.min(10.0))
+}
+
+/// Whether `own` is the positioner band from where the valve rests ([`wide_band`]): the gain
+/// then starts no slower than a healthy positioner's ([`START_TIME_CONSTANT_S`]), so the band
+/// and not a slow positioner explains the waits.
+fn starts_wide(own: &[Free], facts: &Facts) -> bool {
+    let wide = wide_band(facts);
+    own.iter()
+        .any(|f| f.knob == Knob::PositionerDeadband && Some(f.init) == wide)
 }
 
 /// The dead time `own` starts from, when that is where V_P's increments answer O_P's
@@ -304,12 +332,17 @@ pub(crate) fn variants(
         ],
         // A band either on the input (the target moves only once O_P leaves it; the valve
         // then closes in on it ever more slowly) or in the positioner (no action inside it,
-        // full action outside: the valve arrives still moving and stops at once).
+        // full action outside: the valve arrives still moving and stops at once). The
+        // positioner's band also from where the valve rests ([`wide_band`]).
         Effect::Deadband if get(Knob::Deadband) == 0.0 && get(Knob::PositionerDeadband) == 0.0 => {
-            vec![
-                vec![f(Knob::Deadband, 0.02, 10.0, 0.5)],
-                vec![f(Knob::PositionerDeadband, 0.02, 10.0, 0.5)],
+            let wide = wide_band(facts).map(|b| vec![f(Knob::PositionerDeadband, 0.02, 10.0, b)]);
+            [
+                vec![f(Knob::Deadband, 0.02, 10.0, BAND_START_PCT)],
+                vec![f(Knob::PositionerDeadband, 0.02, 10.0, BAND_START_PCT)],
             ]
+            .into_iter()
+            .chain(wide)
+            .collect()
         }
         Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
             travel_limits(facts)
@@ -563,5 +596,34 @@ mod tests {
         for (td, gain) in starts(&facts, Effect::Backlash) {
             assert_eq!((td, gain), (Some(0.1), Some(0.5)));
         }
+    }
+
+    #[test]
+    fn a_valve_resting_far_from_o_p_also_starts_a_wide_positioner_band_at_a_healthy_gain() {
+        let (mut facts, mut spec) = following_steps();
+        composed::set(&mut spec, Knob::Gain, 0.5);
+        let starts = |facts: &Facts| {
+            let at = |free: &[Free], knob| free.iter().find(|f| f.knob == knob).map(|f| f.init);
+            (jobs(&[Effect::Deadband], &spec, facts, 0.01, 0.2).iter())
+                .flat_map(|j| j.starts.iter())
+                .map(|free| (at(free, Knob::PositionerDeadband), at(free, Knob::Gain)))
+                .collect::<Vec<_>>()
+        };
+        // Resting 1.1 % from O_P: a band of 2.2 % too, its gain no slower than 1 / 0.3 s;
+        // every other start keeps the model's gain.
+        facts.rest_distance_pct = 1.1;
+        let with = starts(&facts);
+        assert!(
+            with.contains(&(Some(2.2), Some(1.0 / START_TIME_CONSTANT_S))),
+            "{with:?}"
+        );
+        for (band, gain) in &with {
+            assert!(*band == Some(2.2) || *gain == Some(0.5), "{with:?}");
+        }
+        // Resting within twice the narrow start's half width: no wide start.
+        facts.rest_distance_pct = 0.4;
+        let without = starts(&facts);
+        assert_eq!(without.len(), with.len() - 1);
+        assert!(without.iter().all(|s| s.1 == Some(0.5)), "{without:?}");
     }
 }

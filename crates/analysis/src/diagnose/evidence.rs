@@ -201,6 +201,9 @@ pub enum Detail {
         holds_opening: usize,
         offset_after_closing_pct: f64,
         holds_closing: usize,
+        /// How far from O_P the valve rests, % ([`Facts::rest_distance_pct`]): the evidence
+        /// of a loop that never holds O_P still.
+        rest_distance_pct: f64,
         deadband_pct: f64,
     },
     Saturation {
@@ -437,6 +440,7 @@ fn detail(
                 holds_opening: nu,
                 offset_after_closing_pct: down,
                 holds_closing: nd,
+                rest_distance_pct: facts.rest_distance_pct,
                 deadband_pct: size::deadband(spec),
             }
         }

@@ -6,7 +6,7 @@
 //! seed refits (a speed limit starts from the fastest observed speed). Nothing here fits.
 
 use super::delay::answer_delay;
-use super::settled::{holds, minutes, Hold};
+use super::settled::{finite_span, holds, minutes, rest_distance, Hold};
 use super::speeds::{limit_speeds, speeds, sustained_speeds, WINDOWS_S};
 use vb_core::metrics::stats::{self, median, quantile, Differences};
 use vb_core::metrics::steps::{self, StepOptions};
@@ -72,6 +72,8 @@ pub struct Facts {
     /// The lag at which V_P's increments follow O_P's most closely, s, when that stands out of
     /// the noise (see [`answer_delay`]): the transport delay, also where O_P never steps.
     pub answer_delay_s: Option<f64>,
+    /// How far from O_P the valve rests, % ([`super::settled::rest_distance`]).
+    pub rest_distance_pct: f64,
 }
 
 /// Measures the facts of a recording whose V_P has noise `sigma` and lies on a lattice of
@@ -101,9 +103,10 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
         stop_high_pct: stop(op, vp, dt, (sigma, lattice_pct), true),
         stop_low_pct: stop(op, vp, dt, (sigma, lattice_pct), false),
         approach: approach(op, vp, dt),
-        op_span_pct: span(op),
-        vp_span_pct: span(vp),
+        op_span_pct: finite_span(op),
+        vp_span_pct: finite_span(vp),
         answer_delay_s: answer_delay(rec),
+        rest_distance_pct: rest_distance(op, vp, dt, sigma),
     }
 }
 
@@ -282,12 +285,6 @@ fn step_responses(rec: &RecordingView) -> Vec<StepResponse> {
             })
         })
         .collect()
-}
-
-/// The 5th and 95th percentiles of the measured values of `x`, %.
-fn span(x: &[f64]) -> (f64, f64) {
-    let mut seen: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
-    (quantile(&mut seen, 0.05), quantile(&mut seen, 0.95))
 }
 
 /// Fewest windows in each third of the openings for [`speed_ratio`] to say anything, counted

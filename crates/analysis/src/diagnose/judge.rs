@@ -786,6 +786,7 @@ mod tests {
             op_span_pct: (20.0, 80.0),
             vp_span_pct: (20.0, 80.0),
             answer_delay_s: None,
+            rest_distance_pct: 0.0,
             op_noise_pct: 0.0,
         }
     }

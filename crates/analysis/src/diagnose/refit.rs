@@ -216,6 +216,9 @@ pub(crate) fn starting_at(free: &[Free], spec: &ModelSpec) -> Vec<Free> {
         .collect()
 }
 
+/// The time constant a positioner's fit starts from, s: a healthy positioner's.
+pub(crate) const START_TIME_CONSTANT_S: f64 = 0.3;
+
 /// The knobs from their own starts and from two more spread over their boxes (a tenth and two
 /// fifths of the way, on each knob's scale): stick-slip, backlash and dead time make the error
 /// surface multi-modal.
@@ -244,7 +247,7 @@ pub(crate) fn fit_baseline(scorer: &Scorer, facts: &Facts) -> ModelSpec {
     let start = composed::compose(
         &ModelSpec {
             fopdt: Some(FopdtParams {
-                time_constant_s: 0.3,
+                time_constant_s: START_TIME_CONSTANT_S,
             }),
             ..ModelSpec::bare(ModelKind::Fopdt, td0)
         },

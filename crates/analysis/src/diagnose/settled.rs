@@ -6,7 +6,7 @@
 //! means for a loop whose controller never holds O_P still); [`explains_rests`] and
 //! [`rests_short`] judge a fitted reading error and deadband against them.
 
-use vb_core::metrics::stats::{mean_sd, median};
+use vb_core::metrics::stats::{mean_sd, median, quantile};
 
 /// A hold of O_P long enough for the valve to settle.
 #[derive(Debug, Clone, Copy)]
@@ -57,6 +57,40 @@ pub(super) fn holds(op: &[f64], vp: &[f64], dt: f64) -> Vec<Hold> {
         a = b;
     }
     holds
+}
+
+/// Half the span of the local means of V_P [`rest_distance`] compares, s.
+const REST_MEAN_HALF_S: f64 = 0.02;
+/// How far apart the local means [`rest_distance`] compares lie, s: a valve whose V_P has not
+/// moved over this long is resting.
+const REST_SPAN_S: f64 = 0.2;
+/// The share of rest samples nearer O_P than [`rest_distance`]: the edge of where the valve
+/// rests, above most of what the loop's own swings and the reading's noise leave.
+const REST_QUANTILE: f64 = 0.95;
+
+/// How far from O_P the valve rests, %: the [`REST_QUANTILE`] of |O_P - V_P| over the samples
+/// whose V_P has not moved over [`REST_SPAN_S`] (local means over [`REST_MEAN_HALF_S`] either
+/// side differing by less than 0.05 % or four noise sigmas of their difference, under a
+/// reading noise `sigma`); 0 when it never rests. A loop whose controller never holds O_P
+/// still has no holds to read a positioner's band from, but the band shows here: the valve
+/// does not move while O_P wanders inside it.
+pub(super) fn rest_distance(op: &[f64], vp: &[f64], dt: f64, sigma: f64) -> f64 {
+    let h = (REST_MEAN_HALF_S / dt).round() as usize;
+    let gap = ((REST_SPAN_S / dt).round() as usize / 2).max(1);
+    let still = (4.0 * sigma * (2.0 / (2 * h + 1) as f64).sqrt()).max(0.05);
+    let local = |i: usize| finite_mean(&vp[i - h..=i + h]);
+    let mut distances: Vec<f64> = (gap + h..op.len().saturating_sub(gap + h))
+        .filter(|&i| (local(i + gap) - local(i - gap)).abs() < still)
+        .map(|i| (op[i] - vp[i]).abs())
+        .filter(|d| d.is_finite())
+        .collect();
+    quantile(&mut distances, REST_QUANTILE)
+}
+
+/// The 5th and 95th percentiles of the measured values of `x`, %.
+pub(super) fn finite_span(x: &[f64]) -> (f64, f64) {
+    let mut seen: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    (quantile(&mut seen, 0.05), quantile(&mut seen, 0.95))
 }
 
 /// Mean of the measured values of `x` (NaN when none was).
@@ -245,5 +279,49 @@ mod tests {
             })
             .collect();
         assert_eq!(minutes(&op, &vp, dt), vec![(40.0, 39.0), (60.0, 59.0)]);
+    }
+
+    /// O_P wandering like a loop's output (two slow sines), and V_P of a positioner with a band
+    /// of `band` % (full width) at a gain of 10 /s, sampled at 100 Hz.
+    fn loop_through_band(band: f64) -> (Vec<f64>, Vec<f64>) {
+        let dt = 0.01;
+        let op: Vec<f64> = (0..30_000)
+            .map(|i| {
+                let t = i as f64 * dt;
+                50.0 + 5.0 * (0.05 * t).sin() + 1.5 * (0.37 * t).sin()
+            })
+            .collect();
+        let mut x = op[0];
+        let vp = op
+            .iter()
+            .map(|&o| {
+                let e = o - x;
+                if e.abs() > band / 2.0 {
+                    x += 10.0 * e * dt;
+                }
+                x
+            })
+            .collect();
+        (op, vp)
+    }
+
+    #[test]
+    fn a_band_shows_in_how_far_from_o_p_the_valve_rests_in_a_loop() {
+        let (op, vp) = loop_through_band(2.0);
+        let rest = rest_distance(&op, &vp, 0.01, 0.0);
+        assert!((0.8..=1.0).contains(&rest), "half the band: {rest}");
+        let (op, vp) = loop_through_band(0.0);
+        assert!(
+            rest_distance(&op, &vp, 0.01, 0.0) < 0.1,
+            "a healthy valve keeps up"
+        );
+        let (op, vp) = loop_through_band(2.0);
+        let noisy: Vec<f64> = vp
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.2 * ((i * 7919 % 101) as f64 / 50.0 - 1.0))
+            .collect();
+        let rest = rest_distance(&op, &noisy, 0.01, 0.12);
+        assert!((0.8..=1.3).contains(&rest), "under noise: {rest}");
     }
 }

@@ -269,10 +269,13 @@ pub fn evidence(f: &Finding) -> String {
             holds_opening,
             offset_after_closing_pct,
             holds_closing,
+            rest_distance_pct,
             deadband_pct,
-        } => format!(
-            "settled V_P sits {offset_after_opening_pct:+.2} % from O_P after opening ({holds_opening} holds) and {offset_after_closing_pct:+.2} % after closing ({holds_closing}): \
-             the positioner stops inside a deadband of {deadband_pct:.2} %"
+        } => deadband_text(
+            (*offset_after_opening_pct, *holds_opening),
+            (*offset_after_closing_pct, *holds_closing),
+            *rest_distance_pct,
+            *deadband_pct,
         ),
         Detail::Saturation {
             travel_min_pct,
@@ -293,6 +296,21 @@ pub fn evidence(f: &Finding) -> String {
         } => format!(
             "{rest}settled V_P sits {mean_offset_pct:+.2} % from O_P on average over {holds} holds; the fit gives V_P = {gain:.3} × O_P {offset_pct:+.2} %: \
              a gain or offset between command and position"
+        ),
+    }
+}
+
+/// The evidence of a deadband `band` %: where settled V_P sits from O_P after opening and after
+/// closing (mean offset %, holds), or, in a loop that never holds O_P still, how far from it
+/// V_P rests (`rest` %).
+fn deadband_text(opening: (f64, usize), closing: (f64, usize), rest: f64, band: f64) -> String {
+    let cause = format!("the positioner stops inside a deadband of {band:.2} %");
+    match (opening, closing) {
+        ((_, 0), (_, 0)) => format!(
+            "O_P is never held still; V_P rests up to {rest:.2} % from it (95 % of the samples it stays still): {cause}"
+        ),
+        ((up, nu), (down, nd)) => format!(
+            "settled V_P sits {up:+.2} % from O_P after opening ({nu} holds) and {down:+.2} % after closing ({nd}): {cause}"
         ),
     }
 }
@@ -595,6 +613,22 @@ mod tests {
         assert!(
             steps.contains("0.31 %") && steps.contains("2.42 %"),
             "{steps}"
+        );
+    }
+
+    #[test]
+    fn a_deadband_in_a_loop_without_holds_shows_where_the_valve_rests_instead() {
+        let held = deadband_text((-0.41, 6), (0.38, 5), 0.9, 0.8);
+        assert!(
+            held.contains("-0.41 %") && held.contains("(6 holds)"),
+            "{held}"
+        );
+        let loop_only = deadband_text((0.0, 0), (0.0, 0), 1.03, 2.17);
+        assert!(
+            loop_only.contains("1.03 %")
+                && loop_only.contains("2.17 %")
+                && !loop_only.contains("+0.00"),
+            "{loop_only}"
         );
     }
 }
