@@ -97,6 +97,20 @@ impl StickSlipModel {
     }
 }
 
+/// A deadband: where the valve comes to rest against O_P, and the fitted band.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Rests {
+    /// Mean settled V_P - O_P after opening and after closing, %, and hold counts.
+    pub offset_after_opening_pct: f64,
+    pub holds_opening: usize,
+    pub offset_after_closing_pct: f64,
+    pub holds_closing: usize,
+    /// How far from O_P the valve rests, % ([`Facts::rest_distance_pct`]): the evidence
+    /// of a loop that never holds O_P still.
+    pub rest_distance_pct: f64,
+    pub deadband_pct: f64,
+}
+
 /// Uneven stroke speeds: V_P's speeds each way as the recording shows its limits, and the
 /// fit's limits.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -195,17 +209,7 @@ pub enum Detail {
         model: StickSlipModel,
     },
     Slips(Slips),
-    Deadband {
-        /// Mean settled V_P - O_P after opening and after closing, %, and hold counts.
-        offset_after_opening_pct: f64,
-        holds_opening: usize,
-        offset_after_closing_pct: f64,
-        holds_closing: usize,
-        /// How far from O_P the valve rests, % ([`Facts::rest_distance_pct`]): the evidence
-        /// of a loop that never holds O_P still.
-        rest_distance_pct: f64,
-        deadband_pct: f64,
-    },
+    Deadband(Rests),
     Saturation {
         travel_min_pct: f64,
         travel_max_pct: f64,
@@ -435,14 +439,14 @@ fn detail(
         Effect::Deadband => {
             let (up, nu) = hold_offset(facts, |a| a > 0.0);
             let (down, nd) = hold_offset(facts, |a| a < 0.0);
-            Detail::Deadband {
+            Detail::Deadband(Rests {
                 offset_after_opening_pct: up,
                 holds_opening: nu,
                 offset_after_closing_pct: down,
                 holds_closing: nd,
                 rest_distance_pct: facts.rest_distance_pct,
                 deadband_pct: size::deadband(spec),
-            }
+            })
         }
         Effect::Saturation => Detail::Saturation {
             travel_min_pct: spec.travel.min_pct,

@@ -17,7 +17,9 @@ use super::identify::fmt_param;
 pub use super::verdict::{advice, model_verdict, verdict};
 use super::verdict::{figures, measure, slow_strokes, trace};
 pub use page::html;
-use vb_analysis::diagnose::evidence::{Detail, Evidence, Share, Slips, StickSlipModel, Uneven};
+use vb_analysis::diagnose::evidence::{
+    Detail, Evidence, Rests, Share, Slips, StickSlipModel, Uneven,
+};
 use vb_analysis::diagnose::locate::{Context, Window};
 use vb_analysis::diagnose::{Diagnosis, Effect, Finding, Note};
 use vb_core::metrics;
@@ -264,19 +266,7 @@ pub fn evidence(f: &Finding) -> String {
             stick_slip_model(model, false)
         ),
         Detail::Slips(s) => slips_text(s, f),
-        Detail::Deadband {
-            offset_after_opening_pct,
-            holds_opening,
-            offset_after_closing_pct,
-            holds_closing,
-            rest_distance_pct,
-            deadband_pct,
-        } => deadband_text(
-            (*offset_after_opening_pct, *holds_opening),
-            (*offset_after_closing_pct, *holds_closing),
-            *rest_distance_pct,
-            *deadband_pct,
-        ),
+        Detail::Deadband(r) => deadband_text(r),
         Detail::Saturation {
             travel_min_pct,
             travel_max_pct,
@@ -300,19 +290,23 @@ pub fn evidence(f: &Finding) -> String {
     }
 }
 
-/// The evidence of a deadband `band` %: where settled V_P sits from O_P after opening and after
-/// closing (mean offset %, holds), or, in a loop that never holds O_P still, how far from it
-/// V_P rests (`rest` %).
-fn deadband_text(opening: (f64, usize), closing: (f64, usize), rest: f64, band: f64) -> String {
-    let cause = format!("the positioner stops inside a deadband of {band:.2} %");
-    match (opening, closing) {
-        ((_, 0), (_, 0)) => format!(
-            "O_P is never held still; V_P rests up to {rest:.2} % from it (95 % of the samples it stays still): {cause}"
-        ),
-        ((up, nu), (down, nd)) => format!(
-            "settled V_P sits {up:+.2} % from O_P after opening ({nu} holds) and {down:+.2} % after closing ({nd}): {cause}"
-        ),
+/// The evidence of a deadband: where settled V_P sits from O_P after opening and after closing
+/// or, in a loop that never holds O_P still, how far from it V_P rests.
+fn deadband_text(r: &Rests) -> String {
+    let cause = format!(
+        "the positioner stops inside a deadband of {:.2} %",
+        r.deadband_pct
+    );
+    if r.holds_opening + r.holds_closing == 0 {
+        return format!(
+            "O_P is never held still; V_P rests up to {:.2} % from it (95 % of the samples it stays still): {cause}",
+            r.rest_distance_pct
+        );
     }
+    format!(
+        "settled V_P sits {:+.2} % from O_P after opening ({} holds) and {:+.2} % after closing ({}): {cause}",
+        r.offset_after_opening_pct, r.holds_opening, r.offset_after_closing_pct, r.holds_closing
+    )
 }
 
 /// The evidence of uneven stroke speeds: V_P's speeds each way against the fit's limits.
@@ -618,16 +612,24 @@ mod tests {
 
     #[test]
     fn a_deadband_in_a_loop_without_holds_shows_where_the_valve_rests_instead() {
-        let held = deadband_text((-0.41, 6), (0.38, 5), 0.9, 0.8);
+        let rests = |holds, rest_distance_pct, deadband_pct| Rests {
+            offset_after_opening_pct: -0.41,
+            holds_opening: holds,
+            offset_after_closing_pct: 0.38,
+            holds_closing: holds,
+            rest_distance_pct,
+            deadband_pct,
+        };
+        let held = deadband_text(&rests(6, 0.9, 0.8));
         assert!(
             held.contains("-0.41 %") && held.contains("(6 holds)"),
             "{held}"
         );
-        let loop_only = deadband_text((0.0, 0), (0.0, 0), 1.03, 2.17);
+        let loop_only = deadband_text(&rests(0, 1.03, 2.17));
         assert!(
             loop_only.contains("1.03 %")
                 && loop_only.contains("2.17 %")
-                && !loop_only.contains("+0.00"),
+                && !loop_only.contains("holds"),
             "{loop_only}"
         );
     }
