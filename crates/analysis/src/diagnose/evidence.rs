@@ -106,7 +106,7 @@ pub struct Rests {
     pub offset_after_closing_pct: f64,
     pub holds_closing: usize,
     /// How far from O_P the valve rests, % ([`Facts::rest_distance_pct`]): the evidence
-    /// of a loop that never holds O_P still.
+    /// of a loop that never holds O_P for 3 s (no holds).
     pub rest_distance_pct: f64,
     pub deadband_pct: f64,
 }

@@ -291,7 +291,7 @@ pub fn evidence(f: &Finding) -> String {
 }
 
 /// The evidence of a deadband: where settled V_P sits from O_P after opening and after closing
-/// or, in a loop that never holds O_P still, how far from it V_P rests.
+/// or, in a loop that never holds O_P for 3 s (no holds), how far from it V_P rests.
 fn deadband_text(r: &Rests) -> String {
     let cause = format!(
         "the positioner stops inside a deadband of {:.2} %",
@@ -299,7 +299,7 @@ fn deadband_text(r: &Rests) -> String {
     );
     if r.holds_opening + r.holds_closing == 0 {
         return format!(
-            "O_P is never held still; V_P rests up to {:.2} % from it (95 % of the samples it stays still): {cause}",
+            "O_P is never held for 3 s or more; V_P rests up to {:.2} % from it (95 % of the samples it stays still): {cause}",
             r.rest_distance_pct
         );
     }
