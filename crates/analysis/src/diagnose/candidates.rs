@@ -256,9 +256,17 @@ fn named_slow_stroke(spec: &ModelSpec) -> Vec<Free> {
 /// stop on ramps: refitted without its wind-up, the drawn delay made the held-out error twice
 /// as large, and an unevenness of 12.5 times was named in its place).
 fn named_windup(spec: &ModelSpec) -> Option<Free> {
-    let stop = spec.travel.max_pct < 100.0 || spec.travel.min_pct > 0.0;
-    let windup = composed::get(spec, Knob::Windup);
-    stop.then(|| Free::new(Knob::Windup, 0.0, WINDUP_RANGE_PCT, windup))
+    has_stop(spec).then(|| windup_from(composed::get(spec, Knob::Windup)))
+}
+
+/// Whether `spec` has a travel stop short of 0 or 100 %.
+fn has_stop(spec: &ModelSpec) -> bool {
+    spec.travel.min_pct > 0.0 || spec.travel.max_pct < 100.0
+}
+
+/// A stop's wind-up, free over its whole range ([`WINDUP_RANGE_PCT`]) from `start`, %.
+pub(super) fn windup_from(start: f64) -> Free {
+    Free::new(Knob::Windup, 0.0, WINDUP_RANGE_PCT, start)
 }
 
 /// The variants to try for `effect` on top of `spec`, or none when it is already there or the
@@ -357,9 +365,7 @@ pub(crate) fn variants(
             .chain(wide)
             .collect()
         }
-        Effect::Saturation if spec.travel.min_pct == 0.0 && spec.travel.max_pct == 100.0 => {
-            travel_limits(facts)
-        }
+        Effect::Saturation if !has_stop(spec) => travel_limits(facts),
         // The sensor lattice is named from its evidence, not refitted (see `rounds`).
         Effect::Calibration if get(Knob::CalGain) == 1.0 && get(Knob::CalOffset) == 0.0 => {
             let (g, o) = steady_gain_offset(facts);
@@ -440,7 +446,7 @@ fn travel_limits(facts: &Facts) -> Vec<Vec<Free>> {
         stops.push(vec![h, l]);
     }
     // The drive winds up past the stop while O_P asks for more, and must come back first.
-    let windup = Free::new(Knob::Windup, 0.0, WINDUP_RANGE_PCT, 20.0);
+    let windup = windup_from(20.0);
     (stops.iter())
         .flat_map(|set| {
             WINDUP_STARTS_PCT.map(|start| {

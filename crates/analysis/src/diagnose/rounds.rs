@@ -21,7 +21,7 @@
 use rayon::prelude::*;
 use serde_json::Value;
 
-use super::candidates::{self, WINDUP_RANGE_PCT};
+use super::candidates;
 use super::delay::MAX_DEAD_TIME_S;
 use super::diagnosis::{params, Finding, Note, Support, Trace};
 use super::evidence::Evidence;
@@ -534,13 +534,13 @@ impl<'a> Search<'a> {
         }
     }
 
-    /// The stop's wind-up refitted from starts up to [`WINDUP_RANGE_PCT`] (its box from then
+    /// The stop's wind-up refitted from starts up to [`candidates::WINDUP_RANGE_PCT`] (its box from then
     /// on), each with the stroke speed where it is and at the fastest speed seen (the other
     /// knobs where they are): the time to leave a stop, set by the wind-up and the speed the
     /// drive unwinds at together, is a narrow valley the round's few starts miss, and later
     /// effects (a slowdown of the open valve) would stretch to cover it. Kept if no error rises.
     fn wind_up(&mut self) {
-        let wide = Free::new(Knob::Windup, 0.0, WINDUP_RANGE_PCT, 0.0);
+        let wide = candidates::windup_from(0.0);
         let here = starting_at(&self.freed, &self.current);
         let seen = (self.data.facts.open_speed).max(self.data.facts.close_speed);
         let starts: Vec<Vec<Free>> = (WINDUP_STARTS.iter())
