@@ -317,12 +317,16 @@ const LOCAL_MEAN_HALF_S: f64 = 0.02;
 /// fill hold fewer than [`MIN_WINDOWS_PER_THIRD`] windows. A chamber that fills more slowly
 /// when open shows here as a ratio above 1; how far above depends on the excitation too, so
 /// it is read against the same statistic on a simulation driven by the same O_P.
+/// V_P is read back to the stem through the sensor's calibration `(gain, offset)` (V_P = gain
+/// x + offset): an offset reading rests a percent or more from O_P, more in one third than in
+/// the other when the gain is off too.
 pub fn speed_ratio(
     op: &[f64],
     vp: &[f64],
     dt: f64,
     (sigma, delay_s): (f64, f64),
     span: (f64, f64),
+    (gain, offset): (f64, f64),
 ) -> Option<f64> {
     let h = ((0.1 / dt).round() as usize).max(1);
     let (m, lag) = (
@@ -330,8 +334,9 @@ pub fn speed_ratio(
         (delay_s / dt).round() as usize,
     );
     let least = (5.0 * sigma).max(1.0);
-    let third = (span.1 - span.0) / 3.0;
-    let mean = |k: usize| vp[k - m..=k + m].iter().sum::<f64>() / (2 * m + 1) as f64;
+    let stem = |v: f64| (v - offset) / gain;
+    let (span, third) = ((stem(span.0), stem(span.1)), (span.1 - span.0) / gain / 3.0);
+    let mean = |k: usize| stem(vp[k - m..=k + m].iter().sum::<f64>() / (2 * m + 1) as f64);
     let (mut low, mut high) = (Vec::<(f64, f64)>::new(), Vec::<(f64, f64)>::new());
     for k in m.max(lag)..vp.len().saturating_sub(m + h) {
         let (a, b) = (mean(k), mean(k + h));
@@ -866,7 +871,7 @@ mod tests {
         let op = steps(n, 500, &[10.0, 90.0, 30.0, 70.0]);
         let run = |g: f64| {
             let vp = chamber_valve(&op, (8.0, 60.0), g, 0);
-            speed_ratio(&op, &vp, dt, (0.1, 0.0), (10.0, 90.0))
+            speed_ratio(&op, &vp, dt, (0.1, 0.0), (10.0, 90.0), (1.0, 0.0))
         };
         // The statistic depends on the excitation (how far from O_P V_P starts in each third),
         // so it is read against the same valve without the slowdown, driven alike.
@@ -879,7 +884,39 @@ mod tests {
         let barely = run(0.14).unwrap() / healthy;
         assert!((1.0..1.1).contains(&barely), "{barely}");
         // A valve that never leaves the lower third says nothing of the upper one.
-        assert!(speed_ratio(&op, &vec![20.0; n], dt, (0.1, 0.0), (10.0, 90.0)).is_none());
+        assert!(speed_ratio(
+            &op,
+            &vec![20.0; n],
+            dt,
+            (0.1, 0.0),
+            (10.0, 90.0),
+            (1.0, 0.0)
+        )
+        .is_none());
+    }
+
+    #[test]
+    fn answer_rate_by_opening_is_read_through_the_sensor_s_calibration() {
+        // Steps between 10 and 90 % every 5 s, a valve with no slowdown, read by a sensor 1.8 %
+        // low and 2 % short (V_P = 0.98 x - 1.8): at rest V_P sits 2-3.6 % from O_P, more in the
+        // upper third than in the lower.
+        let (dt, n) = (0.01, 20000);
+        let op = steps(n, 500, &[10.0, 90.0, 30.0, 70.0]);
+        let stem = chamber_valve(&op, (8.0, 60.0), 0.0, 0);
+        let vp: Vec<f64> = stem.iter().map(|x| 0.98 * x - 1.8).collect();
+        let span = (0.98 * 10.0 - 1.8, 0.98 * 90.0 - 1.8);
+        let ratio = |sensor| speed_ratio(&op, &vp, dt, (0.1, 0.0), span, sensor).unwrap();
+        let healthy = speed_ratio(&op, &stem, dt, (0.1, 0.0), (10.0, 90.0), (1.0, 0.0)).unwrap();
+        // Read through the calibration, it is the valve's own; taken as a true reading, the
+        // upper third reads about 15 % slower (1.13 against 0.98), as much as the least
+        // slowdown a recording must show for one to be named.
+        let read = ratio((0.98, -1.8));
+        assert!(
+            (read / healthy - 1.0).abs() < 0.02,
+            "{read} against {healthy}"
+        );
+        let raw = ratio((1.0, 0.0));
+        assert!(raw / healthy > 1.1, "{raw} against {healthy}");
     }
 
     #[test]
@@ -894,14 +931,14 @@ mod tests {
         let op = steps(n, 500, &levels);
         let span = (10.0, 90.0);
         let vp = chamber_valve(&op, (8.0, 30.0), 0.0, 0);
-        let healthy = speed_ratio(&op, &vp, dt, (0.1, 0.0), span).unwrap();
+        let healthy = speed_ratio(&op, &vp, dt, (0.1, 0.0), span, (1.0, 0.0)).unwrap();
         assert!((0.85..1.18).contains(&healthy), "{healthy}");
         // Behind a transport delay of 1 s, read after it: twice as slow fully open shows
         // against the same valve without the slowdown (read on windows inside the delay as
         // well, about 3).
         let late = |g: f64| {
             let vp = chamber_valve(&op, (8.0, 30.0), g, 100);
-            speed_ratio(&op, &vp, dt, (0.1, 1.0), span).unwrap()
+            speed_ratio(&op, &vp, dt, (0.1, 1.0), span, (1.0, 0.0)).unwrap()
         };
         let slow = late(1.0) / late(0.0);
         assert!((1.15..2.0).contains(&slow), "{slow}");

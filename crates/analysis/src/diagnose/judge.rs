@@ -237,10 +237,14 @@ impl Judge<'_> {
             return false;
         }
         // Both read alike: windows chosen by the recording's noise, after the candidate's
-        // transport delay.
+        // transport delay, through the calibration of the model's reading.
         let read = (self.facts.noise_pct, composed::get(spec, Knob::DeadTime));
-        let seen = facts::speed_ratio(self.scorer.op, self.scorer.vp, dt, read, span);
-        let current = facts::speed_ratio(self.scorer.op, ya, dt, read, span);
+        let sensor = (
+            composed::get(spec, Knob::CalGain),
+            composed::get(spec, Knob::CalOffset),
+        );
+        let ratio = |y: &[f64]| facts::speed_ratio(self.scorer.op, y, dt, read, span, sensor);
+        let (seen, current) = (ratio(self.scorer.vp), ratio(ya));
         tracing::debug!(recording = ?seen, ?current, "answer rate low over high in travel");
         match (seen, current) {
             (Some(seen), Some(cur)) => seen >= SLOWDOWN_SEEN * cur,
