@@ -17,32 +17,23 @@ const SPEED_WINDOW: usize = 10;
 
 /// The slips of `x`: moves of at least `jump` within 0.1 s after it stood still (within
 /// 0.01 %) for 0.2 s, while `smooth` (the same valve without what makes it slip, on the same
-/// O_P) moved less than half as much (a move a command starts is no slip). Each slip's size is
-/// the whole jump: how far the stem moves in the 0.1 s after it leaves rest. The first window
-/// found moving by `jump` can end in the middle of a jump that takes a few samples (a chamber
-/// that fills through an orifice), and its move is only the part of the jump that crossed
-/// `jump`; the stem leaves rest at the last still sample, where the slip is measured from.
+/// O_P) moved less than half as much (a move a command starts is no slip). Each slip's size.
 pub(crate) fn slips(x: &[f64], smooth: &[f64], jump: f64) -> Vec<f64> {
-    let n = x.len().min(smooth.len());
-    let still = |k: usize| {
+    let mut out = Vec::new();
+    let mut k = STILL;
+    while k + WITHIN < x.len().min(smooth.len()) {
         let (lo, hi) = x[k - STILL..=k]
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
                 (a.min(v), b.max(v))
             });
-        hi - lo <= STILL_PCT
-    };
-    let mut out = Vec::new();
-    let mut k = STILL;
-    while k + WITHIN < n {
         let moved = (x[k + WITHIN] - x[k]).abs();
-        if still(k) && moved >= jump && (smooth[k + WITHIN] - smooth[k]).abs() < moved / 2.0 {
-            let mut start = k;
-            while start + 1 + WITHIN < n && still(start + 1) {
-                start += 1;
-            }
-            out.push((x[start + WITHIN] - x[start]).abs());
-            k = start + WITHIN + STILL;
+        if hi - lo <= STILL_PCT
+            && moved >= jump
+            && (smooth[k + WITHIN] - smooth[k]).abs() < moved / 2.0
+        {
+            out.push(moved);
+            k += WITHIN + STILL;
         } else {
             k += 1;
         }

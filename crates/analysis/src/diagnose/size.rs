@@ -43,15 +43,9 @@ use vb_core::model::{slower_at, ModelSpec};
 /// further: those are the 90th percentiles of both seeds. The stroke speed is the 90th
 /// percentile of its 88 findings in the records of seeds 19-23 (every third valve, intact and
 /// as logged, each run with the diagnosis of its day): 0.083, where its intervals held the
-/// drawn value in 85 % of them with a spread of 0.05. The slip's was measured when the bench
-/// took a slip's size from the first 0.1 s that moved by the threshold, which ends inside a
-/// jump that takes a few samples; measured from where the stem leaves rest (the whole jump,
-/// `benches/blind/measures.rs`), the 134 slips found on seeds 47-58 (intact and as logged,
-/// every third valve) stray by 0.14 at the 90th percentile, 0.26 at the 95th and 0.41 at most
-/// (digital valves whose hunting jumps differ from one set-point to the next); 0.38 holds 133
-/// of them, and narrower spreads leave single seeds with fewer than 80 % held, so it stays.
-/// The slowdown of the open valve has its own ([`SLOWDOWN_SPREAD`]). Sizes not listed (the
-/// crossing time quoted when no band can be told) had too few findings to measure it.
+/// drawn value in 85 % of them with a spread of 0.05. The slowdown of the open valve has its
+/// own ([`SLOWDOWN_SPREAD`]). Sizes not listed (the crossing time quoted when no band can be
+/// told) had too few findings to measure it.
 const MODEL_SPREAD: [(&str, f64); 10] = [
     ("dead_time_s", 0.05),
     ("deadband_pct", 0.40),
