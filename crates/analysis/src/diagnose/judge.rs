@@ -239,10 +239,7 @@ impl Judge<'_> {
         // Both read alike: windows chosen by the recording's noise, after the candidate's
         // transport delay, through the calibration of the model's reading.
         let read = (self.facts.noise_pct, composed::get(spec, Knob::DeadTime));
-        let sensor = (
-            composed::get(spec, Knob::CalGain),
-            composed::get(spec, Knob::CalOffset),
-        );
+        let sensor = composed::calibration(spec);
         let ratio = |y: &[f64]| facts::speed_ratio(self.scorer.op, y, dt, read, span, sensor);
         let (seen, current) = (ratio(self.scorer.vp), ratio(ya));
         tracing::debug!(recording = ?seen, ?current, "answer rate low over high in travel");
@@ -544,7 +541,7 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
         | Effect::Saturation
         | Effect::Quantization => true,
         Effect::Calibration => settled::explains_rests(
-            (g(Knob::CalGain), g(Knob::CalOffset)),
+            composed::calibration(spec),
             &facts.holds,
             &facts.minutes,
             facts.noise_pct,

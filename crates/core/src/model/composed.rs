@@ -244,6 +244,11 @@ pub fn half_open(spec: &ModelSpec) -> f64 {
     1.0 + spec.effects.open_slowdown / 2.0
 }
 
+/// The reading's calibration: (gain, offset %), V_P as read = gain × stem + offset.
+pub fn calibration(spec: &ModelSpec) -> (f64, f64) {
+    (spec.effects.calibration_gain, spec.effects.calibration_offset_pct)
+}
+
 /// Reads a knob's value from a composed spec.
 pub fn get(spec: &ModelSpec, knob: Knob) -> f64 {
     let p = pc2(spec);
