@@ -110,19 +110,19 @@ pub fn measure(rec: &RecordingView, sigma: f64, lattice_pct: f64) -> Facts {
     }
 }
 
-impl Facts {
-    /// Median speed of V_P toward where it settles while `lo..hi` % away from it, %/s, when at
-    /// least 30 samples of step tails were that far.
-    pub fn approach_speed(&self, lo: f64, hi: f64) -> Option<f64> {
-        let from = self.approach.partition_point(|p| p.0 < lo);
-        let to = self.approach.partition_point(|p| p.0 < hi);
-        let speeds: Vec<f64> = self.approach[from..to].iter().map(|p| p.1).collect();
-        if speeds.len() < 30 {
-            return None;
-        }
-        median(&speeds)
+/// Median speed toward where V_P settles while `lo..hi` % away from it in step tails measured
+/// by [`approach`], %/s, when at least 30 samples were that far.
+pub fn approach_speed(approach: &[(f64, f64)], lo: f64, hi: f64) -> Option<f64> {
+    let from = approach.partition_point(|p| p.0 < lo);
+    let to = approach.partition_point(|p| p.0 < hi);
+    let speeds: Vec<f64> = approach[from..to].iter().map(|p| p.1).collect();
+    if speeds.len() < 30 {
+        return None;
     }
+    median(&speeds)
+}
 
+impl Facts {
     /// V_P's opening and closing speeds as its speed limits show in them, %/s, and whether
     /// they are those it holds for 0.3 s or more ([`limit_speeds`]).
     pub fn measured_speeds(&self) -> ((f64, f64), bool) {
@@ -137,7 +137,7 @@ impl Facts {
 /// difference of means over 0.05 s before and after). A proportional positioner slows in
 /// proportion to the distance; one with a minimum speed keeps it until it stops, which is
 /// what this shows.
-fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
+pub(crate) fn approach(op: &[f64], vp: &[f64], dt: f64) -> Vec<(f64, f64)> {
     let h = ((0.05 / dt).round() as usize).max(1);
     let settle = ((0.5 / dt).round() as usize).max(1);
     let min_hold = ((2.0 / dt).round() as usize).max(2 * h + settle + 1);
@@ -1016,14 +1016,14 @@ mod tests {
             measure(&Columns::new(op.clone(), vp, dt).view(), 0.05, 0.0)
         };
         // 0.25-0.5 % from rest: 1.25-2.5 %/s proportionally, 4 %/s with the floor.
-        let slowing = tails(0.0, false).approach_speed(0.25, 0.5).unwrap();
+        let slowing = approach_speed(&tails(0.0, false).approach, 0.25, 0.5).unwrap();
         assert!((1.4..2.4).contains(&slowing), "{slowing}");
-        let floor = tails(4.0, false).approach_speed(0.25, 0.5).unwrap();
+        let floor = approach_speed(&tails(4.0, false).approach, 0.25, 0.5).unwrap();
         assert!((3.6..4.4).contains(&floor), "{floor}");
-        assert!(tails(0.0, false).approach_speed(6.0, 7.0).is_none());
+        assert!(approach_speed(&tails(0.0, false).approach, 6.0, 7.0).is_none());
         // Rows without V_P change none of what is measured.
         let (a, b) = (tails(4.0, false), tails(4.0, true));
-        let holed = b.approach_speed(0.25, 0.5).unwrap();
+        let holed = approach_speed(&b.approach, 0.25, 0.5).unwrap();
         assert!((holed - floor).abs() < 0.1, "{holed} {floor}");
         assert_eq!(
             (a.holds.len(), a.steps.len()),

@@ -151,7 +151,9 @@ impl Judge<'_> {
         let size = size::size(effect, &spec, self.facts, self.scorer.op, tuning);
         let significant = beyond_chance(t_stat, excess_share, delta_bic, tuning);
         let plausible = !pinned(own, &spec, effect)
-            && (plausible(effect, &spec, self.facts) || self.always_at_limit(effect, &spec, &yb))
+            && (plausible(effect, &spec, self.facts)
+                || self.always_at_limit(effect, &spec, &yb)
+                || self.floor_read_as_modelled(effect, &spec, &yb))
             && (effect != Effect::StateDependentDelay || self.slowdown_seen(&spec, ya))
             && (effect != Effect::Saturation || self.stop_seen(&spec, ya))
             && (effect != Effect::Stiction || !self.stop_departure(ya, &yb))
@@ -211,6 +213,15 @@ impl Judge<'_> {
             "the effect's own share of its gain"
         );
         lost >= (OWN_WORK * gained).min(self.tuning.min_heldout_share * whole(&self.cur))
+    }
+
+    /// Whether the recording shows a minimum speed (`spec`, simulated as `yb`) as the model's
+    /// own step tails read it ([`floor_shown`]).
+    fn floor_read_as_modelled(&self, effect: Effect, spec: &ModelSpec, yb: &[f64]) -> bool {
+        effect == Effect::MinSpeed && {
+            let tails = facts::approach(self.scorer.op, yb, self.scorer.dt);
+            floor_shown(spec, self.facts, Some(&tails))
+        }
     }
 
     /// Whether the recording shows a slowdown of the open valve worth naming, beyond what the
@@ -511,25 +522,7 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
             let seen = (a > b) == (oa > ob) && (differ((oa, ob)) || short_of_faster);
             seen && a.min(b) < 0.8 * FASTEST_PCT_PER_S && oa.min(ob) >= 0.5 * a.min(b)
         }
-        // The floor takes over from proportional action below an error of dy_min / P_k, but
-        // only for small errors: a floor over several % is a constant-speed valve.
-        // Where the recording shows the tails of steps well inside that band (beyond the
-        // noise), V_P must still move at about the floor there, not slow down in proportion.
-        // A recording without step tails (a valve in closed loop answering a noisy controller
-        // output) cannot tell a floor from a rate limit or a filter: none is named there; nor
-        // can one where the valve never moves clearly faster than the floor (a valve that
-        // always moves at one speed is slew-limited, as far as any recording shows).
-        Effect::MinSpeed => {
-            let floor = g(Knob::MinSpeed);
-            let band = floor / g(Knob::Gain);
-            let lo = (2.5 * facts.noise_pct).max(band / 8.0);
-            let kept = match facts.approach_speed(lo, 2.0 * lo) {
-                Some(speed) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * floor,
-                _ => facts.approach.len() >= MIN_TAIL_SAMPLES,
-            };
-            let faster = facts.open_speed.max(facts.close_speed) >= FASTER_THAN_FLOOR * floor;
-            floor >= 0.1 && band <= MAX_SPEED_BAND_PCT && kept && faster
-        }
+        Effect::MinSpeed => floor_shown(spec, facts, None),
         // Stick-slip is sized by its slip (a stickband without a jump is a deadband on the
         // input, and weighs nothing as stick-slip).
         Effect::Deadband => {
@@ -547,6 +540,32 @@ pub(crate) fn plausible(effect: Effect, spec: &ModelSpec, facts: &Facts) -> bool
             facts.noise_pct,
         ),
     }
+}
+
+/// Whether the recording shows the minimum speed of `spec`. The floor takes over from
+/// proportional action below an error of dy_min / P_k, but only for small errors: a floor over
+/// several % is a constant-speed valve. Where the recording shows the tails of steps well
+/// inside that band (beyond the noise), V_P must still move there at [`MIN_FLOOR_SHOWN`] of
+/// the floor as the tails read it, not slow down in proportion. `read` is how the tails of
+/// the model with the floor read ([`facts::approach`] of its V_P); without it the floor
+/// itself. A reading takes the speed over 0.1 s, which at a fast floor reaches where the stem
+/// stops: seed 60's digital valve 324, a floor of 29.8 %/s fitted as 29.3, reads 19.0 %/s
+/// 0.26-0.53 % from rest.
+/// A recording without step tails (a valve in closed loop answering a noisy controller
+/// output) cannot tell a floor from a rate limit or a filter: none is named there; nor can one
+/// where the valve never moves clearly faster than the floor (a valve that always moves at one
+/// speed is slew-limited, as far as any recording shows).
+fn floor_shown(spec: &ModelSpec, facts: &Facts, read: Option<&[(f64, f64)]>) -> bool {
+    let floor = composed::get(spec, Knob::MinSpeed);
+    let band = floor / composed::get(spec, Knob::Gain);
+    let lo = (2.5 * facts.noise_pct).max(band / 8.0);
+    let reading = read.map_or(Some(floor), |tails| facts::approach_speed(tails, lo, 2.0 * lo));
+    let kept = match (facts::approach_speed(&facts.approach, lo, 2.0 * lo), reading) {
+        (Some(speed), Some(model)) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * model,
+        _ => facts.approach.len() >= MIN_TAIL_SAMPLES,
+    };
+    let faster = facts.open_speed.max(facts.close_speed) >= FASTER_THAN_FLOOR * floor;
+    floor >= 0.1 && band <= MAX_SPEED_BAND_PCT && kept && faster
 }
 
 /// Widest band, in O_P's noise (standard deviations), that the jitter of O_P shakes: a band
@@ -918,6 +937,20 @@ mod tests {
             ..tails(|e| (5.0 * e).max(5.0))
         };
         assert!(!material(Effect::MinSpeed, &floor, &never_faster));
+        // Tails read at 3 %/s, 0.6 of the floor: not a floor by the floor itself, but one by a
+        // model whose own tails read 4 %/s there (a reading over 0.1 s reaches where the stem
+        // stops); a model reading 5 %/s there still asks more of them.
+        let slowed = tails(|e| (5.0 * e).max(3.0));
+        let read = |speed: f64| -> Vec<(f64, f64)> {
+            (0..1000)
+                .map(|i| 0.05 + 0.002 * i as f64)
+                .map(|e| (e, (5.0 * e).max(speed)))
+                .collect()
+        };
+        assert!(!material(Effect::MinSpeed, &floor, &slowed));
+        assert!(floor_shown(&floor, &slowed, Some(&read(4.0))));
+        assert!(!floor_shown(&floor, &slowed, Some(&read(5.0))));
+        assert!(!floor_shown(&floor, &tails(|e| 5.0 * e), Some(&read(4.0))));
     }
 
     #[test]
