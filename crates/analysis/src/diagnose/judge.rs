@@ -456,7 +456,17 @@ fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
         let v = composed::get(spec, f.knob);
         // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
         // of 74-78 % is not pinned at 75 %.
-        let at_low = v <= f.floor + 0.02 * f.floor.abs().min(f.def.hi - f.floor);
+        // An uneven valve's slower limit may sit on the floor V_P's held speed sets it
+        // ([`Free::at_least`]): a chamber filling through an orifice slows as it fills, and
+        // a limit the same all the way is slower than the fastest the valve held (seed 60's
+        // digital valve 312, opening at 0.61 %/s held, fitted 0.35 %/s, 51 times slower than
+        // it closes). Only the box's own edge pins it.
+        let floor = if effect == Effect::Asymmetry {
+            f.def.lo
+        } else {
+            f.floor
+        };
+        let at_low = v <= floor + 0.02 * floor.abs().min(f.def.hi - floor);
         // A stroke-speed limit refitted with another effect (an opening-dependent slowdown)
         // may sit at the fastest a fit considers: the recording never asks for it. At its
         // slowest it is pinned: the valve is slow even closed, which is `slew_rate`'s to say.
@@ -768,7 +778,8 @@ mod tests {
         assert!(pinned(&limit, &at(Knob::Slew, 40.2), slowdown));
         assert!(pinned(&limit, &at(Knob::Slew, 995.0), Effect::SlewRate));
         // An uneven valve opening at 5 %/s: its faster, closing limit may sit at the fastest
-        // or at its floor (ramps never asked for it); its slower one is pinned at its floor.
+        // or at its floor (ramps never asked for it); its slower one may sit at the floor its
+        // held speed sets (a chamber that slows as it fills), and is pinned at its box's edge.
         let uneven = [
             Free::new(Knob::Slew, 0.5, 1000.0, 10.0).at_least(5.0),
             Free::new(Knob::ClosingSlew, 0.5, 1000.0, 30.0).at_least(24.0),
@@ -780,7 +791,8 @@ mod tests {
         };
         assert!(!pinned(&uneven, &limits(7.0, 995.0), Effect::Asymmetry));
         assert!(!pinned(&uneven, &limits(7.0, 24.1), Effect::Asymmetry));
-        assert!(pinned(&uneven, &limits(5.01, 60.0), Effect::Asymmetry));
+        assert!(!pinned(&uneven, &limits(5.01, 60.0), Effect::Asymmetry));
+        assert!(pinned(&uneven, &limits(0.505, 60.0), Effect::Asymmetry));
     }
 
     /// The facts of a recording whose V_P opens at `open` and closes at `close` %/s at most,
