@@ -203,7 +203,7 @@ fn a_slowdown_read_by_an_offset_sensor_is_named_beside_the_calibration() {
 /// Seed 60's digital valve 312 in a closed loop opens 51 times slower than it closes; its
 /// chamber fills more slowly the fuller it is, so the opening limit a fit gives it (0.35 %/s)
 /// sits below the 0.61 %/s it held for a second, on the floor the held speed sets a fit. A
-/// limit there was taken as pinned, and the valve was named `calibration` and a deadband.
+/// limit there was taken as pinned, and the valve was named `calibration` and `stiction`.
 #[test]
 fn an_uneven_valve_whose_slower_limit_sits_on_the_held_speed_s_floor_is_named() {
     let (case, d) = diagnosed_as(60, 312, false);
