@@ -569,8 +569,13 @@ fn floor_shown(spec: &ModelSpec, facts: &Facts, read: Option<&[(f64, f64)]>) -> 
     let floor = composed::get(spec, Knob::MinSpeed);
     let band = floor / composed::get(spec, Knob::Gain);
     let lo = (2.5 * facts.noise_pct).max(band / 8.0);
-    let reading = read.map_or(Some(floor), |tails| facts::approach_speed(tails, lo, 2.0 * lo));
-    let kept = match (facts::approach_speed(&facts.approach, lo, 2.0 * lo), reading) {
+    let reading = read.map_or(Some(floor), |tails| {
+        facts::approach_speed(tails, lo, 2.0 * lo)
+    });
+    let kept = match (
+        facts::approach_speed(&facts.approach, lo, 2.0 * lo),
+        reading,
+    ) {
         (Some(speed), Some(model)) if 2.0 * lo <= band => speed >= MIN_FLOOR_SHOWN * model,
         _ => facts.approach.len() >= MIN_TAIL_SAMPLES,
     };

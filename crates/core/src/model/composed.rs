@@ -246,7 +246,10 @@ pub fn half_open(spec: &ModelSpec) -> f64 {
 
 /// The reading's calibration: (gain, offset %), V_P as read = gain × stem + offset.
 pub fn calibration(spec: &ModelSpec) -> (f64, f64) {
-    (spec.effects.calibration_gain, spec.effects.calibration_offset_pct)
+    (
+        spec.effects.calibration_gain,
+        spec.effects.calibration_offset_pct,
+    )
 }
 
 /// Reads a knob's value from a composed spec.
