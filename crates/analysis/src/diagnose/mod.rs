@@ -35,6 +35,7 @@ mod delay;
 mod diagnosis;
 pub mod evidence;
 pub mod facts;
+mod floor;
 mod judge;
 pub mod locate;
 mod measure;
