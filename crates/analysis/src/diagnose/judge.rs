@@ -443,8 +443,6 @@ pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64, z_min: f64) -> f6
 fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
     free.iter().any(|f| {
         let v = composed::get(spec, f.knob);
-        // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
-        // of 74-78 % is not pinned at 75 %.
         // An uneven valve's slower limit may sit on the floor V_P's held speed sets it
         // ([`Free::at_least`]): a chamber filling through an orifice slows as it fills, and
         // a limit the same all the way is slower than the fastest the valve held (seed 60's
@@ -455,6 +453,8 @@ fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
         } else {
             f.floor
         };
+        // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
+        // of 74-78 % is not pinned at 75 %.
         let at_low = v <= floor + 0.02 * floor.abs().min(f.def.hi - floor);
         // A stroke-speed limit refitted with another effect (an opening-dependent slowdown)
         // may sit at the fastest a fit considers: the recording never asks for it. At its
