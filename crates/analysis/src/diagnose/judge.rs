@@ -443,19 +443,14 @@ pub(crate) fn blocks_helped(blocks: &[(f64, f64)], sigma: f64, z_min: f64) -> f6
 fn pinned(free: &[Free], spec: &ModelSpec, effect: Effect) -> bool {
     free.iter().any(|f| {
         let v = composed::get(spec, f.knob);
-        // An uneven valve's slower limit may sit on the floor V_P's held speed sets it
-        // ([`Free::at_least`]): a chamber filling through an orifice slows as it fills, and
-        // a limit the same all the way is slower than the fastest the valve held (seed 60's
-        // digital valve 312, opening at 0.61 %/s held, fitted 0.35 %/s, 51 times slower than
-        // it closes). Only the box's own edge pins it.
-        let floor = if effect == Effect::Asymmetry {
-            f.def.lo
-        } else {
-            f.floor
-        };
-        // 2 % of the bound, but never more than 2 % of the box: a travel stop fitted in a box
-        // of 74-78 % is not pinned at 75 %.
-        let at_low = v <= floor + 0.02 * floor.abs().min(f.def.hi - floor);
+        // Only the box's own edge pins a knob, not a floor raised inside it
+        // ([`Free::at_least`], an uneven valve's limits): a chamber filling through an orifice
+        // slows as it fills, and a limit the same all the way is slower than the fastest the
+        // valve held (seed 60's digital valve 312, opening at 0.61 %/s held, fitted 0.35 %/s,
+        // 51 times slower than it closes). 2 % of the bound, but never more than 2 % of the
+        // box: a travel stop fitted in a box of 74-78 % is not pinned at 75 %.
+        let lo = f.def.lo;
+        let at_low = v <= lo + 0.02 * lo.abs().min(f.def.hi - lo);
         // A stroke-speed limit refitted with another effect (an opening-dependent slowdown)
         // may sit at the fastest a fit considers: the recording never asks for it. At its
         // slowest it is pinned: the valve is slow even closed, which is `slew_rate`'s to say.
