@@ -37,6 +37,7 @@ mod diagnose_slow_positioner;
 mod diagnose_smooth_slips;
 mod diagnose_stiction_or_not;
 mod diagnose_stop_windup;
+mod diagnose_under_noise;
 mod diagnose_uneven_and_slow;
 mod fleet_cli;
 mod identify_cli;

@@ -27,7 +27,8 @@ use super::diagnosis::{params, Finding, Note, Support, Trace};
 use super::evidence::Evidence;
 use super::facts::Facts;
 use super::judge::{
-    best_per_effect, bic_change, floor_alike, offset_alike, pick_nuisance, Judge, Trial,
+    best_per_effect, bic_change, floor_alike, floor_alike_untold, offset_alike, pick_nuisance,
+    Judge, Trial,
 };
 use super::locate::Window;
 use super::measure::Measure;
@@ -288,14 +289,18 @@ impl<'a> Search<'a> {
     /// So when no candidate passes, the trace that removes the most held-out error is put in
     /// the model and the round tried again; which trace, and when one goes in before a winner
     /// (the reading's calibration, or a small effect that removes far more), is
-    /// [`pick_nuisance`]'s rule.
+    /// [`pick_nuisance`]'s rule; a limit a floor fits nearly as well is one
+    /// ([`floor_alike_untold`]).
     fn nuisance(&self, best: &[&Trial]) -> Option<Trial> {
         let winner = self.winner(best);
         let tuning = self.data.tuning;
         let dead_zone = |t: &Trial| size::dead_zone_worth(t.effect, &t.spec, tuning);
         let absorbed = |e| self.absorbed(e);
+        let held = (self.cur.held, tuning.min_heldout_share);
+        let told = floor_alike_untold(best, self.data.facts, held, LOOK_ALIKE_SHARE);
+        let best: Vec<&Trial> = told.iter().collect();
         pick_nuisance(
-            best,
+            &best,
             winner,
             self.cur.held,
             tuning.materiality,

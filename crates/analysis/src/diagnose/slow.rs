@@ -302,7 +302,7 @@ fn judged(
         "slow valve"
     );
     let shown = beyond_chance(helped, excess_share, delta_bic, tuning)
-        && heldout_share >= tuning.min_heldout_share
+        && heldout_share >= tuning.share_asked(size.worth_low)
         && size.worth_low >= tuning.materiality;
     shown.then(|| Finding {
         effect: Effect::SlewRate,
