@@ -1141,8 +1141,6 @@ mod tests {
         assert!(!floor_alike(&t, &[&t, &c], &busy, 387.2, 0.8));
         let t = limit(366.8, 2.4);
         assert!(!floor_alike(&t, &[&t], &busy, 387.2, 0.8));
-        // The alike limit is made a trace, to go in the model unnamed; the one V_P holds stays.
-        let (t, c) = (limit(366.8, 2.4), floor(368.7));
         // Passing on half the share only (0.5 % of it here, the full share 1 %), the alike
         // limit is made a trace, to go in the model unnamed; on the full share, or held by V_P,
         // it is left as it is.
