@@ -138,7 +138,7 @@ impl Judge<'_> {
             self.corr_len,
         );
         let size = size::size(effect, &spec, self.facts, self.scorer.op, tuning);
-        let significant = beyond_chance(t_stat, excess_share, delta_bic, tuning);
+        let significant = beyond_chance(t_stat, excess_share, delta_bic, size.worth, tuning);
         let plausible = !pinned(own, &spec, effect)
             && (plausible(effect, &spec, self.facts)
                 || self.always_at_limit(effect, &spec, &yb)
@@ -397,17 +397,18 @@ pub(crate) fn shares(before: f64, after: f64, held_noise: f64) -> (f64, f64) {
     (excess_share, heldout_share)
 }
 
-/// Whether a candidate that helped `t_stat` held-out blocks beyond noise, removed
-/// `excess_share` of the error above the noise floor and changed BIC by `delta_bic` explains
-/// the recording beyond chance.
+/// Whether a candidate `worth` times what is worth maintenance that helped `t_stat` held-out
+/// blocks beyond noise, removed `excess_share` of the error above the noise floor and changed
+/// BIC by `delta_bic` explains the recording beyond chance ([`Tuning::excess_asked`]).
 pub(crate) fn beyond_chance(
     t_stat: f64,
     excess_share: f64,
     delta_bic: f64,
+    worth: f64,
     tuning: &Tuning,
 ) -> bool {
     t_stat >= tuning.min_blocks
-        && excess_share >= tuning.min_excess_share
+        && excess_share >= tuning.excess_asked(worth)
         && delta_bic < tuning.max_delta_bic
 }
 
@@ -685,6 +686,7 @@ pub(crate) fn pick_nuisance<'t>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::tuning::LARGE_WORTH;
     use vb_core::model::{bundled, ModelKind};
 
     fn errors(fit: f64) -> Errors {
@@ -1066,12 +1068,14 @@ mod tests {
     }
 
     #[test]
-    fn chance_needs_blocks_a_share_of_the_excess_and_bic() {
+    fn chance_needs_blocks_a_share_of_the_excess_halved_when_large_and_bic() {
         let t = Tuning::default();
-        assert!(beyond_chance(3.0, 0.5, -50.0, &t));
-        assert!(!beyond_chance(1.0, 0.5, -50.0, &t));
-        assert!(!beyond_chance(3.0, 0.05, -50.0, &t));
-        assert!(!beyond_chance(3.0, 0.5, -5.0, &t));
+        assert!(beyond_chance(3.0, 0.5, -50.0, 1.0, &t));
+        assert!(!beyond_chance(1.0, 0.5, -50.0, 1.0, &t));
+        assert!(!beyond_chance(3.0, 0.06, -50.0, 1.0, &t));
+        assert!(beyond_chance(3.0, 0.06, -50.0, LARGE_WORTH, &t));
+        assert!(!beyond_chance(3.0, 0.04, -50.0, LARGE_WORTH, &t));
+        assert!(!beyond_chance(3.0, 0.5, -5.0, 1.0, &t));
     }
 
     fn trial(effect: Effect, held: f64, material: bool) -> Trial {

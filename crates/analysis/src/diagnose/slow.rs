@@ -301,7 +301,7 @@ fn judged(
         worth_low = size.worth_low,
         "slow valve"
     );
-    let shown = beyond_chance(helped, excess_share, delta_bic, tuning)
+    let shown = beyond_chance(helped, excess_share, delta_bic, size.worth_low, tuning)
         && heldout_share >= tuning.share_asked(size.worth_low)
         && size.worth_low >= tuning.materiality;
     shown.then(|| Finding {
